@@ -1,0 +1,1 @@
+"""Symbolic derivation of wedge-mechanism models, scene files and code export."""

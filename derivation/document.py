@@ -1,0 +1,244 @@
+"""The derivation document, built from the same objects that feed code generation.
+
+``build_document(model)`` returns a list of sections of text, equations and tables;
+``render(doc, "latex" | "markdown")`` writes it through a Jinja2 template. Text uses
+``$...$`` for inline math, which both targets understand.
+"""
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass, field
+from importlib import resources
+
+import jinja2
+import sympy as sp
+
+from derivation import audit, mechanics as M
+from derivation.model import Model
+
+FLANK_WORDS = {"a": "flank a (body 1 pushes body 2)", "b": "flank b (body 2 pushes body 1)"}
+
+
+@dataclass
+class Section:
+    title: str
+    blocks: list[tuple] = field(default_factory=list)
+
+    def text(self, text: str) -> None:
+        self.blocks.append(("text", text))
+
+    def math(self, *lines: str) -> None:
+        self.blocks.append(("math", list(lines)))
+
+    def table(self, spec: str, header: list[str], rows: list[list[str]]) -> None:
+        self.blocks.append(("table", spec, header, rows))
+
+
+def _l(expr) -> str:
+    return sp.latex(expr)
+
+
+def _eq(lhs, rhs) -> str:
+    return f"{_l(lhs)} = {_l(rhs)}"
+
+
+def _assumptions() -> Section:
+    s = Section("Assumptions")
+    s.text("Two rigid bodies on frictionless guides: body 1 (the worm, reduced to its pitch line) moves along "
+           "$x_1$, body 2 (the wheel, reduced likewise) along $x_2$, perpendicular to $x_1$. Body 1 carries two "
+           "flanks, straight contact lines at the slope $\\gamma$ to $x_1$, with no clearance between them.")
+    s.text("Flank a transmits when body 1 pushes body 2 ($f = +1$), flank b when body 2 pushes body 1 "
+           "($f = -1$). The contact force has a normal part $N \\ge 0$ and Coulomb friction $N\\tan\\rho$ against "
+           "the sliding, so the resultant leans by the friction angle $\\rho$ from the normal. Sliding runs in the "
+           "direction $s = \\operatorname{sign} v_1$. Applied forces $F_1$, $F_2$ act along the coordinates; a "
+           "negative $F_2$ resists forward motion.")
+    s.text("Reactions are defined alike for both bodies, $S_i = F_i - m_i \\ddot x_i$ (eq. 8): minus the contact "
+           "force on body $i$ along its guide.")
+    return s
+
+
+def _kinematics() -> Section:
+    k = M.kinematics()
+    s = Section("Geometry and kinematic constraint (eq. 1)")
+    s.text("Unit vectors of the contact line (seen from body 1) and of the flank-a normal (from body 1 into body 2):")
+    s.math(f"\\mathbf t = {_l(M.TANGENT)}, \\qquad \\mathbf n = {_l(M.NORMAL)}")
+    s.text("Non-penetration: the gap along the normal between the two bodies' reference points stays zero. "
+           "Differentiated twice with respect to time:")
+    s.math(f"g = {_l(k.gap)} = 0", _l(k.position), _l(k.velocity), _l(k.acceleration))
+    s.text("Body 2 is slower than body 1 by $\\tan\\gamma$. The relative sliding speed along the contact line is")
+    s.math(f"v_s = (\\dot{{\\mathbf r}}_2 - \\dot{{\\mathbf r}}_1)\\cdot\\mathbf t = {_l(k.sliding_speed * M.v1)}")
+    return s
+
+
+def _sliding_sections(flank_dirs) -> list[Section]:
+    modes = [M.sliding(f, d) for f, d in flank_dirs]
+    force = Section("Contact force and force transfer functions (eqs. 2, 3)")
+    force.text("Contact resultant on body 2: $\\mathbf R = Q\\,(f\\cos\\rho\\,\\mathbf n - s\\sin\\rho\\,\\mathbf t)$, "
+               "$Q = N/\\cos\\rho$; body 1 takes $-\\mathbf R$. The guides take the components across them, so")
+    for m in modes:
+        force.math(f"f={M.FLANK_SIGN[m.flank]:+d},\\ s={m.direction:+d}:\\quad R_1 = {_l(m.R1)}, \\quad R_2 = {_l(m.R2)}")
+    force.text("With $S_i = -R_i$ the ratio of the reactions does not depend on $N$; SymPy's trigsimp gives the "
+               "force transfer function $\\Psi = -S_1/S_2$:")
+    force.table("llll", ["flank", "direction", "$\\Psi$", "regime"],
+                [[FLANK_WORDS[m.flank], "forward" if m.direction > 0 else "backward", f"${_l(m.psi)}$",
+                  "tractive" if (m.flank, m.direction) == ("a", 1) else
+                  "inverse-tractive" if (m.flank, m.direction) == ("b", 1) else "reverse drive"] for m in modes])
+    force.math(f"S_1 = -\\Psi\\, S_2")
+
+    m = modes[0]
+    eom = Section("Reduced equation of motion (eq. 6)")
+    eom.text("Newton for each body, $S_1 = F_1 - m_1 a_1$, $S_2 = F_2 - m_2 a_2$, with $a_2 = a_1\\tan\\gamma$ "
+             "and $S_1 = -\\Psi S_2$, solved for $a_1$:")
+    eom.math(_eq(M.a1, m.accel_in_psi), f"D = {_l(sp.fraction(sp.together(m.accel_in_psi))[1])}")
+    eom.text("Solving Newton's equations for $(a_1, Q)$ directly, without the FTF, gives the same $a_1$ (a test "
+             "checks this for every flank and direction). The mode is consistent while $D > 0$; with $\\Psi < 0$ "
+             "(self-locking) and a heavy body 2, $D \\le 0$: rigid contact with friction has no solution there "
+             "(a Painleve-type case), which tswm reports instead of integrating through.")
+
+    reac = Section("Reactions (eqs. 8, 9) and the switching function (eq. 7)")
+    reac.text("Substituting $a_1$ back:")
+    reac.math(_eq(M.S1, sp.factor(m.S1.subs(m.psi, M.Psi))), _eq(M.S2, sp.factor(m.S2.subs(m.psi, M.Psi))))
+    reac.text("Both reactions are proportional to one function that does not depend on $\\Psi$ (so it is the "
+              "same for both flanks):")
+    reac.math(f"\\varphi = {_l(m.switching)}", f"S_2 = -\\frac{{m_1 m_2\\,\\varphi}}{{D}}, \\qquad "
+              f"S_1 = \\Psi\\,\\frac{{m_1 m_2\\,\\varphi}}{{D}}")
+    reac.text("$\\varphi$ is body 1's own acceleration mapped onto $x_2$ minus body 2's own acceleration: the "
+              "residual of the acceleration constraint when each body is left to its own force. It is zero "
+              "exactly when $S_1 = S_2 = 0$. The normal force follows from $R_2$:")
+    for mm in modes:
+        reac.math(f"f={M.FLANK_SIGN[mm.flank]:+d},\\ s={mm.direction:+d}:\\quad N = {_l(mm.normal)}")
+    reac.text("So, while $D > 0$ and $\\cos(\\gamma + f s\\rho) > 0$ (else the wedge jams), flank a carries the "
+              "load for $\\varphi \\ge 0$ and flank b for $\\varphi < 0$.")
+    kink = sp.factor(m.accel_in_psi - M.F1 / M.m1)
+    reac.text("Continuity at the flank switch: both flanks give the same acceleration on $\\varphi = 0$, "
+              "because")
+    reac.math(f"a_1 - \\frac{{F_1}}{{m_1}} = {_l(kink)} = -\\frac{{\\Psi m_2\\,\\varphi}}{{D}}")
+    reac.text("vanishes there for any $\\Psi$. The flank switch is a kink in the right-hand side, not a jump; the "
+              "genuine discontinuity is at $v_1 = 0$, where friction reverses.")
+
+    power = Section("Power balance and efficiency")
+    power.text("The contact absorbs $P = -(R_1 v_1 + R_2 v_2)$. From the force balance, and from Coulomb's law "
+               "directly (friction force times sliding speed):")
+    for mm in modes:
+        power.math(f"f={M.FLANK_SIGN[mm.flank]:+d},\\ s={mm.direction:+d}:\\quad P = {_l(mm.friction_power)} "
+                   f"= {_l(mm.friction_power_coulomb)} \\ge 0")
+    power.text("Efficiency of the tractive mode (power into body 2 over power out of body 1):")
+    power.math(f"\\eta = {_l(M.sliding('a', 1).efficiency)}")
+    return [force, eom, reac, power]
+
+
+def _stick_section() -> Section:
+    st = M.stick()
+    s = Section("Stick and breakaway")
+    s.text("At $v_1 = 0$ with both bodies at rest the contact force on body 2 is $f N\\,\\mathbf n - T\\,\\mathbf t$. "
+           "Statics gives")
+    s.math(f"f N = {_l(st.normal_times_flank)}, \\qquad T = {_l(st.tangential)}")
+    s.text("and $S_1 = F_1$, $S_2 = F_2$. The bodies stay stuck while $|T| \\le \\tan\\rho_0\\,|fN|$ with the "
+           "friction angle at zero speed $\\rho_0$:")
+    s.math(f"{_l(st.cone_forward)} \\ge 0", f"{_l(st.cone_backward)} \\ge 0")
+    s.text("When the first condition fails the drive breaks away forward, when the second fails backward; the "
+           "sign of $fN$ tells which flank holds.")
+    return s
+
+
+def _laws_section(model: Model) -> Section:
+    s = Section(f"Laws of scene `{model.scene.name}`")
+    for q in model.laws:
+        s.text(q.doc + ":")
+        s.math(_eq(q.symbol, q.expr))
+    if model.scene.drive.kind == "kloss":
+        s.text("The Kloss curve $2F_{max}/(s/s_{max} + s_{max}/s)$ is singular at synchronous speed ($s = 0$); "
+               "brought over a common denominator, as above, it is regular there.")
+    for e in model.events:
+        s.text(f"Event: {e.doc}, where ${_l(e.expr)}$ changes sign.")
+    return s
+
+
+def _modes_section(model: Model) -> Section:
+    s = Section(f"Modes of scene `{model.scene.name}`")
+    s.text(f"Equations: {model.scene.equations}. States: " + ", ".join(f"${_l(x)}$" for x in model.states) + ".")
+    s.math(f"\\varphi = {_l(model.switching)}")
+    for mode in model.modes:
+        s.text(f"Mode `{mode.name}` ({mode.regime}):")
+        s.math(_eq(M.a1, mode.accel), _eq(M.S1, mode.S1), _eq(M.S2, mode.S2))
+    if model.stick is not None:
+        s.text("Stick conditions:")
+        s.math(f"{_l(model.stick.cone_forward)} \\ge 0", f"{_l(model.stick.cone_backward)} \\ge 0")
+    return s
+
+
+def _load_factor_section() -> Section:
+    s = Section("Dynamic load factors (eq. 10)")
+    s.text("With the largest reactions $S_i^m$ over a run and the static tangential forces $F_{t1}$, $F_{t2}$:")
+    s.math("K_{D1} = \\frac{|S_1^m|}{F_{t1}}, \\qquad K_{D2} = \\frac{|S_2^m|}{F_{t2}}")
+    return s
+
+
+def _audit_section() -> Section:
+    entries = audit.audit()
+    s = Section("Audit of the printed equations")
+    s.text("Each printed equation of the paper against the derivation. \"checked\" means SymPy verified the "
+           "agreement, or that the stated change turns one form into the other.")
+    s.table("lllp{7.5cm}", ["eq.", "verdict", "checked", "reconciliation"],
+            [[e.equation, "agrees" if e.agrees else "differs", "yes" if e.checked else "no", e.reconciliation]
+             for e in entries])
+    for e in entries:
+        s.text(f"Eq. {e.equation}, {e.topic}: printed, then derived.")
+        s.math(e.printed, e.derived)
+    s.text("The literal equations jump across their own switching surface (printed $\\varphi = 0$) by")
+    s.math(f"\\Delta a_1 = {_l(audit.literal_jump())}")
+    s.text("which is nonzero whenever $\\rho > 0$: the printed model has a genuine discontinuity there and can "
+           "slide along it (Filippov), unlike the consistent model.")
+    s.text("Data remarks: \"$V_0 = \\omega_0/R_1^2$\" reads $\\omega_0 R_1 = 314.16 \\cdot 0.025 = 7.85$ m/s; "
+           "\"$F_{t2} = 2T_1 u\\gamma/d_2$\" uses the efficiency $\\eta = 0.67$ where it prints $\\gamma$.")
+    return s
+
+
+def build_document(model: Model) -> dict:
+    """Title, parameter table and sections of the derivation of ``model``'s scene."""
+    scene = model.scene
+    flank_dirs = [(f, d) for d in (1, -1) for f in ("a", "b")]
+    sections = [_assumptions(), _kinematics(), *_sliding_sections(flank_dirs), _stick_section(),
+                _load_factor_section(), _laws_section(model), _modes_section(model), _audit_section()]
+    params = [[f"`{p.name}`", f"{p.value:.6g}", p.unit,
+               "free" if p.free else "fixed"] for p in scene.params()]
+    return {"title": f"Derivation of the wedge model for scene `{scene.name}`",
+            "description": scene.description, "source": scene.source, "digest": scene.digest,
+            "params": params, "sections": sections}
+
+
+_MATH_OR_CODE = re.compile(r"(\$[^$]*\$|`[^`]*`)")
+_TEX_SPECIAL = str.maketrans({c: "\\" + c for c in "&%#_{}"})
+
+
+def latex_prose(text: str) -> str:
+    """Prose with $math$ and `code` as LaTeX: escape specials outside math, typeset code."""
+    out = []
+    for part in _MATH_OR_CODE.split(text):
+        if part.startswith("$"):
+            out.append(part)
+        elif part.startswith("`"):
+            out.append("\\texttt{" + part[1:-1].translate(_TEX_SPECIAL) + "}")
+        else:
+            out.append(re.sub(r'"([^"]*)"', r"``\1''", part.translate(_TEX_SPECIAL)))
+    return "".join(out)
+
+
+def _environment(target: str) -> jinja2.Environment:
+    loader = jinja2.FileSystemLoader(str(resources.files("derivation") / "templates"))
+    options = dict(loader=loader, trim_blocks=True, lstrip_blocks=True, keep_trailing_newline=True)
+    if target == "latex":
+        env = jinja2.Environment(block_start_string="((*", block_end_string="*))", variable_start_string="(((",
+                                 variable_end_string=")))", comment_start_string="((#", comment_end_string="#))",
+                                 **options)
+        env.filters["prose"] = latex_prose
+    else:
+        env = jinja2.Environment(**options)
+        env.filters["prose"] = lambda text: text
+    return env
+
+
+def render(doc: dict, target: str) -> str:
+    """The document as a standalone LaTeX file or as Markdown with $$ math blocks."""
+    name = {"latex": "derivation.tex.j2", "markdown": "derivation.md.j2"}[target]
+    return _environment(target).get_template(name).render(**doc)

@@ -1,0 +1,146 @@
+"""First-principles kinetostatics of the wedge: geometry, contact force, force balance.
+
+Everything here is scene-independent and symbolic. Body 1 moves along x1, body 2 along
+x2 (perpendicular guides). Flank ``f`` (+1 for flank a, where body 1 pushes body 2; -1
+for flank b, where body 2 pushes body 1) is a line at the slope ``gamma`` to x1. Sliding
+runs in the direction ``s = sign(v1)``. Each step below is a SymPy computation; nothing
+downstream of the geometry and Coulomb's law is typed in.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import lru_cache
+
+import sympy as sp
+
+FLANK_SIGN = {"a": 1, "b": -1}
+
+t = sp.Symbol("t", real=True)
+m1, m2 = sp.symbols("m1 m2", positive=True)
+gamma = sp.Symbol("gamma", positive=True)
+rho = sp.Symbol("rho", nonnegative=True)
+F1, F2 = sp.symbols("F1 F2", real=True)
+x1, v1, a1 = sp.symbols("x1 v1 a1", real=True)
+x2, v2, a2 = sp.symbols("x2 v2 a2", real=True)
+Q = sp.Symbol("Q", nonnegative=True)          # magnitude of the contact resultant
+N = sp.Symbol("N", real=True)                 # normal contact force (>= 0 when valid)
+T = sp.Symbol("T", real=True)                 # tangential contact force in stick
+Psi = sp.Symbol("Psi", real=True)             # force transfer function, as an unknown
+S1, S2 = sp.symbols("S1 S2", real=True)
+phi = sp.Symbol("phi", real=True)             # switching function, as an unknown
+
+E1 = sp.Matrix([1, 0])                        # direction of x1
+E2 = sp.Matrix([0, 1])                        # direction of x2
+TANGENT = sp.Matrix([-sp.cos(gamma), sp.sin(gamma)])   # contact line, seen from body 1
+NORMAL = sp.Matrix([sp.sin(gamma), sp.cos(gamma)])     # flank a normal, body 1 -> body 2
+
+
+@dataclass(frozen=True)
+class Kinematics:
+    """Constraint of one flank on position, velocity and acceleration level."""
+
+    gap: sp.Expr                 # signed distance along the flank normal
+    position: sp.Eq
+    velocity: sp.Eq
+    acceleration: sp.Eq
+    x2_of_x1: sp.Expr            # solved position constraint
+    ratio: sp.Expr               # v2 / v1
+    sliding_speed: sp.Expr       # relative speed along the contact line, per unit v1
+
+
+@dataclass(frozen=True)
+class SlidingMode:
+    """Force balance of one flank sliding in one direction, solved."""
+
+    flank: str
+    direction: int
+    R1: sp.Expr                  # contact force on body 1 along x1 (in terms of N)
+    R2: sp.Expr                  # contact force on body 2 along x2
+    psi: sp.Expr                 # FTF: S1 = -psi S2
+    accel_in_psi: sp.Expr        # reduced EOM with psi kept as a symbol
+    accel: sp.Expr               # reduced EOM
+    accel_direct: sp.Expr        # the same, solved directly for (a1, N) without the FTF
+    denominator: sp.Expr         # D = m1 + psi m2 tan(gamma)
+    S1: sp.Expr
+    S2: sp.Expr
+    switching: sp.Expr           # phi, with S2 = -m1 m2 phi / D
+    normal: sp.Expr              # N in terms of phi
+    jam_factor: sp.Expr          # cos(gamma + f s rho): must stay > 0
+    friction_power: sp.Expr      # power the contact absorbs, from the force balance
+    friction_power_coulomb: sp.Expr   # tan(rho) N |v1| / cos(gamma), Coulomb's law directly
+    efficiency: sp.Expr          # power delivered to body 2 / power taken from body 1
+
+
+@dataclass(frozen=True)
+class Stick:
+    """Statics at v1 = 0: the contact force that holds both bodies at rest."""
+
+    normal_times_flank: sp.Expr  # f N: positive on flank a, negative on flank b
+    tangential: sp.Expr          # T: friction force the stick needs (along the line)
+    cone_forward: sp.Expr        # tan(rho) |f N| - T >= 0: no breakaway forward
+    cone_backward: sp.Expr       # tan(rho) |f N| + T >= 0: no breakaway backward
+
+
+def _contact_forces(force_on_body2: sp.Matrix) -> tuple[sp.Expr, sp.Expr]:
+    """Components along each body's guide: R1 on body 1 (reaction), R2 on body 2."""
+    return (-force_on_body2).dot(E1), force_on_body2.dot(E2)
+
+
+@lru_cache(maxsize=None)
+def kinematics() -> Kinematics:
+    """Non-penetration of the flank, differentiated twice."""
+    X1, X2 = sp.Function("x1")(t), sp.Function("x2")(t)
+    gap = (X2 * E2 - X1 * E1).dot(NORMAL)
+    x2_sol = sp.solve(sp.Eq(gap.subs({X1: x1, X2: x2}), 0), x2)[0]
+    plain = {X1.diff(t, 2): a1, X2.diff(t, 2): a2, X1.diff(t): v1, X2.diff(t): v2, X1: x1, X2: x2}
+    as_tan = {sp.sin(gamma): sp.tan(gamma) * sp.cos(gamma)}
+    level = [sp.Eq(sp.expand((gap.diff(t, k) / sp.cos(gamma)).subs(as_tan)).subs(plain), 0) for k in range(3)]
+    ratio = sp.simplify(sp.solve(level[1], v2)[0] / v1)
+    slide = sp.simplify((v2 * E2 - v1 * E1).dot(TANGENT).subs(v2, ratio * v1) / v1)
+    return Kinematics(gap.subs({X1: x1, X2: x2}), *level, x2_sol, ratio, slide)
+
+
+@lru_cache(maxsize=None)
+def sliding(flank: str, direction: int) -> SlidingMode:
+    """Solve the force balance of ``flank`` sliding with sign(v1) = ``direction``."""
+    f, s = FLANK_SIGN[flank], direction
+    kin = kinematics()
+    # Coulomb: the resultant leans by rho from the normal, against body 2's sliding.
+    resultant = Q * (f * sp.cos(rho) * NORMAL - s * sp.sin(rho) * TANGENT)
+    R1, R2 = _contact_forces(resultant)
+    psi = sp.trigsimp(sp.simplify(-R1 / R2))
+    # Newton for each body, reactions S_i = F_i - m_i a_i = -R_i, constraint a2 = ratio a1.
+    eom = [sp.Eq(S1, F1 - m1 * a1), sp.Eq(S2, F2 - m2 * kin.ratio * a1), sp.Eq(S1, -Psi * S2)]
+    sol = sp.solve(eom, [a1, S1, S2], dict=True)[0]
+    accel_in_psi = sp.factor(sol[a1])
+    accel = accel_in_psi.subs(Psi, psi)
+    denominator = sp.fraction(sp.together(accel_in_psi))[1].subs(Psi, psi)
+    direct = sp.solve([sp.Eq(m1 * a1, F1 + R1), sp.Eq(m2 * kin.ratio * a1, F2 + R2)], [a1, Q], dict=True)[0]
+    S2_expr = sp.simplify(sol[S2].subs(Psi, psi))
+    S1_expr = sp.simplify(sol[S1].subs(Psi, psi))
+    switching = sp.simplify(sp.expand(-sol[S2] * sp.fraction(sp.together(accel_in_psi))[1] / (m1 * m2)))
+    q_of_s2 = sp.solve(sp.Eq(R2, -S2), Q)[0]
+    normal = sp.simplify((q_of_s2 * sp.cos(rho)).subs(S2, -m1 * m2 * phi / denominator))
+    sign_v1 = {v1: s * sp.Abs(v1)}
+    power = sp.simplify(-(R1 * v1 + R2 * kin.ratio * v1))
+    power_n = power.subs(Q, N / sp.cos(rho))
+    coulomb = sp.tan(rho) * N * sp.Abs(v1) * kin.sliding_speed
+    efficiency = sp.simplify((-S2 * kin.ratio / S1).subs(S1, -psi * S2))
+    return SlidingMode(
+        flank=flank, direction=direction, R1=R1.subs(Q, N / sp.cos(rho)), R2=R2.subs(Q, N / sp.cos(rho)),
+        psi=psi, accel_in_psi=accel_in_psi, accel=accel, accel_direct=direct[a1], denominator=denominator,
+        S1=S1_expr, S2=S2_expr, switching=switching, normal=normal,
+        jam_factor=sp.cos(gamma + f * s * rho), friction_power=power_n.subs(sign_v1),
+        friction_power_coulomb=coulomb, efficiency=efficiency,
+    )
+
+
+@lru_cache(maxsize=None)
+def stick() -> Stick:
+    """Both bodies at rest: solve the statics for the normal and tangential force."""
+    fN = sp.Symbol("fN", real=True)
+    R1, R2 = _contact_forces(fN * NORMAL - T * TANGENT)
+    sol = sp.solve([sp.Eq(F1 + R1, 0), sp.Eq(F2 + R2, 0)], [fN, T], dict=True)[0]
+    fn, tang = sp.simplify(sol[fN]), sp.simplify(sol[T])
+    cone = sp.tan(rho) * sp.Abs(fn)
+    return Stick(fn, tang, cone - tang, cone + tang)

@@ -1,0 +1,174 @@
+"""The model IR: a scene's modes, laws, states and parameters as plain data.
+
+``build_model(scene)`` specialises the scene-independent mechanics to one scene: it picks
+the modes the scene declares, substitutes the scene's slope and friction symbols, and
+attaches the drive, load and friction laws. Code generation and the LaTeX writer both
+read this object, so the document and the code cannot drift apart.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import sympy as sp
+
+from derivation import laws, mechanics, paper
+from derivation.mechanics import F1, F2, v1, x1
+from derivation.scene import Param, Scene
+
+DIRECTIONS = {"forward": ("fwd", 1), "backward": ("bwd", -1)}
+REGIMES = {(1, "a"): "tractive", (1, "b"): "inverse-tractive",
+           (-1, "a"): "backward on flank a", (-1, "b"): "backward on flank b"}
+
+
+@dataclass(frozen=True)
+class Quantity:
+    """A named intermediate (a law, or x2) with its defining expression."""
+
+    symbol: sp.Symbol
+    expr: sp.Expr
+    doc: str
+
+
+@dataclass(frozen=True)
+class Mode:
+    """One mode: sliding on a flank in a direction, or stick."""
+
+    name: str
+    regime: str
+    flank: str                   # "a", "b", or "" for stick (the flank follows from statics)
+    direction: int               # +1, -1, 0 for stick
+    accel: sp.Expr               # a1
+    S1: sp.Expr
+    S2: sp.Expr
+    psi: sp.Expr | None = None   # FTF of a sliding mode
+    denominator: sp.Expr | None = None   # D: the mode is consistent while D > 0
+    normal: sp.Expr | None = None        # contact normal force N (>= 0 while the flank holds)
+    jam: sp.Expr | None = None           # cos(gamma + f s rho) (> 0, else the wedge jams)
+
+
+@dataclass(frozen=True)
+class StickConditions:
+    """Statics at v1 = 0 with the friction angle at zero speed."""
+
+    flank_normal: sp.Expr        # f N: > 0 holds on flank a, < 0 on flank b
+    tangential: sp.Expr          # friction force the stick needs
+    cone_forward: sp.Expr        # >= 0 while no breakaway forward
+    cone_backward: sp.Expr       # >= 0 while no breakaway backward
+
+
+@dataclass(frozen=True)
+class Model:
+    """Everything code generation and the document need, nothing more."""
+
+    scene: Scene
+    symbols: dict[str, sp.Symbol]        # parameter name -> symbol
+    states: tuple[sp.Symbol, ...]        # (x1, v1), or (v1,) when no law reads x1
+    laws: tuple[Quantity, ...]           # in evaluation order
+    events: tuple[laws.LawEvent, ...]    # where a law jumps
+    switching: sp.Expr                   # phi
+    modes: tuple[Mode, ...]
+    stick: StickConditions | None
+
+    @property
+    def params(self) -> tuple[Param, ...]:
+        return self.scene.params()
+
+    def mode(self, name: str) -> Mode:
+        return next(m for m in self.modes if m.name == name)
+
+
+def param_symbol(param: Param) -> sp.Symbol:
+    """The SymPy symbol of a scene parameter (all real; ranges are the scene's job)."""
+    return sp.Symbol(param.name, real=True)
+
+
+def _friction_symbols(scene: Scene) -> dict[str, sp.Symbol]:
+    shared = len({id(scene.friction[f]) for f in scene.flanks}) == 1
+    return {f: sp.Symbol("rho" if shared else f"rho_{f}", real=True) for f in scene.flanks}
+
+
+def _laws(scene: Scene, rho_of: dict[str, sp.Symbol]) -> tuple[tuple[Quantity, ...], tuple[laws.LawEvent, ...]]:
+    slope = param_symbol(scene.gamma[scene.flanks[0]])
+    x2 = sp.Symbol("x2", real=True)
+    load, events = laws.load_force(scene.load, param_symbol, x2)
+    quantities = []
+    if x2 in load.free_symbols:
+        x2_expr = mechanics.kinematics().x2_of_x1.subs(mechanics.gamma, slope)
+        quantities.append(Quantity(x2, x2_expr, "position of body 2 (kinematic constraint)"))
+    quantities.append(Quantity(F1, laws.drive_force(scene.drive, param_symbol), f"drive force ({scene.drive.kind})"))
+    quantities.append(Quantity(F2, load, f"load force ({scene.load.kind})"))
+    done = set()
+    for f in scene.flanks:
+        if rho_of[f] not in done:
+            done.add(rho_of[f])
+            expr = laws.friction_angle(scene.friction[f], param_symbol, param_symbol(scene.gamma[f]))
+            quantities.append(Quantity(rho_of[f], expr, f"friction angle ({scene.friction[f].kind})"))
+    return tuple(quantities), events
+
+
+def _specialise(scene: Scene, flank: str, rho_of: dict[str, sp.Symbol]) -> dict:
+    return {mechanics.gamma: param_symbol(scene.gamma[flank]), mechanics.rho: rho_of[flank],
+            mechanics.m1: param_symbol(scene.m1), mechanics.m2: param_symbol(scene.m2)}
+
+
+def _sliding_modes(scene: Scene, rho_of: dict[str, sp.Symbol]) -> list[Mode]:
+    modes = []
+    for word, (prefix, direction) in DIRECTIONS.items():
+        if word not in scene.modes:
+            continue
+        for flank in scene.flanks:
+            m = mechanics.sliding(flank, direction)
+            sub = _specialise(scene, flank, rho_of)
+            phi = m.switching.subs(sub)
+            modes.append(Mode(
+                name=f"{prefix}_{flank}",
+                regime=REGIMES[direction, flank], flank=flank, direction=direction,
+                accel=m.accel.subs(sub), S1=m.S1.subs(sub), S2=m.S2.subs(sub), psi=m.psi.subs(sub),
+                denominator=m.denominator.subs(sub), normal=m.normal.subs(sub).subs(mechanics.phi, phi),
+                jam=m.jam_factor.subs(sub)))
+    return modes
+
+
+def _stick(scene: Scene, rho_of: dict[str, sp.Symbol]) -> tuple[Mode, StickConditions]:
+    st = mechanics.stick()
+    sub = _specialise(scene, scene.flanks[0], rho_of)
+    flank_normal = st.normal_times_flank.subs(sub)
+    if len(set(rho_of.values())) > 1:
+        sub[mechanics.rho] = sp.Piecewise((rho_of["a"], flank_normal >= 0), (rho_of["b"], True))
+    conditions = StickConditions(flank_normal, st.tangential.subs(sub),
+                                 st.cone_forward.subs(sub), st.cone_backward.subs(sub))
+    mode = Mode(name="stick", regime="stick", flank="", direction=0, accel=sp.Integer(0), S1=F1, S2=F2)
+    return mode, conditions
+
+
+def _literal_modes(scene: Scene, rho_of: dict[str, sp.Symbol]) -> tuple[list[Mode], sp.Expr]:
+    """The paper's eqs. (6), (7), (8), (9) verbatim, with Psi_1 on flank a and Psi_2 on b."""
+    sub = _specialise(scene, "a", rho_of)
+    modes = []
+    for flank, psi in (("a", paper.PSI_TRACTIVE), ("b", paper.PSI_INVERSE)):
+        psi = psi.subs(sub)
+        accel = paper.EQ6_ACCEL.subs(sub).subs(mechanics.Psi, psi)
+        s1 = paper.EQ8_S1.subs(sub).subs(mechanics.a1, accel)
+        modes.append(Mode(name=f"fwd_{flank}", regime=REGIMES[1, flank], flank=flank, direction=1,
+                          accel=accel, S1=s1, S2=paper.EQ9_S2.subs({mechanics.S1: s1, mechanics.Psi: psi}),
+                          psi=psi, denominator=sp.fraction(sp.together(accel))[1]))
+    return modes, paper.EQ7_SWITCHING.subs(sub)
+
+
+def build_model(scene: Scene) -> Model:
+    """Specialise the mechanics to ``scene``."""
+    rho_of = _friction_symbols(scene)
+    quantities, events = _laws(scene, rho_of)
+    stick = None
+    if scene.equations == "literal":
+        modes, switching = _literal_modes(scene, rho_of)
+    else:
+        modes = _sliding_modes(scene, rho_of)
+        switching = mechanics.sliding(scene.flanks[0], 1).switching.subs(_specialise(scene, scene.flanks[0], rho_of))
+        if "stick" in scene.modes:
+            stick_mode, stick = _stick(scene, rho_of)
+            modes.append(stick_mode)
+    reads_x1 = any(x1 in q.expr.free_symbols for q in quantities)
+    symbols = {p.name: param_symbol(p) for p in scene.params()}
+    return Model(scene=scene, symbols=symbols, states=(x1, v1) if reads_x1 else (v1,),
+                 laws=quantities, events=events, switching=switching, modes=tuple(modes), stick=stick)

@@ -1,0 +1,444 @@
+"""Scene files (docs/scene-format.md): a wedge variant and its run, read from TOML, checked, in SI."""
+
+from __future__ import annotations
+
+import difflib
+import hashlib
+import importlib.resources
+import math
+import os
+import re
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+from typing import NoReturn
+
+from . import units
+
+DEG = math.pi / 180
+FLANKS = ("a", "b")
+MODES = ("forward", "backward", "stick")
+EQUATIONS = ("consistent", "literal")
+METHODS = ("dopri5", "rosenbrock")
+TOP_KEYS = ("name", "description", "equations", "wedge", "friction", "drive", "load",
+            "reference", "modes", "run")
+NAME = re.compile(r"[a-z0-9][a-z0-9-]*")
+_SCENES = importlib.resources.files("derivation") / "scenes"
+
+
+class SceneError(ValueError):
+    """A scene that cannot be used; the message names file, dotted key, value and allowed range."""
+
+
+@dataclass(frozen=True)
+class Param:
+    """One model parameter, in SI; free ones are read from a parameter vector at run time."""
+    name: str
+    value: float
+    unit: str
+    free: bool
+    key: str
+
+
+@dataclass(frozen=True)
+class Law:
+    """A drive, load or friction law and its parameters, keyed by the law's own key names."""
+    kind: str
+    params: dict[str, Param]
+
+
+@dataclass(frozen=True)
+class Run:
+    """Integration settings, in SI."""
+    t_end: float
+    x1: float
+    v1: float
+    rtol: float
+    atol: float
+    method: str
+    max_steps: int
+
+
+@dataclass(frozen=True)
+class Scene:
+    """A validated scene; shared slopes and friction laws are the same objects on both flanks."""
+    name: str
+    description: str
+    equations: str
+    flanks: tuple[str, ...]
+    gamma: dict[str, Param]
+    m1: Param
+    m2: Param
+    friction: dict[str, Law]
+    drive: Law
+    load: Law
+    reference: dict[str, Param]
+    modes: tuple[str, ...]
+    run: Run
+    source: str
+    digest: str
+
+    def params(self) -> tuple[Param, ...]:
+        """Every distinct model parameter once: wedge, friction, drive, load, reference."""
+        laws = (*self.friction.values(), self.drive, self.load)
+        return tuple(dict.fromkeys((
+            *self.gamma.values(), self.m1, self.m2,
+            *(p for law in laws for p in law.params.values()),
+            *self.reference.values(),
+        )))
+
+    def free_params(self) -> tuple[Param, ...]:
+        """The free parameters, in params() order."""
+        return tuple(p for p in self.params() if p.free)
+
+
+@dataclass(frozen=True)
+class Rule:
+    """How one numeric key is read: quantity, allowed range in SI, default (None: required)."""
+    quantity: str
+    lo: float | None = None
+    hi: float | str | None = None  # a number, or a key of the same table that bounds it
+    lo_in: bool = False
+    hi_in: bool = False
+    default: float | None = None
+    integer: bool = False
+
+
+GAMMA = Rule("angle", 0.0, 90 * DEG)
+WEDGE = {"m1": Rule("mass", 0.0), "m2": Rule("mass", 0.0)}
+FRICTION_LAWS = {
+    "constant": {"rho": Rule("angle", 0.0, 90 * DEG, lo_in=True)},
+    "velocity": {"a": Rule("dimensionless", 0.0, lo_in=True),
+                 "b": Rule("dimensionless", 0.0), "c": Rule("dimensionless", 0.0)},
+}
+DRIVE_LAWS = {
+    "kloss": {"Fmax": Rule("force", 0.0), "V0": Rule("velocity", 0.0),
+              "Vmax": Rule("velocity", 0.0, "V0")},
+    "constant": {"F1": Rule("force")},
+    "linear": {"F0": Rule("force"), "V0": Rule("velocity", 0.0)},
+}
+LOAD_LAWS = {
+    "constant": {"F2": Rule("force")},
+    "step": {"F2_before": Rule("force", default=0.0), "F2": Rule("force"),
+             "t_step": Rule("time", 0.0, lo_in=True)},
+    "spring": {"k": Rule("stiffness", 0.0), "x2_contact": Rule("length"),
+               "preload": Rule("force", 0.0, lo_in=True)},
+}
+REFERENCE = {"Ft1": Rule("force", 0.0), "Ft2": Rule("force", 0.0)}
+RUN = {
+    "t_end": Rule("time", 0.0, default=1.0),
+    "x1": Rule("length", default=0.0),
+    "v1": Rule("velocity", default=0.0),
+    "rtol": Rule("dimensionless", 1e-13, 1e-1, lo_in=True, hi_in=True, default=1e-6),
+    "atol": Rule("dimensionless", 0.0, default=1e-9),
+    "max_steps": Rule("dimensionless", 1, lo_in=True, default=100000, integer=True),
+}
+# Largest friction angle of a law (at v = 0) and the key that sets it, for the jam check.
+MAX_RHO = {
+    "constant": ("rho", "friction angle rho", lambda p: p["rho"].value),
+    "velocity": ("c", "rho(0) = 1/c deg", lambda p: DEG / p["c"].value),
+}
+
+
+def shipped_scenes() -> tuple[str, ...]:
+    """Names of the scenes shipped in derivation/scenes/."""
+    return tuple(sorted(f.name.removesuffix(".toml") for f in _SCENES.iterdir()
+                        if f.name.endswith(".toml")))
+
+
+def load_scene(name_or_path: str | os.PathLike) -> Scene:
+    """Load a shipped scene by name ("paper") or a scene file by path."""
+    if isinstance(name_or_path, str) and name_or_path in shipped_scenes():
+        return _parse((_SCENES / f"{name_or_path}.toml").read_bytes(), f"shipped:{name_or_path}")
+    source = os.fspath(name_or_path)
+    try:
+        data = Path(source).read_bytes()
+    except OSError as err:
+        raise SceneError(f"{source}: cannot read scene file ({err.strerror}); "
+                         f"shipped scenes: {', '.join(shipped_scenes())}") from err
+    return _parse(data, source)
+
+
+def parse_scene(text: str, source: str = "<string>") -> Scene:
+    """Parse scene text; source names it in messages."""
+    return _parse(text.encode("utf-8"), source)
+
+
+def _parse(data: bytes, source: str) -> Scene:
+    try:
+        doc = tomllib.loads(data.decode("utf-8"))
+    except (UnicodeDecodeError, tomllib.TOMLDecodeError) as err:
+        raise SceneError(f"{source}: not a valid UTF-8 TOML file: {err}") from err
+    return _Reader(source).scene(doc, hashlib.sha256(data).hexdigest())
+
+
+def _join(path: str, key: str) -> str:
+    """Dotted key of key inside path ("" is the top level)."""
+    return f"{path}.{key}" if path else key
+
+
+def _toml(raw: object) -> str:
+    """A raw TOML value written back as TOML, for messages."""
+    if isinstance(raw, bool):
+        return str(raw).lower()
+    if isinstance(raw, str):
+        return f'"{raw}"'
+    if isinstance(raw, float):
+        return f"{raw:g}"
+    if isinstance(raw, list):
+        return f"[{', '.join(map(_toml, raw))}]"
+    if isinstance(raw, dict):
+        return "{" + ", ".join(f"{k} = {_toml(v)}" for k, v in raw.items()) + "}"
+    return str(raw)
+
+
+def _range(rule: Rule, hi: float | None, hi_key: str | None) -> str:
+    """The allowed range of a rule as text, e.g. "in (0, 90) deg" or "> 0 kg"."""
+    def num(value: float) -> str:
+        return f"{units.in_display(value, rule.quantity):g}"
+
+    if rule.lo is not None and hi is not None:
+        text = (f"in {'[' if rule.lo_in else '('}{num(rule.lo)}, "
+                f"{num(hi)}{']' if rule.hi_in else ')'}")
+    elif rule.lo is not None:
+        text = f"{'>=' if rule.lo_in else '>'} {num(rule.lo)}"
+    elif hi is not None:
+        text = f"{'<=' if rule.hi_in else '<'} {num(hi)}"
+    else:
+        text = "finite"
+    text = f"{text} {units.display_unit(rule.quantity)}".rstrip()
+    return f"{text} (below {hi_key})" if hi_key else text
+
+
+def _in_range(rule: Rule, value: float, hi: float | None) -> bool:
+    """Whether an SI value lies in the rule's range (hi already resolved to a number)."""
+    above = rule.lo is None or value > rule.lo or (rule.lo_in and value == rule.lo)
+    below = hi is None or value < hi or (rule.hi_in and value == hi)
+    return above and below
+
+
+class _Reader:
+    """Reads a parsed scene section by section; every failure raises SceneError naming the file."""
+
+    def __init__(self, source: str):
+        self.source = source
+
+    def fail(self, key: str, problem: str, value: str | None = None) -> NoReturn:
+        where = key if value is None else f"{key} = {value}"
+        raise SceneError(f"{self.source}: {where}: {problem}")
+
+    def keys(self, table: dict, path: str, allowed: tuple[str, ...]) -> None:
+        """Refuse keys not in allowed, listing the allowed ones and the closest match."""
+        for key in table:
+            if key not in allowed:
+                close = difflib.get_close_matches(key, allowed, n=1)
+                hint = f" (did you mean '{close[0]}'?)" if close else ""
+                self.fail(_join(path, key), f"unknown key{hint}; allowed here: {', '.join(allowed)}")
+
+    def table(self, parent: dict, key: str, path: str = "", required: bool = True,
+              hint: str = "") -> dict | None:
+        """A sub-table, or None when it is absent and not required."""
+        dotted = _join(path, key)
+        if key not in parent:
+            if required:
+                self.fail(dotted, f"missing required table{hint}")
+            return None
+        if not isinstance(parent[key], dict):
+            self.fail(dotted, "expected a table", _toml(parent[key]))
+        return parent[key]
+
+    def text(self, table: dict, key: str, path: str, choices: tuple[str, ...] | None = None,
+             default: str | None = None, pattern: re.Pattern | None = None) -> str:
+        """A string key, optionally one of choices or matching pattern."""
+        dotted = _join(path, key)
+        allowed = f"one of {', '.join(map(_toml, choices))}" if choices else "a string"
+        if pattern:
+            allowed = f"a string matching {pattern.pattern}"
+        if key not in table:
+            if default is None:
+                self.fail(dotted, f"missing required key; expected {allowed}")
+            return default
+        raw = table[key]
+        if not isinstance(raw, str):
+            self.fail(dotted, f"expected {allowed}", _toml(raw))
+        if (choices and raw not in choices) or (pattern and not pattern.fullmatch(raw)):
+            self.fail(dotted, f"must be {allowed}", _toml(raw))
+        return raw
+
+    def subset(self, table: dict, key: str, path: str, allowed: tuple[str, ...],
+               default: list | None = None) -> tuple[str, ...]:
+        """A non-empty list of distinct names from allowed, returned in allowed's order."""
+        dotted = _join(path, key)
+        need = f"a non-empty list of distinct names from {_toml(list(allowed))}"
+        if key not in table and default is None:
+            self.fail(dotted, f"missing required key; expected {need}")
+        raw = table.get(key, default)
+        if (not isinstance(raw, list) or not raw or len(set(map(str, raw))) != len(raw)
+                or not all(isinstance(x, str) and x in allowed for x in raw)):
+            self.fail(dotted, f"must be {need}", _toml(raw))
+        return tuple(x for x in allowed if x in raw)
+
+    def number(self, table: dict, key: str, path: str, rule: Rule, free_ok: bool = True,
+               siblings: dict[str, Param] | None = None) -> tuple[float, bool]:
+        """Value in SI and free flag of a numeric key, checked against its rule."""
+        dotted = _join(path, key)
+        hi, hi_key = rule.hi, None
+        if isinstance(rule.hi, str):
+            hi, hi_key = siblings[rule.hi].value, siblings[rule.hi].key
+        if key not in table:
+            if rule.default is None:
+                self.fail(dotted, f"missing required key ({rule.quantity}, "
+                                  f"{_range(rule, hi, hi_key)})")
+            return float(rule.default), False
+        raw, free = self.unwrap(table[key], dotted, free_ok)
+        if rule.integer and (isinstance(raw, bool) or not isinstance(raw, int)):
+            self.fail(dotted, "expected an integer", _toml(raw))
+        try:
+            value = units.to_si(raw, rule.quantity)
+        except units.UnitError as err:
+            self.fail(dotted, str(err), _toml(raw))
+        if not _in_range(rule, value, hi):
+            hint = ""
+            if rule.quantity == "angle" and not isinstance(raw, str):
+                hint = f"; plain numbers are SI (rad); write '{raw:g} deg'"
+            self.fail(dotted, f"must be {_range(rule, hi, hi_key)}{hint}",
+                      units.describe(raw, rule.quantity))
+        return value, free
+
+    def unwrap(self, raw: object, dotted: str, free_ok: bool) -> tuple[object, bool]:
+        """Value and free flag of a plain value or a {value, free} table."""
+        if not isinstance(raw, dict):
+            return raw, False
+        if not free_ok:
+            self.fail(dotted, "expected a plain value; {value, free} tables are for model "
+                              "parameters only", _toml(raw))
+        self.keys(raw, dotted, ("value", "free"))
+        if "value" not in raw:
+            self.fail(f"{dotted}.value", "missing required key")
+        free = raw.get("free", False)
+        if not isinstance(free, bool):
+            self.fail(f"{dotted}.free", "expected true or false", _toml(free))
+        return raw["value"], free
+
+    def params(self, table: dict, path: str, rules: dict[str, Rule],
+               prefix: str = "") -> dict[str, Param]:
+        """Params for the rules' keys, in rule order, named prefix + key."""
+        out: dict[str, Param] = {}
+        for key, rule in rules.items():
+            value, free = self.number(table, key, path, rule, siblings=out)
+            out[key] = Param(prefix + key, value, units.si_unit(rule.quantity), free,
+                             _join(path, key))
+        return out
+
+    def law(self, table: dict, path: str, laws: dict[str, dict[str, Rule]],
+            prefix: str = "") -> Law:
+        kind = self.text(table, "law", path, tuple(laws))
+        self.keys(table, path, ("law", *laws[kind]))
+        return Law(kind, self.params(table, path, laws[kind], prefix))
+
+    def only_modelled(self, table: dict, path: str, flank_of: dict[str, str],
+                      flanks: tuple[str, ...]) -> None:
+        """Refuse per-flank keys for flanks the scene does not model."""
+        for key, flank in flank_of.items():
+            if key in table and flank not in flanks:
+                self.fail(_join(path, key), f"flank {flank} is not modelled "
+                                            f"(wedge.flanks = {_toml(list(flanks))})")
+
+    def slopes(self, wedge: dict, flanks: tuple[str, ...]) -> dict[str, Param]:
+        """gamma per modelled flank: one shared Param, or gamma_a / gamma_b."""
+        per_flank = {f"gamma_{f}": f for f in FLANKS}
+        self.only_modelled(wedge, "wedge", per_flank, flanks)
+        given = [key for key in per_flank if key in wedge]
+        if "gamma" in wedge or not given:
+            if given:
+                self.fail(f"wedge.{given[0]}", "give either wedge.gamma (all flanks) or "
+                                               "gamma_a / gamma_b (per flank), not both")
+            shared = self.params(wedge, "wedge", {"gamma": GAMMA})["gamma"]
+            return {f: shared for f in flanks}
+        gamma = {f: self.params(wedge, "wedge", {f"gamma_{f}": GAMMA})[f"gamma_{f}"]
+                 for f in flanks}
+        if len(flanks) == 2:
+            a, b = gamma["a"], gamma["b"]
+            if not math.isclose(a.value, b.value, rel_tol=1e-12):
+                self.fail(b.key, f"must equal wedge.gamma_a = {units.show(a.value, 'angle')} "
+                                 "with both flanks modelled: with different slopes the two "
+                                 "flanks cannot both touch with zero clearance, so a flank "
+                                 "change would open a gap (free flight, backlash), which tswm "
+                                 "does not model", units.show(b.value, "angle"))
+            if a.free or b.free:
+                self.fail((b if b.free else a).key, "a free slope with both flanks modelled "
+                          "must be given once as wedge.gamma (the flanks share one slope)")
+        return gamma
+
+    def friction(self, doc: dict, flanks: tuple[str, ...]) -> dict[str, Law]:
+        """One shared law for all flanks, or one [friction.<flank>] table per modelled flank."""
+        table = self.table(doc, "friction")
+        tables = [k for k, v in table.items() if isinstance(v, dict) and "value" not in v]
+        if not tables:
+            shared = self.law(table, "friction", FRICTION_LAWS, "friction_")
+            return {f: shared for f in flanks}
+        others = [k for k in table if k not in tables]
+        if others:
+            self.fail("friction", "give either one law for all flanks (law = ... and its keys) "
+                                  "or one table per flank ([friction.a], [friction.b]), not "
+                                  f"both; found keys {', '.join(others)} and tables "
+                                  f"{', '.join(tables)}")
+        self.keys(table, "friction", FLANKS)
+        self.only_modelled(table, "friction", {f: f for f in FLANKS}, flanks)
+        hint = " (per-flank friction needs a table for every modelled flank)"
+        return {f: self.law(self.table(table, f, "friction", hint=hint), f"friction.{f}",
+                            FRICTION_LAWS, f"friction_{f}_") for f in flanks}
+
+    def check_jam(self, gamma: dict[str, Param], friction: dict[str, Law]) -> None:
+        """Refuse slope + largest friction angle >= 90 deg on any flank (the wedge jams)."""
+        for flank, law in friction.items():
+            key, label, max_rho = MAX_RHO[law.kind]
+            slope, rho = gamma[flank].value, max_rho(law.params)
+            if slope + rho >= 90 * DEG:
+                p = law.params[key]
+                self.fail(p.key, f"{gamma[flank].key} + {label} = "
+                                 f"{units.in_display(slope, 'angle'):g} + "
+                                 f"{units.in_display(rho, 'angle'):g} deg: must be < 90 deg "
+                                 "(else the wedge jams)",
+                          units.show(p.value, FRICTION_LAWS[law.kind][key].quantity))
+
+    def run(self, doc: dict) -> Run:
+        table = self.table(doc, "run", required=False) or {}
+        self.keys(table, "run", (*RUN, "method"))
+        value = {k: self.number(table, k, "run", rule, free_ok=False)[0] for k, rule in RUN.items()}
+        method = self.text(table, "method", "run", METHODS, default="dopri5")
+        return Run(**{**value, "max_steps": int(value["max_steps"])}, method=method)
+
+    def scene(self, doc: dict, digest: str) -> Scene:
+        self.keys(doc, "", TOP_KEYS)
+        name = self.text(doc, "name", "", pattern=NAME)
+        description = self.text(doc, "description", "", default="")
+        equations = self.text(doc, "equations", "", EQUATIONS, default="consistent")
+        wedge = self.table(doc, "wedge")
+        self.keys(wedge, "wedge", ("flanks", "gamma", "gamma_a", "gamma_b", *WEDGE))
+        flanks = self.subset(wedge, "flanks", "wedge", FLANKS)
+        gamma = self.slopes(wedge, flanks)
+        masses = self.params(wedge, "wedge", WEDGE)
+        friction = self.friction(doc, flanks)
+        self.check_jam(gamma, friction)
+        drive = self.law(self.table(doc, "drive"), "drive", DRIVE_LAWS)
+        load = self.law(self.table(doc, "load"), "load", LOAD_LAWS)
+        reference = self.table(doc, "reference", required=False)
+        if reference is not None:
+            self.keys(reference, "reference", tuple(REFERENCE))
+            reference = self.params(reference, "reference", REFERENCE)
+        modes_table = self.table(doc, "modes", required=False) or {}
+        self.keys(modes_table, "modes", ("include",))
+        modes = self.subset(modes_table, "include", "modes", MODES, default=["forward"])
+        if equations == "literal" and modes != ("forward",):
+            self.fail("modes.include", 'equations = "literal" allows ["forward"] only (the '
+                      "printed equations model forward sliding only)", _toml(list(modes)))
+        if equations == "literal" and flanks != FLANKS:
+            self.fail("wedge.flanks", 'equations = "literal" needs ["a", "b"] (the printed '
+                      "model switches between both flanks)", _toml(list(flanks)))
+        scene = Scene(name, description, equations, flanks, gamma, masses["m1"], masses["m2"],
+                      friction, drive, load, reference or {}, modes, self.run(doc),
+                      self.source, digest)
+        names = [p.name for p in scene.params()]
+        assert len(set(names)) == len(names) and all(n.isidentifier() for n in names), names
+        return scene

@@ -1,0 +1,96 @@
+"""Units accepted in scene files: a small table and a parser for "4.76 deg" or plain SI numbers."""
+
+import math
+import re
+
+# quantity -> {unit: factor to SI}; the first unit is the SI unit tswm stores.
+UNITS: dict[str, dict[str, float]] = {
+    "mass": {"kg": 1.0, "g": 1e-3, "t": 1e3},
+    "length": {"m": 1.0, "mm": 1e-3},
+    "angle": {"rad": 1.0, "deg": math.pi / 180},
+    "force": {"N": 1.0, "kN": 1e3},
+    "velocity": {"m/s": 1.0, "mm/s": 1e-3},
+    "time": {"s": 1.0, "ms": 1e-3},
+    "stiffness": {"N/m": 1.0, "N/mm": 1e3, "kN/mm": 1e6},
+    "dimensionless": {"": 1.0},
+}
+DISPLAY = {"angle": "deg"}  # unit used in messages where it is not the SI unit
+
+_QUANTITY = re.compile(r"\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*(.*?)\s*")
+
+
+class UnitError(ValueError):
+    """A value that is not a finite number with a unit of the expected quantity."""
+
+
+def si_unit(quantity: str) -> str:
+    """The SI unit stored for a quantity ("" when dimensionless)."""
+    return next(iter(UNITS[quantity]))
+
+
+def display_unit(quantity: str) -> str:
+    """The unit used to show values of a quantity in messages."""
+    return DISPLAY.get(quantity, si_unit(quantity))
+
+
+def in_display(value: float, quantity: str) -> float:
+    """An SI value converted to the display unit."""
+    return value / UNITS[quantity][display_unit(quantity)]
+
+
+def show(value: float, quantity: str) -> str:
+    """An SI value as text in the display unit, e.g. "4.76 deg"."""
+    return f"{in_display(value, quantity):g} {display_unit(quantity)}".rstrip()
+
+
+def to_si(raw: object, quantity: str) -> float:
+    """Convert a plain number (already SI) or a string "<number> <unit>" to SI."""
+    if isinstance(raw, bool) or not isinstance(raw, (int, float, str)):
+        raise UnitError(f"expected {_expected(quantity)}")
+    if isinstance(raw, str):
+        number, unit = _split(raw, quantity)
+        value = number * UNITS[quantity][unit]
+    else:
+        value = float(raw)
+    if not math.isfinite(value):
+        raise UnitError("must be a finite number")
+    return value
+
+
+def describe(raw: int | float | str, quantity: str) -> str:
+    """A valid value as written, followed by its display-unit value when that reads differently."""
+    shown = show(to_si(raw, quantity), quantity)
+    if isinstance(raw, str):
+        number, unit = _split(raw, quantity)
+        written = f"{number:g} {unit}"
+    else:
+        written = f"{raw:g} {si_unit(quantity)}".rstrip()
+    return shown if written == shown else f"{written} (= {shown})"
+
+
+def _split(raw: str, quantity: str) -> tuple[float, str]:
+    """Number and unit of a string such as "4.76 deg", checked against the quantity."""
+    if quantity == "dimensionless":
+        raise UnitError(f"expected {_expected(quantity)}")
+    match = _QUANTITY.fullmatch(raw)
+    if not match:
+        raise UnitError(f"expected {_expected(quantity)}")
+    unit = match[2]
+    if unit not in UNITS[quantity]:
+        owner = next((q for q, table in UNITS.items() if unit in table), None)
+        if not unit:
+            problem = "missing unit"
+        elif owner:
+            problem = f"'{unit}' is a {owner} unit"
+        else:
+            problem = f"unknown unit '{unit}'"
+        raise UnitError(f"{problem}; expected {_expected(quantity)}")
+    return float(match[1]), unit
+
+
+def _expected(quantity: str) -> str:
+    """What a value of the quantity may look like, for messages."""
+    if quantity == "dimensionless":
+        return "a plain number (dimensionless)"
+    names = ", ".join(UNITS[quantity])
+    return f"a {quantity}: a plain number in {si_unit(quantity)} or '<number> <unit>' with unit {names}"

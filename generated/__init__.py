@@ -1,0 +1,1 @@
+"""Emitted model modules, one per shipped scene. Written by `tswm generate`; never edit by hand."""

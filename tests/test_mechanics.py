@@ -1,0 +1,125 @@
+"""The derivation against hand-written formulas and physical invariants."""
+import numpy as np
+import pytest
+import sympy as sp
+
+from derivation import mechanics as M
+
+MODES = [(f, s) for f in "ab" for s in (1, -1)]
+rng = np.random.default_rng(7)
+
+
+def zero(expr) -> bool:
+    return sp.simplify(sp.expand_trig(expr)) == 0
+
+
+def random_points(n=25):
+    """Physical points: slope and friction below jamming, masses > 0, forces of both signs."""
+    for _ in range(n):
+        g = rng.uniform(0.02, 0.6)
+        yield {M.gamma: g, M.rho: rng.uniform(0.0, 0.5) * (np.pi / 2 - g), M.m1: rng.uniform(0.1, 20),
+               M.m2: rng.uniform(1, 400), M.F1: rng.uniform(-3e3, 3e3), M.F2: rng.uniform(-2e4, 2e4)}
+
+
+def hand(flank, s):
+    """The reduced model written out by hand (physics notes, with f and s)."""
+    f = M.FLANK_SIGN[flank]
+    psi = sp.tan(M.gamma + f * s * M.rho)
+    D = M.m1 + psi * M.m2 * sp.tan(M.gamma)
+    phi = M.F1 * sp.tan(M.gamma) / M.m1 - M.F2 / M.m2
+    return dict(psi=psi, D=D, phi=phi, accel=(M.F1 + psi * M.F2) / D, S2=-M.m1 * M.m2 * phi / D,
+                S1=psi * M.m1 * M.m2 * phi / D,
+                N=f * M.m1 * M.m2 * phi * sp.cos(M.rho) / (D * sp.cos(M.gamma + f * s * M.rho)))
+
+
+def test_kinematics_constraint_and_sliding_speed():
+    k = M.kinematics()
+    assert zero(k.x2_of_x1 - M.x1 * sp.tan(M.gamma))
+    assert zero(k.velocity.lhs - (M.v2 - M.v1 * sp.tan(M.gamma)))
+    assert zero(k.acceleration.lhs - (M.a2 - M.a1 * sp.tan(M.gamma)))
+    assert zero(k.sliding_speed - 1 / sp.cos(M.gamma))
+
+
+@pytest.mark.parametrize("flank,s", MODES)
+def test_sliding_mode_equals_hand_formulas(flank, s):
+    m, h = M.sliding(flank, s), hand(flank, s)
+    assert m.psi == h["psi"]                        # trigsimp must find the angle-sum form itself
+    for name, got in [("D", m.denominator), ("phi", m.switching), ("accel", m.accel), ("S1", m.S1),
+                      ("S2", m.S2)]:
+        assert zero(got - h[name]), name
+    assert zero(m.normal.subs(M.phi, h["phi"]) - h["N"])
+
+
+@pytest.mark.parametrize("flank,s", MODES)
+def test_ftf_route_equals_direct_solution(flank, s):
+    """Eliminating N through the FTF and solving Newton for (a1, N) directly agree."""
+    m = M.sliding(flank, s)
+    for point in random_points(10):
+        assert float(m.accel.subs(point)) == pytest.approx(float(m.accel_direct.subs(point)), rel=1e-12)
+
+
+@pytest.mark.parametrize("flank,s", MODES)
+def test_power_balance_from_newton(flank, s):
+    """Work of F1, F2 minus kinetic energy rate equals Coulomb dissipation, which is >= 0 when N >= 0."""
+    m, k = M.sliding(flank, s), M.kinematics()
+    v = s * 1.7
+    for point in random_points():
+        a = float(m.accel.subs(point))
+        phi = float(m.switching.subs(point))
+        N = float(m.normal.subs(M.phi, phi).subs(point))
+        ratio = float(k.ratio.subs(point))
+        balance = (point[M.F1] * v + point[M.F2] * ratio * v
+                   - (point[M.m1] * a * v + point[M.m2] * ratio * a * ratio * v))
+        coulomb = np.tan(point[M.rho]) * N * abs(v) / np.cos(point[M.gamma])
+        assert balance == pytest.approx(coulomb, rel=1e-9, abs=1e-6)
+        if N >= 0 and float(m.denominator.subs(point)) > 0:
+            assert coulomb >= 0
+    assert zero(m.friction_power - m.friction_power_coulomb)
+
+
+def test_contact_force_vanishes_exactly_on_switching_surface():
+    for flank, s in MODES:
+        m = M.sliding(flank, s)
+        on_surface = {M.F2: M.m2 * M.F1 * sp.tan(M.gamma) / M.m1}
+        assert zero(m.switching.subs(on_surface))
+        assert zero(m.S1.subs(on_surface)) and zero(m.S2.subs(on_surface))
+        assert {M.Psi, M.rho}.isdisjoint(m.switching.free_symbols)     # one phi for every flank
+
+
+def test_flank_switch_is_continuous_in_acceleration():
+    """On phi = 0 both flanks give a1 = F1/m1 for either direction: a kink, not a jump."""
+    on_surface = {M.F2: M.m2 * M.F1 * sp.tan(M.gamma) / M.m1}
+    for s in (1, -1):
+        a_a = M.sliding("a", s).accel.subs(on_surface)
+        a_b = M.sliding("b", s).accel.subs(on_surface)
+        assert zero(a_a - a_b) and zero(a_a - M.F1 / M.m1)
+    for point in random_points(5):       # ... but the slopes differ there (kink)
+        point[M.F2] = float((M.m2 * M.F1 * sp.tan(M.gamma) / M.m1).subs(point))
+        d_a = float(sp.diff(M.sliding("a", 1).accel, M.F2).subs(point))
+        d_b = float(sp.diff(M.sliding("b", 1).accel, M.F2).subs(point))
+        assert abs(d_a - d_b) > 1e-9 * abs(d_a) or point[M.rho] < 1e-6
+
+
+def test_tractive_efficiency():
+    assert zero(M.sliding("a", 1).efficiency - sp.tan(M.gamma) / sp.tan(M.gamma + M.rho))
+
+
+def test_stick_statics_by_hand_and_breakaway_meets_sliding():
+    st = M.stick()
+    assert zero(st.normal_times_flank - (M.F1 * sp.sin(M.gamma) - M.F2 * sp.cos(M.gamma)))
+    assert zero(st.tangential - (M.F1 * sp.cos(M.gamma) + M.F2 * sp.sin(M.gamma)))
+    # On the forward cone boundary (flank a) the forward sliding acceleration is exactly zero.
+    boundary = {M.F1: sp.solve(sp.tan(M.rho) * st.normal_times_flank - st.tangential, M.F1)[0]}
+    assert zero(M.sliding("a", 1).accel.subs(boundary))
+    boundary_b = {M.F1: sp.solve(sp.tan(M.rho) * st.normal_times_flank + st.tangential, M.F1)[0]}
+    assert zero(M.sliding("a", -1).accel.subs(boundary_b))
+
+
+def test_paper_breakaway_force_matches_physics_notes():
+    """Starting against F2 = -5000 N needs F1 of about 1445 N; the Kloss force at rest is about 727 N."""
+    point = {M.gamma: np.radians(4.76), M.rho: np.radians(1 / 0.088), M.F2: -5000.0}
+    st = M.stick()
+    need = sp.nsolve(st.cone_forward.subs(point), M.F1, 1000)
+    assert float(need) == pytest.approx(1445, abs=5)
+    F1_rest = 2 * 2178 * 7.85 * 1.35 / (7.85 ** 2 + 1.35 ** 2)
+    assert F1_rest == pytest.approx(727, abs=2) and F1_rest < float(need)

@@ -1,0 +1,127 @@
+"""Scene-specialised models: modes, laws, states, and variants that must reduce to each other."""
+import math
+
+import pytest
+import sympy as sp
+
+from derivation import laws, mechanics as M, paper
+from derivation.model import build_model
+from derivation.scene import load_scene, parse_scene
+
+BASE = """
+name = "variant"
+[wedge]
+flanks = {flanks}
+gamma = "6 deg"
+m1 = "3 kg"
+m2 = "40 kg"
+{friction}
+[drive]
+law = "constant"
+F1 = "400 N"
+[load]
+law = "constant"
+F2 = "-900 N"
+[modes]
+include = ["forward", "backward", "stick"]
+"""
+SHARED = '[friction]\nlaw = "constant"\nrho = "4 deg"'
+PER_FLANK = '[friction.a]\nlaw = "constant"\nrho = "4 deg"\n[friction.b]\nlaw = "constant"\nrho = "{rho_b}"'
+
+
+def variant(flanks='["a", "b"]', friction=SHARED):
+    return build_model(parse_scene(BASE.format(flanks=flanks, friction=friction)))
+
+
+def test_paper_model_modes_states_and_laws():
+    model = build_model(load_scene("paper"))
+    assert [m.name for m in model.modes] == ["fwd_a", "fwd_b", "stick"]
+    assert model.states == (M.v1,)                      # no law reads x1: position by quadrature
+    assert [q.symbol for q in model.laws] == [M.F1, M.F2, sp.Symbol("rho", real=True)]
+    assert model.mode("fwd_a").regime == "tractive" and model.mode("fwd_b").regime == "inverse-tractive"
+
+
+def test_spring_load_adds_position_state_and_event():
+    model = build_model(load_scene("one-sided"))
+    assert model.states == (M.x1, M.v1)
+    assert [e.name for e in model.events] == ["load_contact"]
+
+
+@pytest.mark.parametrize("flank", ["a", "b"])
+def test_one_sided_reduces_to_two_sided(flank):
+    one, two = variant(flanks=f'["{flank}"]'), variant()
+    for word in ("fwd", "bwd"):
+        a, b = one.mode(f"{word}_{flank}"), two.mode(f"{word}_{flank}")
+        assert sp.simplify(a.accel - b.accel) == 0 and sp.simplify(a.S2 - b.S2) == 0
+    assert [m.name for m in one.modes] == [f"fwd_{flank}", f"bwd_{flank}", "stick"]
+
+
+def test_asymmetric_reduces_to_symmetric_when_frictions_coincide():
+    asym, sym = variant(friction=PER_FLANK.format(rho_b="4 deg")), variant()
+    rho, rho_a, rho_b = (sp.Symbol(n, real=True) for n in ("rho", "rho_a", "rho_b"))
+    same = {rho_a: rho, rho_b: rho}
+    for mode in sym.modes:
+        other = asym.mode(mode.name)
+        for field in ("accel", "S1", "S2"):
+            assert sp.simplify(getattr(other, field).subs(same) - getattr(mode, field)) == 0
+    assert sp.simplify(asym.stick.cone_forward.subs(same) - sym.stick.cone_forward) == 0
+    laws_by_symbol = {q.symbol: q.expr for q in asym.laws}
+    assert laws_by_symbol[rho_a] == laws_by_symbol[rho_b].subs(sp.Symbol("friction_b_rho", real=True),
+                                                              sp.Symbol("friction_a_rho", real=True))
+
+
+def test_asymmetric_stick_uses_the_holding_flanks_friction():
+    asym = variant(friction=PER_FLANK.format(rho_b="9 deg"))
+    rho_a, rho_b = sp.Symbol("rho_a", real=True), sp.Symbol("rho_b", real=True)
+    cone = asym.stick.cone_forward
+    holds_on_b = {M.F1: 0, M.F2: 100, sp.Symbol("gamma", real=True): 0.1, rho_a: 0.05, rho_b: 0.2}
+    assert float(cone.subs(holds_on_b)) == pytest.approx(math.tan(0.2) * 100 * math.cos(0.1) - 100 * math.sin(0.1))
+
+
+def test_literal_model_is_the_printed_equations():
+    model = build_model(load_scene("paper-literal"))
+    g, rho, m1, m2 = (sp.Symbol(n, real=True) for n in ("gamma", "rho", "m1", "m2"))
+    for name, psi in (("fwd_a", sp.tan(g + rho)), ("fwd_b", sp.tan(g - rho))):
+        mode = model.mode(name)
+        printed = (M.F1 - M.F2 * psi) / (m1 - m2 * psi * sp.tan(g))
+        assert sp.simplify(mode.accel - printed) == 0
+        assert sp.simplify(mode.S2 - (M.F1 - m1 * printed) / psi) == 0
+    assert sp.simplify(model.switching - (M.F1 / m1 - M.F2 / m2 * sp.tan(g))) == 0
+    assert model.stick is None
+
+
+def test_kloss_safe_form_equals_textbook_and_is_regular_at_synchronous_speed():
+    scene = load_scene("paper")
+    from derivation.model import param_symbol
+    safe = laws.drive_force(scene.drive, param_symbol)
+    Fmax, V0, Vmax = (param_symbol(scene.drive.params[k]) for k in ("Fmax", "V0", "Vmax"))
+    textbook = laws.kloss_textbook(Fmax, V0 - M.v1, V0 - Vmax)
+    assert sp.simplify(safe - textbook) == 0
+    values = {Fmax: 2178.0, V0: 7.85, Vmax: 6.5}
+    assert float(safe.subs(values).subs(M.v1, 7.85)) == 0.0
+    with pytest.raises(ZeroDivisionError):             # float arithmetic of the printed form
+        sp.lambdify(M.v1, textbook.subs(values))(7.85)
+    denominator = sp.fraction(sp.together(safe))[1]
+    assert all(not root.is_real for root in sp.solve(denominator.subs(values), M.v1))
+    assert float(safe.subs(values).subs(M.v1, 6.5)) == pytest.approx(2178.0)   # peak at Vmax
+
+
+def test_velocity_friction_law_in_degrees():
+    scene = load_scene("paper")
+    from derivation.model import param_symbol
+    rho = laws.friction_angle(scene.friction["a"], param_symbol, param_symbol(scene.gamma["a"]))
+    values = {param_symbol(p): p.value for p in scene.params()}
+    assert math.degrees(float(rho.subs(values).subs(M.v1, 0))) == pytest.approx(1 / 0.088)
+    v = 6.5
+    expected = 1 / (0.161 * (v / math.cos(math.radians(4.76))) ** 0.535 + 0.088)
+    assert math.degrees(float(rho.subs(values).subs(M.v1, -v))) == pytest.approx(expected)
+
+
+def test_step_load_is_piecewise_with_time_event():
+    model = build_model(load_scene("asymmetric"))
+    F2 = {q.symbol: q.expr for q in model.laws}[M.F2]
+    t_step = sp.Symbol("t_step", real=True)
+    assert F2.subs({M.t: 0.0, t_step: 0.3}) == sp.Symbol("F2_before", real=True)
+    assert F2.subs({M.t: 0.5, t_step: 0.3}) == sp.Symbol("F2", real=True)
+    assert [e.name for e in model.events] == ["load_step"]
+    assert paper.PSI_TRACTIVE == sp.tan(M.gamma + M.rho)
