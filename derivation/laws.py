@@ -36,7 +36,7 @@ def drive_force(law: Law, sym: SymbolOf) -> sp.Expr:
     p = {k: sym(v) for k, v in law.params.items()}
     if law.kind == "kloss":
         slip, slip_max = p["V0"] - v1, p["V0"] - p["Vmax"]
-        return sp.factor(sp.together(kloss_textbook(p["Fmax"], slip, slip_max)))
+        return sp.together(kloss_textbook(p["Fmax"], slip, slip_max))   # 2 Fmax s smax / (s^2 + smax^2)
     if law.kind == "constant":
         return p["F1"]
     if law.kind == "linear":
@@ -51,7 +51,7 @@ def load_force(law: Law, sym: SymbolOf, x2: sp.Expr) -> tuple[sp.Expr, tuple[Law
         return p["F2"], ()
     if law.kind == "step":
         event = LawEvent("load_step", t - p["t_step"], "the load steps at t = t_step")
-        return sp.Piecewise((p["F2_before"], t < p["t_step"]), (p["F2"], True)), (event,)
+        return sp.Piecewise((p["F2_before"], t < p["t_step"]), (p["F2_after"], True)), (event,)
     if law.kind == "spring":
         squeeze = x2 - p["x2_contact"]
         event = LawEvent("load_contact", squeeze, "body 2 reaches the spring at x2 = x2_contact")

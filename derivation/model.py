@@ -149,8 +149,10 @@ def _literal_modes(scene: Scene, rho_of: dict[str, sp.Symbol]) -> tuple[list[Mod
         psi = psi.subs(sub)
         accel = paper.EQ6_ACCEL.subs(sub).subs(mechanics.Psi, psi)
         s1 = paper.EQ8_S1.subs(sub).subs(mechanics.a1, accel)
+        # eq. (9) divided through: S1 carries the factor psi, so psi = 0 (rho = gamma) is no singularity.
+        s2 = sp.cancel(paper.EQ9_S2.subs({mechanics.S1: s1, mechanics.Psi: psi}))
         modes.append(Mode(name=f"fwd_{flank}", regime=REGIMES[1, flank], flank=flank, direction=1,
-                          accel=accel, S1=s1, S2=paper.EQ9_S2.subs({mechanics.S1: s1, mechanics.Psi: psi}),
+                          accel=accel, S1=s1, S2=s2,
                           psi=psi, denominator=sp.fraction(sp.together(accel))[1]))
     return modes, paper.EQ7_SWITCHING.subs(sub)
 
@@ -170,5 +172,7 @@ def build_model(scene: Scene) -> Model:
             modes.append(stick_mode)
     reads_x1 = any(x1 in q.expr.free_symbols for q in quantities)
     symbols = {p.name: param_symbol(p) for p in scene.params()}
+    for q in quantities:     # a parameter may carry a law's name only if it is that law (constant F1, F2)
+        assert str(q.symbol) not in symbols or q.expr == q.symbol, f"parameter {q.symbol} shadows the law {q.doc}"
     return Model(scene=scene, symbols=symbols, states=(x1, v1) if reads_x1 else (v1,),
                  laws=quantities, events=events, switching=switching, modes=tuple(modes), stick=stick)

@@ -119,7 +119,7 @@ DRIVE_LAWS = {
 }
 LOAD_LAWS = {
     "constant": {"F2": Rule("force")},
-    "step": {"F2_before": Rule("force", default=0.0), "F2": Rule("force"),
+    "step": {"F2_before": Rule("force", default=0.0), "F2_after": Rule("force"),
              "t_step": Rule("time", 0.0, lo_in=True)},
     "spring": {"k": Rule("stiffness", 0.0), "x2_contact": Rule("length"),
                "preload": Rule("force", 0.0, lo_in=True)},

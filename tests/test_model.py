@@ -122,6 +122,6 @@ def test_step_load_is_piecewise_with_time_event():
     F2 = {q.symbol: q.expr for q in model.laws}[M.F2]
     t_step = sp.Symbol("t_step", real=True)
     assert F2.subs({M.t: 0.0, t_step: 0.3}) == sp.Symbol("F2_before", real=True)
-    assert F2.subs({M.t: 0.5, t_step: 0.3}) == sp.Symbol("F2", real=True)
+    assert F2.subs({M.t: 0.5, t_step: 0.3}) == sp.Symbol("F2_after", real=True)
     assert [e.name for e in model.events] == ["load_step"]
     assert paper.PSI_TRACTIVE == sp.tan(M.gamma + M.rho)

@@ -131,9 +131,9 @@ def test_asymmetric():
     assert fb.params["rho"].value == pytest.approx(3 * math.pi / 180, rel=1e-15)
     assert [p.name for p in s.params()] == [
         "gamma", "m1", "m2", "friction_a_a", "friction_a_b", "friction_a_c", "friction_b_rho",
-        "Fmax", "V0", "Vmax", "F2_before", "F2", "t_step"]
+        "Fmax", "V0", "Vmax", "F2_before", "F2_after", "t_step"]
     assert {k: p.value for k, p in s.load.params.items()} == {
-        "F2_before": 0.0, "F2": 3000.0, "t_step": 0.3}
+        "F2_before": 0.0, "F2_after": 3000.0, "t_step": 0.3}
     assert s.m2.value == 100.0 and s.modes == ("forward", "backward", "stick")
 
 
@@ -198,7 +198,8 @@ def test_per_flank_slopes_one_sided_and_equal():
 
 
 def test_value_table_fixed_and_default_step():
-    s = scene(**{"wedge.m1": '{ value = "2 kg" }', "load.law": '"step"', "load.t_step": "0"})
+    s = scene(**{"wedge.m1": '{ value = "2 kg" }', "load": None, "load.law": '"step"',
+                 "load.F2_after": '"-5 kN"', "load.t_step": "0"})
     assert (s.m1.value, s.m1.free) == (2.0, False)
     assert s.load.params["F2_before"].value == 0.0 and s.load.params["t_step"].free is False
 
@@ -249,7 +250,7 @@ BAD = [
     ({"drive.Vmax": '"0 m/s"'}, ["drive.Vmax = 0 m/s", "in (0, 7.85) m/s"]),
     ({"drive": None, "drive.law": '"linear"', "drive.F0": '"800 N"', "drive.V0": '"-1 m/s"'},
      ["drive.V0 = -1 m/s", "> 0 m/s"]),
-    ({"load.law": '"step"', "load.t_step": '"-1 ms"'},
+    ({"load": None, "load.law": '"step"', "load.F2_after": "0", "load.t_step": '"-1 ms"'},
      ["load.t_step = -1 ms (= -0.001 s)", ">= 0 s"]),
     ({"load": None, "load.law": '"spring"', "load.k": '"0 N/mm"', "load.x2_contact": "0",
       "load.preload": "0"}, ["load.k = 0 N/mm (= 0 N/m)", "> 0 N/m"]),

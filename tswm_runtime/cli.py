@@ -35,6 +35,18 @@ def _derive(args: argparse.Namespace) -> int:
     return 0
 
 
+def _generate(args: argparse.Namespace) -> int:
+    from derivation.codegen import write_module
+    from derivation.model import build_model
+    from derivation.scene import load_scene
+
+    model = build_model(load_scene(args.scene))
+    path = write_module(model, args.output, force=args.force)
+    print(f"wrote {path}: modes {', '.join(m.name for m in model.modes)}; "
+          f"free parameters {', '.join(p.name for p in model.scene.free_params()) or 'none'}")
+    return 0
+
+
 def _parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="tswm", description="Derive, generate and simulate wedge mechanisms.")
     sub = parser.add_subparsers(dest="command", required=True)
@@ -45,17 +57,24 @@ def _parser() -> argparse.ArgumentParser:
     derive.add_argument("--pdf", nargs="?", const=True, metavar="FILE.pdf",
                         help="build a PDF with pdflatex (default name: the --latex file's, else SCENE-derivation.pdf)")
     derive.set_defaults(run=_derive)
+    generate = sub.add_parser("generate", help="emit the scene's numba module")
+    generate.add_argument("scene", help="a shipped scene name or a .toml path")
+    generate.add_argument("-o", "--output", default="generated", metavar="DIR",
+                          help="directory for the module (default: generated)")
+    generate.add_argument("--force", action="store_true", help="overwrite a module that was edited by hand")
+    generate.set_defaults(run=_generate)
     return parser
 
 
 def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
-    from derivation.scene import SceneError
     from derivation.latex import TexUnavailable
+    from derivation.scene import SceneError
+    from tswm_runtime.files import EditedModuleError
 
     try:
         return args.run(args)
-    except (SceneError, TexUnavailable, FileNotFoundError) as error:
+    except (SceneError, TexUnavailable, EditedModuleError, FileNotFoundError) as error:
         print(f"tswm {args.command}: error: {error}", file=sys.stderr)
         return 2
 

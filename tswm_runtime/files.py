@@ -6,6 +6,10 @@ import tempfile
 from pathlib import Path
 
 
+class EditedModuleError(RuntimeError):
+    """A generated module was edited by hand: its body no longer matches its header hash."""
+
+
 def write_atomic(path: str | os.PathLike, data: str | bytes) -> Path:
     """Write ``data`` to a temporary file beside ``path``, then rename it over ``path``."""
     path = Path(path)

@@ -1,0 +1,309 @@
+"""Emit one numba module per scene from the model IR, through a Jinja2 template.
+
+Fixed parameters are folded in as numbers (SymPy then evaluates what depends only on
+them, such as tan(gamma)); free ones are read from the parameter vector ``p``. Every
+function is a top-level ``@njit(cache=True)`` function calling the others as module
+globals, so numba caches and inlines them. The module imports math, numpy and numba only.
+"""
+from __future__ import annotations
+
+import hashlib
+from dataclasses import dataclass
+from importlib import resources
+from pathlib import Path
+
+import jinja2
+import sympy as sp
+from sympy.printing.pycode import PythonCodePrinter
+
+from derivation.mechanics import t
+from derivation.model import Model, param_symbol
+from tswm_runtime.files import EditedModuleError, write_atomic
+
+GENERATOR_VERSION = "0.1.0"
+HEADER_LINES = 5
+STICK_GUARDS = ("cone_forward", "cone_backward", "flank_normal")
+SLIDING_GUARDS = ("phi", "v1", "D", "jam")
+
+
+@dataclass(frozen=True)
+class Function:
+    """One emitted function: its name, arguments, docstring, body lines and return value."""
+
+    name: str
+    args: str
+    doc: str
+    lines: tuple[str, ...]
+    result: str
+    signature: str = ""          # explicit numba signature name, for the contract functions
+
+
+def module_name(scene_name: str) -> str:
+    return scene_name.replace("-", "_")
+
+
+def generator_digest() -> str:
+    """sha256 over the generator's own sources, so a module names the code that wrote it."""
+    h = hashlib.sha256()
+    root = resources.files("derivation")
+    names = sorted(p.name for p in root.iterdir() if p.name.endswith(".py"))
+    for name in names:
+        h.update(name.encode() + (root / name).read_bytes())
+    for name in sorted(p.name for p in (root / "templates").iterdir()):
+        h.update(name.encode() + (root / "templates" / name).read_bytes())
+    return h.hexdigest()
+
+
+class _Printer(PythonCodePrinter):
+    """Python source for numba: math-module functions, exact doubles for numbers."""
+
+    def __init__(self):
+        super().__init__({"standard": "python3", "fully_qualified_modules": True})
+
+    def _print_Float(self, expr):
+        return repr(float(expr))
+
+
+class _Emitter:
+    """Turns IR expressions into function bodies for one scene."""
+
+    def __init__(self, model: Model, free: tuple[str, ...]):
+        self.model = model
+        self.free = free
+        self.printer = _Printer()
+        fixed = [p for p in model.params if p.name not in free]
+        self.fixed = {param_symbol(p): sp.Float(repr(p.value)) for p in fixed}
+        self.law_functions = {q.symbol: law_function_name(q.symbol) for q in model.laws}
+        self.inlined_laws = _compose_laws(model)
+
+    def print(self, expr) -> str:
+        return self.printer.doprint(expr)
+
+    def body(self, outputs: list[sp.Expr], law: sp.Symbol | None = None) -> tuple[list[str], list[str]]:
+        """Unpack states, free parameters and laws the outputs use; one CSE over the outputs.
+
+        A law symbol may share its name with a parameter (a constant load ``F2``): outside
+        the law's own function the value then comes from the law, inside it from ``p``.
+        """
+        exprs = [sp.sympify(e).subs(self.fixed) for e in outputs]
+        used = set().union(*(e.free_symbols for e in exprs))
+        calls = [q.symbol for q in self.model.laws if q.symbol in used and q.symbol != law]
+        lines = [f"{s} = y[{i}]" for i, s in enumerate(self.model.states) if s in used]
+        lines += [f"{name} = p[{i}]" for i, name in enumerate(self.free)
+                  if sp.Symbol(name, real=True) in used and sp.Symbol(name, real=True) not in calls]
+        lines += [f"{s} = {self.law_functions[s]}(t, y, p)" for s in calls]
+        replacements, reduced = sp.cse(exprs, symbols=sp.numbered_symbols("c"))
+        lines += [f"{s} = {self.print(e)}" for s, e in replacements]
+        return lines, [self.print(sp.Float(e) if e.is_Number else e) for e in reduced]
+
+    def function(self, name: str, doc: str, outputs: list[sp.Expr], law: sp.Symbol | None = None) -> Function:
+        lines, results = self.body(outputs, law)
+        return Function(name, "t, y, p", doc, tuple(lines), ", ".join(results))
+
+
+def law_function_name(symbol: sp.Symbol) -> str:
+    base = {"F1": "drive_force", "F2": "load_force", "x2": "body2_position"}
+    name = str(symbol)
+    return base.get(name, name.replace("rho", "friction_angle"))
+
+
+def _compose_laws(model: Model) -> dict:
+    """Each law symbol -> its expression in states, t and parameters only."""
+    done: dict = {}
+    for q in model.laws:
+        done[q.symbol] = q.expr.subs(done)
+    return done
+
+
+def _short(expr: sp.Expr) -> str:
+    return sp.sstr(expr)
+
+
+def _mode_functions(em: _Emitter) -> list[Function]:
+    out = []
+    for mode in em.model.modes:
+        out.append(em.function(f"accel_{mode.name}", f"a1 in mode {mode.name} ({mode.regime}): "
+                               f"{_short(mode.accel)}", [mode.accel]))
+        out.append(em.function(f"reactions_{mode.name}", f"(S1, S2) in mode {mode.name}: "
+                               f"S1 = {_short(mode.S1)}, S2 = {_short(mode.S2)}", [mode.S1, mode.S2]))
+        if mode.denominator is not None:
+            outs = [mode.denominator] + ([mode.jam] if mode.jam is not None else [])
+            out.append(em.function(f"consistency_{mode.name}", f"(D{', jam' if mode.jam is not None else ''}) "
+                                   f"in mode {mode.name}: the mode exists while each is > 0. D = "
+                                   f"{_short(mode.denominator)}", outs))
+    return out
+
+
+def _jacobian(em: _Emitter, mode) -> Function:
+    states = em.model.states
+    accel = mode.accel.subs(em.inlined_laws)
+    f = [states[-1], accel] if len(states) == 2 else [accel]
+    entries = [sp.diff(fi, s) for fi in f for s in states] + [sp.diff(fi, t) for fi in f]
+    lines, results = em.body(entries)
+    n = len(states)
+    targets = [f"J[{i}, {j}]" for i in range(n) for j in range(n)] + [f"dfdt[{i}]" for i in range(n)]
+    lines += [f"{target} = {value}" for target, value in zip(targets, results)]
+    return Function(f"jac_{mode.name}", "t, y, p, J, dfdt", f"Jacobian of the right-hand side in mode {mode.name}.",
+                    tuple(lines), "")
+
+
+def guard_names(model: Model) -> tuple[str, ...]:
+    sliding = SLIDING_GUARDS if any(m.jam is not None for m in model.modes) else SLIDING_GUARDS[:3]
+    return sliding + (STICK_GUARDS if model.stick else ()) + tuple(e.name for e in model.events)
+
+
+def _guard_directions(model: Model) -> tuple[tuple[int, ...], ...]:
+    """Per mode and guard: -1 falling, +1 rising, 0 both (constant-one guards never fire)."""
+    names = guard_names(model)
+    table = []
+    for mode in model.modes:
+        row = []
+        for name in names:
+            if name == "phi":
+                row.append(-1 if mode.flank == "a" else 1)
+            elif name == "v1":
+                row.append(-mode.direction)
+            elif name in ("D", "jam", "cone_forward", "cone_backward"):
+                row.append(-1)
+            else:
+                row.append(0)
+        table.append(tuple(row))
+    return tuple(table)
+
+
+def _guards(em: _Emitter) -> Function:
+    model = em.model
+    names = guard_names(model)
+    lines = ["for k in range(g.shape[0]):", "    g[k] = 1.0"]
+    for index, mode in enumerate(model.modes):
+        lines.append(f"{'if' if index == 0 else 'elif'} mode == {index}:  # {mode.name}")
+        if mode.direction:
+            lines.append(f"    g[{names.index('phi')}] = switching(t, y, p)")
+            lines.append(f"    g[{names.index('v1')}] = y[{len(model.states) - 1}]")
+            if mode.jam is not None:
+                lines.append(f"    g[{names.index('D')}], g[{names.index('jam')}] = consistency_{mode.name}(t, y, p)")
+            else:
+                lines.append(f"    g[{names.index('D')}] = consistency_{mode.name}(t, y, p)")
+        else:
+            targets = ", ".join(f"g[{names.index(n)}]" for n in STICK_GUARDS)
+            lines.append(f"    {targets} = stick_conditions(t, y, p)")
+    if model.events:
+        ev_lines, ev_results = em.body([e.expr for e in model.events])
+        lines += ev_lines + [f"g[{names.index(e.name)}] = {r}" for e, r in zip(model.events, ev_results)]
+    return Function("guards", "mode, t, y, p, g", "Event functions of `mode`, in the order of GUARDS.",
+                    tuple(lines), "", "GUARDS_SIG")
+
+
+def _dispatch(model: Model, name: str, per_mode: str, args: str, doc: str, default: str) -> Function:
+    lines = []
+    for index, mode in enumerate(model.modes):
+        lines.append(f"{'if' if index == 0 else 'elif'} mode == {index}:")
+        lines.append(f"    return {per_mode}_{mode.name}({args})")
+    return Function(name, f"mode, {args}", doc, tuple(lines), default)
+
+
+def _functions(em: _Emitter) -> list[Function]:
+    model = em.model
+    fns = [em.function(law_function_name(q.symbol), f"{q.doc}: {q.symbol} = {_short(q.expr)}", [q.expr], q.symbol)
+           for q in model.laws]
+    fns.append(em.function("switching", f"phi = {_short(model.switching)}: zero where the contact force is",
+                           [model.switching]))
+    fns += _mode_functions(em)
+    if model.stick is not None:
+        st = model.stick
+        fns.append(em.function("stick_conditions", "(cone_forward, cone_backward, flank_normal) at v1 = 0: "
+                               "stick holds while both cones are >= 0; flank_normal > 0 holds on flank a",
+                               [st.cone_forward, st.cone_backward, st.flank_normal]))
+    fns += [_jacobian(em, mode) for mode in model.modes]
+    fns.append(_dispatch(model, "accel", "accel", "t, y, p", "a1 in `mode`.", "math.nan"))
+    fns.append(_dispatch(model, "reactions", "reactions", "t, y, p", "(S1, S2) in `mode`.", "math.nan, math.nan"))
+    return fns
+
+
+def _rhs(model: Model) -> Function:
+    last = len(model.states) - 1
+    lines = ["a1 = accel(mode, t, y, p)"]
+    if last:
+        lines.append("dy[0] = y[1]")
+    lines.append(f"dy[{last}] = a1")
+    return Function("rhs", "mode, t, y, p, dy", "Right-hand side: d(states)/dt in `mode`.", tuple(lines), "",
+                    "RHS_SIG")
+
+
+def _jac(model: Model) -> Function:
+    lines = []
+    for index, mode in enumerate(model.modes):
+        lines += [f"{'if' if index == 0 else 'elif'} mode == {index}:", f"    jac_{mode.name}(t, y, p, J, dfdt)"]
+    lines += ["# d rho / d v1 is unbounded at v1 = 0 when the friction law is not Lipschitz there;",
+              "# the Rosenbrock-W method tolerates an inexact Jacobian, so such entries become 0.",
+              "for i in range(J.shape[0]):",
+              "    dfdt[i] = dfdt[i] if math.isfinite(dfdt[i]) else 0.0",
+              "    for j in range(J.shape[1]):",
+              "        J[i, j] = J[i, j] if math.isfinite(J[i, j]) else 0.0"]
+    return Function("jac", "mode, t, y, p, J, dfdt", "Jacobian J = df/dy and dfdt = df/dt in `mode`.",
+                    tuple(lines), "", "JAC_SIG")
+
+
+def _load_factors(em: _Emitter) -> Function | None:
+    ref = em.model.scene.reference
+    if not ref:
+        return None
+    S1m, S2m = sp.symbols("S1m S2m", real=True)
+    lines, results = em.body([sp.Abs(S1m) / param_symbol(ref["Ft1"]), sp.Abs(S2m) / param_symbol(ref["Ft2"])])
+    return Function("load_factors", "S1m, S2m, p", "(KD1, KD2) = (|S1m| / Ft1, |S2m| / Ft2), eq. (10).",
+                    tuple(lines), ", ".join(results))
+
+
+def generate_module(model: Model, free: tuple[str, ...] | None = None) -> str:
+    """Source of the scene's module. ``free`` overrides which parameters are free (benchmarks)."""
+    scene = model.scene
+    free = tuple(p.name for p in scene.params() if p.free) if free is None else free
+    em = _Emitter(model, free)
+    functions = _functions(em) + [_rhs(model), _jac(model), _guards(em)]
+    load_factors = _load_factors(em)
+    if load_factors:
+        functions.append(load_factors)
+    by_name = {p.name: p for p in scene.params()}
+    free_params = [by_name[n] for n in free]
+    fixed = [p for p in scene.params() if p.name not in free]
+    constants = {
+        "SCENE": scene.name, "SCENE_DIGEST": scene.digest, "EQUATIONS": scene.equations,
+        "STATES": tuple(str(s) for s in model.states), "MODES": tuple(m.name for m in model.modes),
+        "MODE_REGIME": tuple(m.regime for m in model.modes),
+        "MODE_FLANK": tuple({"a": 1, "b": -1}.get(m.flank, 0) for m in model.modes),
+        "MODE_DIRECTION": tuple(m.direction for m in model.modes),
+        "PARAM_NAMES": tuple(p.name for p in free_params), "PARAM_UNITS": tuple(p.unit for p in free_params),
+        "PARAM_DEFAULTS": tuple(p.value for p in free_params), "FIXED": {p.name: p.value for p in fixed},
+        "GUARDS": guard_names(model), "HAS_LOAD_FACTORS": load_factors is not None,
+        "RUN": dict(vars(scene.run)),
+    }
+    env = jinja2.Environment(loader=jinja2.FileSystemLoader(str(resources.files("derivation") / "templates")),
+                             trim_blocks=True, lstrip_blocks=True, keep_trailing_newline=True)
+    body = env.get_template("module.py.j2").render(
+        scene=scene, model=model, functions=functions, free=free_params, fixed=fixed, guards=guard_names(model),
+        constants={k: repr(v) for k, v in constants.items()}, directions=_guard_directions(model))
+    header = (f"# Generated by tswm {GENERATOR_VERSION} from scene '{scene.name}'. DO NOT EDIT: regenerate with "
+              f"`tswm generate {scene.name}`.\n"
+              f"# scene-sha256: {scene.digest}\n"
+              f"# generator-sha256: {generator_digest()}\n"
+              f"# generator-version: {GENERATOR_VERSION}\n"
+              f"# body-sha256: {hashlib.sha256(body.encode()).hexdigest()}\n")
+    return header + body
+
+
+def body_is_intact(source: str) -> bool:
+    """True when the module body still matches the hash in its header."""
+    lines = source.splitlines(keepends=True)
+    stated = next((line.split(":", 1)[1].strip() for line in lines[:HEADER_LINES]
+                   if line.startswith("# body-sha256:")), None)
+    body = "".join(lines[HEADER_LINES:])
+    return stated == hashlib.sha256(body.encode()).hexdigest()
+
+
+def write_module(model: Model, directory: str | Path, force: bool = False) -> Path:
+    """Write the scene's module atomically; refuse to replace a hand-edited one unless ``force``."""
+    path = Path(directory) / f"{module_name(model.scene.name)}.py"
+    if path.exists() and not force and not body_is_intact(path.read_text()):
+        raise EditedModuleError(f"{path} was edited by hand (its body no longer matches its body-sha256 header); "
+                                "regenerating would lose the edit: use --force to overwrite it")
+    return write_atomic(path, generate_module(model))

@@ -1,0 +1,213 @@
+"""Generated modules: fresh, deterministic, SymPy-free, and equal to hand-written formulas."""
+import math
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import given, settings, strategies as st
+
+from derivation.codegen import body_is_intact, generate_module, module_name
+from derivation.model import build_model
+from derivation.scene import load_scene, shipped_scenes
+from tswm_runtime import signatures
+from tswm_runtime.cli import main
+from tswm_runtime.contract import check_module, load_module
+
+GENERATED = Path(__file__).resolve().parents[1] / "generated"
+G = math.radians(4.76)
+M1 = 11.8
+
+
+@pytest.mark.parametrize("name", shipped_scenes())
+def test_checked_in_module_is_fresh_and_deterministic(name):
+    model = build_model(load_scene(name))
+    source = generate_module(model)
+    assert source == generate_module(model)
+    checked_in = (GENERATED / f"{module_name(name)}.py").read_text()
+    assert source == checked_in, f"generated/{module_name(name)}.py is stale: run `tswm generate {name}`"
+
+
+@pytest.mark.parametrize("name", shipped_scenes())
+def test_module_follows_contract_and_imports_no_sympy(name):
+    module = load_module(name)
+    assert check_module(module) is module
+    assert (module.RHS_SIG, module.JAC_SIG, module.GUARDS_SIG) == (
+        signatures.RHS_SIG, signatures.JAC_SIG, signatures.GUARDS_SIG)
+    source = (GENERATED / f"{module_name(name)}.py").read_text()
+    imports = {line.split()[1] for line in source.splitlines() if line.startswith(("import ", "from "))}
+    assert imports == {"math", "numba"}
+    probe = (f"import sys; sys.modules['sympy'] = None; import generated.{module_name(name)} as m; "
+             "print(len(m.MODES))")
+    run = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True,
+                         cwd=GENERATED.parent)
+    assert run.returncode == 0, run.stderr
+
+
+def test_hand_edited_module_is_refused_unless_forced(tmp_path, capsys):
+    assert main(["generate", "paper", "-o", str(tmp_path)]) == 0
+    path = tmp_path / "paper.py"
+    assert body_is_intact(path.read_text())
+    path.write_text(path.read_text().replace("return F2", "return 2 * F2"))
+    assert main(["generate", "paper", "-o", str(tmp_path)]) == 2
+    assert "edited by hand" in capsys.readouterr().err and "return 2 * F2" in path.read_text()
+    assert main(["generate", "paper", "-o", str(tmp_path), "--force"]) == 0
+    assert path.read_text() == (GENERATED / "paper.py").read_text()
+
+
+# ---- the paper scene against formulas written out by hand -------------------------------
+
+def kloss(v):
+    slip, slip_max = 7.85 - v, 7.85 - 6.5
+    return 2 * 2178 * slip * slip_max / (slip ** 2 + slip_max ** 2)
+
+
+def rho_paper(v):
+    return math.radians(1 / (0.161 * (abs(v) / math.cos(G)) ** 0.535 + 0.088))
+
+
+def hand_sliding(f, s, F1, F2, rho, m1, m2, gamma):
+    psi = math.tan(gamma + f * s * rho)
+    a = (F1 + psi * F2) / (m1 + psi * m2 * math.tan(gamma))
+    return a, F1 - m1 * a, F2 - m2 * math.tan(gamma) * a     # reactions by their definition
+
+
+speeds = st.one_of(st.sampled_from([0.0, 7.85, -0.5, 6.5, 1e-12]), st.floats(-3.0, 9.0))
+
+
+@settings(max_examples=150, deadline=None)
+@given(v=speeds, m2=st.floats(50, 400), F2=st.floats(-20000, 5000))
+def test_paper_module_equals_hand_formulas(v, m2, F2):
+    m = load_module("paper")
+    y, p = np.array([v]), np.array([m2, F2])
+    F1, rho = kloss(v), rho_paper(v)
+    assert m.drive_force(0.0, y, p) == pytest.approx(F1, rel=1e-12, abs=1e-9)
+    assert m.friction_angle(0.0, y, p) == pytest.approx(rho, rel=1e-12)
+    assert m.switching(0.0, y, p) == pytest.approx(F1 * math.tan(G) / M1 - F2 / m2, rel=1e-9, abs=1e-9)
+    for mode, f in ((0, 1), (1, -1)):
+        a, S1, S2 = hand_sliding(f, 1, F1, F2, rho, M1, m2, G)
+        assert m.accel(mode, 0.0, y, p) == pytest.approx(a, rel=1e-9, abs=1e-9)
+        assert m.reactions(mode, 0.0, y, p) == pytest.approx((S1, S2), rel=1e-9, abs=1e-6)
+    cone_f, cone_b, fn = m.stick_conditions(0.0, y, p)
+    normal, tangential = F1 * math.sin(G) - F2 * math.cos(G), F1 * math.cos(G) + F2 * math.sin(G)
+    assert (cone_f, cone_b, fn) == pytest.approx(
+        (math.tan(rho) * abs(normal) - tangential, math.tan(rho) * abs(normal) + tangential, normal), abs=1e-6)
+    assert m.load_factors(S1, S2, p) == pytest.approx((abs(S1) / 990, abs(S2) / 8303.7))
+
+
+@settings(max_examples=50, deadline=None)
+@given(v=st.floats(0.0, 7.0), m2=st.floats(50, 400))
+def test_paper_module_on_switching_surface(v, m2):
+    """phi = 0: no contact force, and both flanks give a1 = F1/m1."""
+    m = load_module("paper")
+    F2 = m2 * kloss(v) * math.tan(G) / M1
+    y, p = np.array([v]), np.array([m2, F2])
+    assert m.switching(0.0, y, p) == pytest.approx(0.0, abs=1e-9)
+    for mode in (0, 1):
+        assert m.accel(mode, 0.0, y, p) == pytest.approx(kloss(v) / M1, rel=1e-9)
+        assert m.reactions(mode, 0.0, y, p) == pytest.approx((0.0, 0.0), abs=1e-7)
+
+
+def test_literal_reaction_is_finite_where_psi2_vanishes():
+    """Printed eq. (9) divides by Psi_2 = tan(gamma - rho), zero where rho(v) = gamma."""
+    from scipy.optimize import brentq
+    m = load_module("paper_literal")
+    v = brentq(lambda v: rho_paper(v) - G, 0.01, 5.0)
+    p = np.array([200.0, -5000.0])
+    S2 = m.reactions(1, 0.0, np.array([v]), p)[1]
+    limit = (-kloss(v) * 200 * math.tan(G) + (-5000.0) * M1) / M1     # S1/Psi as Psi -> 0
+    assert math.isfinite(S2) and S2 == pytest.approx(limit, rel=1e-6)
+
+
+def test_asymmetric_module_all_modes_equal_hand_formulas():
+    m = load_module("asymmetric")
+    rho_b = math.radians(3)
+    for v in (-2.0, -0.3, 0.4, 5.0):
+        y = np.array([v])
+        for t, F2 in ((0.1, 0.0), (0.5, 3000.0)):
+            assert m.load_force(t, y, np.array([])) == F2
+            for mode, name in enumerate(m.MODES[:4]):
+                f, s = m.MODE_FLANK[mode], m.MODE_DIRECTION[mode]
+                rho = rho_paper(v) if f == 1 else rho_b
+                a, S1, S2 = hand_sliding(f, s, kloss(v), F2, rho, M1, 100.0, G)
+                assert m.accel(mode, t, y, np.array([])) == pytest.approx(a, rel=1e-9, abs=1e-9), name
+                assert m.reactions(mode, t, y, np.array([])) == pytest.approx((S1, S2), rel=1e-9, abs=1e-6)
+
+
+def finite_difference_jacobian(m, mode, t, y, p, h=1e-6):
+    n = len(y)
+    J = np.zeros((n, n))
+    f = lambda t, y: np.array([y[1], m.accel(mode, t, y, p)] if n == 2 else [m.accel(mode, t, y, p)])
+    for j in range(n):
+        e = np.zeros(n)
+        e[j] = h * max(1.0, abs(y[j]))
+        J[:, j] = (f(t, y + e) - f(t, y - e)) / (2 * e[j])
+    dt = h * max(1.0, t)
+    return J, (f(t + dt, y) - f(t - dt, y)) / (2 * dt)
+
+
+@pytest.mark.parametrize("name,states", [("paper", [[0.7], [3.0], [7.0]]),
+                                         ("one_sided", [[0.001, 0.2], [0.1, 0.3], [0.2, -0.1]]),
+                                         ("asymmetric", [[-1.0], [2.0]]),
+                                         ("paper_literal", [[1.0], [5.0]])])
+def test_jacobian_matches_finite_differences(name, states):
+    m = load_module(name)
+    p = np.array(m.PARAM_DEFAULTS, dtype=float)
+    for y in map(np.array, states):
+        for mode in range(len(m.MODES)):
+            if m.MODE_DIRECTION[mode] and np.sign(y[-1]) != m.MODE_DIRECTION[mode]:
+                continue
+            J, dfdt = np.zeros((len(y), len(y))), np.zeros(len(y))
+            m.jac(mode, 0.2, y, p, J, dfdt)
+            J_fd, dfdt_fd = finite_difference_jacobian(m, mode, 0.2, y, p)
+            assert J == pytest.approx(J_fd, rel=1e-5, abs=1e-6), (name, mode, y)
+            assert dfdt == pytest.approx(dfdt_fd, abs=1e-6)
+
+
+NEW_VARIANT = """
+name = "steep-wedge"
+description = "a steep wedge near jamming, written by a test"
+[wedge]
+flanks = ["a", "b"]
+gamma = {{ value = "80 deg", free = true }}
+m1 = "0.5 kg"
+m2 = "2 kg"
+[friction]
+law = "constant"
+rho = "9.9 deg"
+[drive]
+law = "linear"
+F0 = "100 N"
+V0 = "2 m/s"
+[load]
+law = "spring"
+k = "1000 N/m"
+x2_contact = "0.01 m"
+preload = "5 N"
+[modes]
+include = ["forward", "backward", "stick"]
+"""
+
+
+def test_new_scene_file_generates_compiles_and_evaluates(tmp_path):
+    scene = tmp_path / "steep.toml"
+    scene.write_text(NEW_VARIANT.format())
+    assert main(["generate", str(scene), "-o", str(tmp_path)]) == 0
+    m = load_module(tmp_path / "steep_wedge.py")
+    assert m.MODES == ("fwd_a", "fwd_b", "bwd_a", "bwd_b", "stick") and m.STATES == ("x1", "v1")
+    gamma, rho = math.radians(80), math.radians(9.9)       # gamma + rho = 89.9 deg
+    x1, v = 0.01, 0.5
+    y, p = np.array([x1, v]), np.array([gamma])
+    F1 = 100 * (1 - v / 2)
+    x2 = x1 * math.tan(gamma)
+    F2 = -(5 + 1000 * (x2 - 0.01))
+    for mode in range(4):
+        a, S1, S2 = hand_sliding(m.MODE_FLANK[mode], m.MODE_DIRECTION[mode], F1, F2, rho, 0.5, 2.0, gamma)
+        assert m.accel(mode, 0.0, y, p) == pytest.approx(a, rel=1e-9)
+        assert m.reactions(mode, 0.0, y, p) == pytest.approx((S1, S2), rel=1e-9)
+    D, jam = m.consistency_fwd_a(0.0, y, p)
+    assert jam == pytest.approx(math.cos(gamma + rho)) and 0 < jam < 2e-3
+    g = np.zeros(len(m.GUARDS))
+    m.guards(0, 0.0, y, p, g)
+    assert g[m.GUARDS.index("load_contact")] == pytest.approx(x2 - 0.01)

@@ -1,0 +1,68 @@
+"""The contract between a generated model module and the runtime, written down once.
+
+A generated module (``tswm generate``) provides the names below; ``check_module`` tells
+a stale or foreign module apart with an error that names what is missing.
+"""
+from __future__ import annotations
+
+import importlib
+import importlib.util
+from pathlib import Path
+from types import ModuleType
+
+CONSTANTS = {
+    "SCENE": "scene name",
+    "SCENE_DIGEST": "sha256 of the scene file the module was generated from",
+    "EQUATIONS": "'consistent' or 'literal'",
+    "STATES": "state names: ('v1',) or ('x1', 'v1'); without x1 the runtime integrates v1 for it",
+    "MODES": "mode names, indexed by the integer mode",
+    "MODE_REGIME": "regime of each mode (tractive, inverse-tractive, backward on flank a/b, stick)",
+    "MODE_FLANK": "+1 flank a, -1 flank b, 0 stick",
+    "MODE_DIRECTION": "sign of v1 in each mode, 0 for stick",
+    "PARAM_NAMES": "free parameters, in the order of the vector p",
+    "PARAM_UNITS": "SI unit of each free parameter",
+    "PARAM_DEFAULTS": "scene value of each free parameter",
+    "FIXED": "fixed parameters folded into the code: name -> value",
+    "GUARDS": "names of the event functions, in the order guards() fills them",
+    "GUARD_DIRECTIONS": "per mode, per guard: -1 falling, +1 rising, 0 either way",
+    "HAS_LOAD_FACTORS": "whether load_factors() exists (the scene gives Ft1, Ft2)",
+    "RUN": "the scene's run settings: t_end, x1, v1, rtol, atol, method, max_steps",
+}
+FUNCTIONS = {
+    "rhs": "rhs(mode, t, y, p, dy): dy = d(states)/dt; explicit signature RHS_SIG",
+    "jac": "jac(mode, t, y, p, J, dfdt): J = df/dy, dfdt = df/dt; explicit signature JAC_SIG",
+    "guards": "guards(mode, t, y, p, g): event functions; inactive ones are 1.0; signature GUARDS_SIG",
+    "accel": "accel(mode, t, y, p) -> a1",
+    "reactions": "reactions(mode, t, y, p) -> (S1, S2)",
+    "switching": "switching(t, y, p) -> phi, zero where the contact force is",
+    "drive_force": "drive_force(t, y, p) -> F1",
+    "load_force": "load_force(t, y, p) -> F2",
+}
+
+
+class ContractError(ImportError):
+    """A module that does not provide the generated-module contract."""
+
+
+def check_module(module: ModuleType) -> ModuleType:
+    """Return ``module`` if it has every contract name, else raise naming the missing ones."""
+    missing = [name for name in (*CONSTANTS, *FUNCTIONS) if not hasattr(module, name)]
+    if getattr(module, "HAS_LOAD_FACTORS", False) and not hasattr(module, "load_factors"):
+        missing.append("load_factors")
+    if missing:
+        raise ContractError(f"{module.__name__} is not a tswm model module (missing {', '.join(missing)}); "
+                            "regenerate it with `tswm generate SCENE`")
+    return module
+
+
+def load_module(name_or_path: str | Path) -> ModuleType:
+    """Import a generated module: a shipped scene name (``paper``) or a path to a .py file."""
+    path = Path(name_or_path)
+    if path.suffix == ".py":
+        if not path.exists():
+            raise FileNotFoundError(f"{path}: no such generated module")
+        spec = importlib.util.spec_from_file_location(f"tswm_model_{path.stem}", path)
+        module = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(module)
+        return check_module(module)
+    return check_module(importlib.import_module(f"generated.{str(name_or_path).replace('-', '_')}"))
