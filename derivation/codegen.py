@@ -74,7 +74,7 @@ class _Emitter:
         fixed = [p for p in model.params if p.name not in free]
         self.fixed = {param_symbol(p): sp.Float(repr(p.value)) for p in fixed}
         self.law_functions = {q.symbol: law_function_name(q.symbol) for q in model.laws}
-        self.inlined_laws = _compose_laws(model)
+        self.inlined_laws = compose_laws(model)
 
     def print(self, expr) -> str:
         return self.printer.doprint(expr)
@@ -107,7 +107,7 @@ def law_function_name(symbol: sp.Symbol) -> str:
     return base.get(name, name.replace("rho", "friction_angle"))
 
 
-def _compose_laws(model: Model) -> dict:
+def compose_laws(model: Model) -> dict:
     """Each law symbol -> its expression in states, t and parameters only."""
     done: dict = {}
     for q in model.laws:
