@@ -83,7 +83,7 @@ def _sliding_sections(flank_dirs) -> list[Section]:
                 [[FLANK_WORDS[m.flank], "forward" if m.direction > 0 else "backward", f"${_l(m.psi)}$",
                   "tractive" if (m.flank, m.direction) == ("a", 1) else
                   "inverse-tractive" if (m.flank, m.direction) == ("b", 1) else "reverse drive"] for m in modes])
-    force.math(f"S_1 = -\\Psi\\, S_2")
+    force.math("S_1 = -\\Psi\\, S_2")
 
     m = modes[0]
     eom = Section("Reduced equation of motion (eq. 6)")
@@ -100,8 +100,8 @@ def _sliding_sections(flank_dirs) -> list[Section]:
     reac.math(_eq(M.S1, sp.factor(m.S1.subs(m.psi, M.Psi))), _eq(M.S2, sp.factor(m.S2.subs(m.psi, M.Psi))))
     reac.text("Both reactions are proportional to one function that does not depend on $\\Psi$ (so it is the "
               "same for both flanks):")
-    reac.math(f"\\varphi = {_l(m.switching)}", f"S_2 = -\\frac{{m_1 m_2\\,\\varphi}}{{D}}, \\qquad "
-              f"S_1 = \\Psi\\,\\frac{{m_1 m_2\\,\\varphi}}{{D}}")
+    reac.math(f"\\varphi = {_l(m.switching)}",
+              "S_2 = -\\frac{m_1 m_2\\,\\varphi}{D}, \\qquad S_1 = \\Psi\\,\\frac{m_1 m_2\\,\\varphi}{D}")
     reac.text("$\\varphi$ is body 1's own acceleration mapped onto $x_2$ minus body 2's own acceleration: the "
               "residual of the acceleration constraint when each body is left to its own force. It is zero "
               "exactly when $S_1 = S_2 = 0$. The normal force follows from $R_2$:")
