@@ -1,0 +1,210 @@
+"""Event location on a step's dense output, shared by all integration methods.
+
+Both methods describe an accepted step [t_a, t_b = t_a + h] by its dense output
+y(t_a + theta h) = y_a + h sum_j Q[:, j] theta^(j+1), j = 0..3 (``dense_eval``).
+
+Rules (see docs/architecture.md, "Lessons from the peers' trackers"):
+
+* Guard k fires when it changes sign in its direction d_k: +1 rising (- to +),
+  -1 falling (+ to -), 0 both. Values with |g| <= gtol count as zero and carry
+  no sign, so touching zero without changing sign (grazing) is no event.
+* Sampling: the guards are evaluated at GUARD_SUBINTERVALS - 1 interior points of
+  the dense output and at the step end, so two crossings inside one step (or a
+  sign change and back) are seen when they fall in different subintervals
+  (scipy issue 9228; DifferentialEquations.jl's interpolation points).
+* A guard that is zero at the segment start (|g| <= gtol) is disarmed until it
+  has left zero; so a restart on a switching surface does not fire again.
+* The root is located by the Illinois method (modified regula falsi, here with a
+  bisection safeguard; also used by SUNDIALS CVODE's rootfinder) to the relative
+  time tolerance (4 eps + ttol) max(1, |t|), and the end of the final bracket on
+  the far side of the crossing is returned, as CVODE does. The reported event is thus
+  never before the crossing, and a restart from it cannot find the same crossing
+  again (scipy issue 17066; an absolute tolerance would repeat it).
+* A guard that reaches zero exactly at the segment end (where no later sample
+  can show whether it crosses) is reported as an event at the end time.
+
+The Illinois iteration is written as pure state-update functions (``bracket_*``)
+so that ``segment`` runs the same iteration on the re-taken full-order step.
+"""
+import numpy as np
+from numba import njit
+
+GUARD_SUBINTERVALS = 4  # Guard samples per step: 3 interior points + the step end.
+ROOT_EPS_FACTOR = 4.0  # Root time tolerance floor: 4 eps, relative to max(1, |t|).
+_EPS = np.finfo(np.float64).eps
+
+
+@njit(cache=True, error_model="numpy")
+def dense_eval(y_a, h, Q, theta, out):
+    """out = y_a + h * sum_j Q[:, j] theta^(j+1) (Horner); theta = (t - t_a) / h."""
+    for i in range(out.size):
+        poly = Q[i, 3]
+        for j in range(2, -1, -1):
+            poly = poly * theta + Q[i, j]
+        out[i] = y_a[i] + h * theta * poly
+
+
+@njit(cache=True, error_model="numpy")
+def time_tolerance(t, ttol):
+    """Width to which event times are located: (4 eps + ttol) * max(1, |t|)."""
+    return (ROOT_EPS_FACTOR * _EPS + ttol) * max(1.0, abs(t))
+
+
+@njit(cache=True, error_model="numpy")
+def arm_guards(g, gtol, sgn):
+    """Initial signs at a segment start: 0 (disarmed) for guards within gtol of zero."""
+    for k in range(g.size):
+        if abs(g[k]) <= gtol:
+            sgn[k] = 0
+        elif g[k] > 0.0:
+            sgn[k] = 1
+        else:
+            sgn[k] = -1
+
+
+@njit(cache=True, error_model="numpy")
+def bracket_start(a, fa, b, fb):
+    """Illinois state (a, fa, b, fb, side, w1, w2) for a < b, fa pre-, fb post-crossing.
+
+    side: which end moved last (+1 b, -1 a); w1, w2: the widths before the last
+    two updates (for the bisection safeguard).
+    """
+    return (a, fa, b, fb, 0.0, np.inf, np.inf)
+
+
+@njit(cache=True, error_model="numpy")
+def bracket_done(state, tol):
+    """True when b is an exact zero or the bracket is narrower than tol."""
+    a, fa, b, fb = state[0], state[1], state[2], state[3]
+    return fb == 0.0 or b - a <= tol
+
+
+@njit(cache=True, error_model="numpy")
+def bracket_next(state, tol):
+    """Next trial point: regula falsi, or bisection if two updates did not halve the
+    bracket; kept tol/2 inside the bracket so every update shrinks it."""
+    a, fa, b, fb, w2 = state[0], state[1], state[2], state[3], state[6]
+    if b - a > 0.5 * w2:
+        c = 0.5 * (a + b)
+    else:
+        c = b - fb * (b - a) / (fb - fa)
+    return min(max(c, a + 0.5 * tol), b - 0.5 * tol)
+
+
+@njit(cache=True, error_model="numpy")
+def bracket_update(state, c, fc):
+    """Replace the end on c's side; halve the kept end's value if it was kept twice
+    in a row (the Illinois modification, superlinear convergence)."""
+    a, fa, b, fb, side, w1 = state[0], state[1], state[2], state[3], state[4], state[5]
+    width = b - a
+    if fc == 0.0 or (fc > 0.0) == (fb > 0.0):
+        if side > 0.0:
+            fa *= 0.5
+        return (a, fa, c, fc, 1.0, width, w1)
+    if side < 0.0:
+        fb *= 0.5
+    return (c, fc, b, fb, -1.0, width, w1)
+
+
+@njit(cache=True, error_model="numpy")
+def sample_time(t_a, t_b, j):
+    """Time of guard sample j = 0..GUARD_SUBINTERVALS (exactly t_a and t_b at the ends)."""
+    if j == GUARD_SUBINTERVALS:
+        return t_b
+    return t_a + (t_b - t_a) * (j / GUARD_SUBINTERVALS)
+
+
+@njit(cache=True, error_model="numpy")
+def _sign_changes(G, j, directions, gtol, sgn, cand):
+    """Update the guards' last signs with sample j; mark sign changes in an allowed
+    direction in cand (their sgn is kept: the pre-crossing sign). True if any."""
+    found = False
+    for k in range(G.shape[1]):
+        g = G[j, k]
+        if abs(g) <= gtol:
+            continue
+        s = 1 if g > 0.0 else -1
+        if sgn[k] == 0:
+            sgn[k] = s
+        elif s != sgn[k]:
+            if directions[k] == 0 or directions[k] == s:
+                cand[k] = True
+                found = True
+            else:
+                sgn[k] = s
+    return found
+
+
+@njit(cache=True, error_model="numpy")
+def _root_on_dense(guards, mode, p, k, t_a, y_a, h, t_b, Q, G, j, tol, y_tmp, g_tmp):
+    """Crossing time of guard k, which has its new sign at sample j.
+
+    The bracket starts at the last sample before j that is not yet on the new
+    side; if the guard already had the new sign at t_a (it crossed inside the
+    zero band in an earlier step), the crossing is reported at t_a.
+    """
+    post = G[j, k]
+    i = j - 1
+    while i >= 0 and G[i, k] * post > 0.0:
+        i -= 1
+    if i < 0:
+        return t_a
+    t_lo, t_hi = sample_time(t_a, t_b, i), sample_time(t_a, t_b, i + 1)
+    state = bracket_start(t_lo, G[i, k], t_hi, G[i + 1, k])
+    while not bracket_done(state, tol):
+        c = bracket_next(state, tol)
+        dense_eval(y_a, h, Q, (c - t_a) / h, y_tmp)
+        guards(mode, c, y_tmp, p, g_tmp)
+        state = bracket_update(state, c, g_tmp[k])
+    return state[2]
+
+
+@njit(cache=True, error_model="numpy")
+def _zero_at_end(G, directions, gtol, sgn):
+    """Lowest armed guard that reached zero at the last sample in an allowed direction."""
+    last = G.shape[0] - 1
+    for k in range(G.shape[1]):
+        arriving = directions[k] == 0 or directions[k] == -sgn[k]
+        if sgn[k] != 0 and arriving and abs(G[last, k]) <= gtol:
+            return k
+    return -1
+
+
+@njit(cache=True, error_model="numpy")
+def _earliest_root(guards, mode, p, t_a, y_a, h, t_b, Q, G, j, ttol, cand, y_tmp, g_tmp):
+    """Locate every candidate's crossing before sample j; the earliest wins (ties: lowest k)."""
+    tol = time_tolerance(t_b, ttol)
+    k_best = -1
+    t_best = t_b
+    for k in range(cand.size):
+        if cand[k]:
+            t_k = _root_on_dense(guards, mode, p, k, t_a, y_a, h, t_b, Q, G, j, tol, y_tmp, g_tmp)
+            if k_best < 0 or t_k < t_best:
+                k_best = k
+                t_best = t_k
+    return k_best, t_best, j
+
+
+@njit(cache=True, error_model="numpy")
+def find_event(guards, mode, p, t_a, y_a, h, t_b, Q, G, directions, gtol, ttol, sgn, at_end,
+               cand, y_tmp, g_tmp):
+    """Earliest event in the accepted step [t_a, t_b]; returns (k, t_event, j).
+
+    G[0] (guards at t_a) and G[-1] (at t_b, from the step's own y_b) are given; the
+    interior rows are filled here from the dense output. sgn carries each guard's
+    last sign across steps. k = -1: no event. j is the sample at which guard k was
+    seen on its new side (the far end of the bracket). at_end: t_b is the segment
+    end, where a guard that reaches zero counts as an event.
+    """
+    cand[:] = False
+    for j in range(1, GUARD_SUBINTERVALS + 1):
+        if j < GUARD_SUBINTERVALS:
+            t_j = sample_time(t_a, t_b, j)
+            dense_eval(y_a, h, Q, (t_j - t_a) / h, y_tmp)
+            guards(mode, t_j, y_tmp, p, G[j])
+        if _sign_changes(G, j, directions, gtol, sgn, cand):
+            return _earliest_root(guards, mode, p, t_a, y_a, h, t_b, Q, G, j, ttol, cand,
+                                  y_tmp, g_tmp)
+    if at_end:
+        return _zero_at_end(G, directions, gtol, sgn), t_b, GUARD_SUBINTERVALS
+    return -1, t_b, GUARD_SUBINTERVALS
