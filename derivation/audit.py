@@ -7,6 +7,7 @@ checked only if applying it to one side gives the other.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 
 import sympy as sp
 
@@ -54,6 +55,7 @@ def literal_jump() -> sp.Expr:
     return sp.simplify(jump.subs(M.F1, on_surface))
 
 
+@lru_cache(maxsize=None)
 def audit() -> tuple[AuditEntry, ...]:
     kin = M.kinematics()
     fwd_a, fwd_b = M.sliding("a", 1), M.sliding("b", 1)

@@ -75,7 +75,7 @@ def bracket_start(a, fa, b, fb):
 @njit(cache=True, error_model="numpy")
 def bracket_done(state, tol):
     """True when b is an exact zero or the bracket is narrower than tol."""
-    a, fa, b, fb = state[0], state[1], state[2], state[3]
+    a, b, fb = state[0], state[2], state[3]
     return fb == 0.0 or b - a <= tol
 
 
