@@ -16,14 +16,16 @@ import jinja2
 import sympy as sp
 from sympy.printing.pycode import PythonCodePrinter
 
-from derivation.mechanics import t
-from derivation.model import Model, param_symbol
+from derivation.mechanics import S1, S2, t
+from derivation.model import Model, compose_laws as _compose, param_symbol
 from tswm_runtime.files import EditedModuleError, write_atomic
 
 GENERATOR_VERSION = "0.1.0"
 HEADER_LINES = 5
 STICK_GUARDS = ("cone_forward", "cone_backward", "flank_normal")
 SLIDING_GUARDS = ("phi", "v1", "D", "jam")
+SLIDE_GUARDS = ("slide_exit_a", "slide_exit_b")
+OBSERVABLES = (S1, S2)
 
 
 @dataclass(frozen=True)
@@ -69,7 +71,7 @@ class _Emitter:
 
     def __init__(self, model: Model, free: tuple[str, ...]):
         self.model = model
-        self.free = free
+        self.vector = free + tuple(str(latch.symbol) for latch in model.latches)   # the names in p
         self.printer = _Printer()
         fixed = [p for p in model.params if p.name not in free]
         self.fixed = {param_symbol(p): sp.Float(repr(p.value)) for p in fixed}
@@ -89,7 +91,7 @@ class _Emitter:
         used = set().union(*(e.free_symbols for e in exprs))
         calls = [q.symbol for q in self.model.laws if q.symbol in used and q.symbol != law]
         lines = [f"{s} = y[{i}]" for i, s in enumerate(self.model.states) if s in used]
-        lines += [f"{name} = p[{i}]" for i, name in enumerate(self.free)
+        lines += [f"{name} = p[{i}]" for i, name in enumerate(self.vector)
                   if sp.Symbol(name, real=True) in used and sp.Symbol(name, real=True) not in calls]
         lines += [f"{s} = {self.law_functions[s]}(t, y, p)" for s in calls]
         replacements, reduced = sp.cse(exprs, symbols=sp.numbered_symbols("c"))
@@ -109,10 +111,7 @@ def law_function_name(symbol: sp.Symbol) -> str:
 
 def compose_laws(model: Model) -> dict:
     """Each law symbol -> its expression in states, t and parameters only."""
-    done: dict = {}
-    for q in model.laws:
-        done[q.symbol] = q.expr.subs(done)
-    return done
+    return _compose(model.laws)
 
 
 def _short(expr: sp.Expr) -> str:
@@ -124,6 +123,15 @@ def _mode_functions(em: _Emitter) -> list[Function]:
     for mode in em.model.modes:
         out.append(em.function(f"accel_{mode.name}", f"a1 in mode {mode.name} ({mode.regime}): "
                                f"{_short(mode.accel)}", [mode.accel]))
+        if mode.slide is not None:
+            out.append(em.function(f"reactions_{mode.name}", f"(S1, S2) in mode {mode.name}: Filippov's combination "
+                                   "lambda (S1, S2)_fwd_a + (1 - lambda) (S1, S2)_fwd_b, lambda = rate_b / (rate_b - "
+                                   "rate_a)", [mode.S1, mode.S2]))
+            out.append(em.function("slide_exits", "(slide_exit_a, slide_exit_b) = (-rate_a, rate_b): sliding along "
+                                   "phi = 0 persists while both are > 0. rate_a (rate_b) = d phi/dt along fwd_a "
+                                   f"(fwd_b) = {_short(mode.slide.rate)} with that mode's a1",
+                                   [-mode.slide.rate_a, mode.slide.rate_b]))
+            continue
         out.append(em.function(f"reactions_{mode.name}", f"(S1, S2) in mode {mode.name}: "
                                f"S1 = {_short(mode.S1)}, S2 = {_short(mode.S2)}", [mode.S1, mode.S2]))
         if mode.denominator is not None:
@@ -149,12 +157,15 @@ def _jacobian(em: _Emitter, mode) -> Function:
 
 def guard_names(model: Model) -> tuple[str, ...]:
     sliding = SLIDING_GUARDS if any(m.jam is not None for m in model.modes) else SLIDING_GUARDS[:3]
-    return sliding + (STICK_GUARDS if model.stick else ()) + tuple(e.name for e in model.events)
+    slide = SLIDE_GUARDS if any(m.slide is not None for m in model.modes) else ()
+    return (sliding + (STICK_GUARDS if model.stick else ()) + tuple(e.name for e in model.events) + slide
+            + tuple(latch.name for latch in model.latches))
 
 
 def _guard_directions(model: Model) -> tuple[tuple[int, ...], ...]:
     """Per mode and guard: -1 falling, +1 rising, 0 both (constant-one guards never fire)."""
     names = guard_names(model)
+    latches = {latch.name for latch in model.latches}
     table = []
     for mode in model.modes:
         row = []
@@ -163,7 +174,7 @@ def _guard_directions(model: Model) -> tuple[tuple[int, ...], ...]:
                 row.append(-1 if mode.flank == "a" else 1)
             elif name == "v1":
                 row.append(-mode.direction)
-            elif name in ("D", "jam", "cone_forward", "cone_backward"):
+            elif name in ("D", "jam", "cone_forward", "cone_backward", *SLIDE_GUARDS) or name in latches:
                 row.append(-1)
             else:
                 row.append(0)
@@ -177,7 +188,11 @@ def _guards(em: _Emitter) -> Function:
     lines = ["for k in range(g.shape[0]):", "    g[k] = 1.0"]
     for index, mode in enumerate(model.modes):
         lines.append(f"{'if' if index == 0 else 'elif'} mode == {index}:  # {mode.name}")
-        if mode.direction:
+        if mode.slide is not None:
+            lines.append(f"    g[{names.index('v1')}] = y[{len(model.states) - 1}]")
+            lines.append(f"    g[{names.index(SLIDE_GUARDS[0])}], g[{names.index(SLIDE_GUARDS[1])}] = "
+                         "slide_exits(t, y, p)")
+        elif mode.direction:
             lines.append(f"    g[{names.index('phi')}] = switching(t, y, p)")
             lines.append(f"    g[{names.index('v1')}] = y[{len(model.states) - 1}]")
             if mode.jam is not None:
@@ -190,6 +205,13 @@ def _guards(em: _Emitter) -> Function:
     if model.events:
         ev_lines, ev_results = em.body([e.expr for e in model.events])
         lines += ev_lines + [f"g[{names.index(e.name)}] = {r}" for e, r in zip(model.events, ev_results)]
+    for latch in model.latches:
+        armed_lines, (armed,) = em.body([latch.armed])
+        guard_lines, (guard,) = em.body([latch.guard])
+        lines += armed_lines + [f"if {armed}:  # {latch.name}: {latch.doc}"]
+        if S1 in latch.guard.free_symbols:
+            lines.append("    S1 = reactions(mode, t, y, p)[0]")
+        lines += [f"    {line}" for line in guard_lines] + [f"    g[{names.index(latch.name)}] = {guard}"]
     return Function("guards", "mode, t, y, p, g", "Event functions of `mode`, in the order of GUARDS.",
                     tuple(lines), "", "GUARDS_SIG")
 
@@ -218,6 +240,12 @@ def _functions(em: _Emitter) -> list[Function]:
     fns.append(_dispatch(model, "accel", "accel", "t, y, p", "a1 in `mode`.", "math.nan"))
     fns.append(_dispatch(model, "reactions", "reactions", "t, y, p", "(S1, S2) in `mode`.", "math.nan, math.nan"))
     return fns
+
+
+def _observe() -> Function:
+    targets = ", ".join(f"out[{i}]" for i in range(len(OBSERVABLES)))
+    return Function("observe", "mode, t, y, p, out", "Observables of `mode`, in the order of OBSERVABLES: "
+                    "its reactions.", (f"{targets} = reactions(mode, t, y, p)",), "", "GUARDS_SIG")
 
 
 def _rhs(model: Model) -> Function:
@@ -259,7 +287,7 @@ def generate_module(model: Model, free: tuple[str, ...] | None = None) -> str:
     scene = model.scene
     free = tuple(p.name for p in scene.params() if p.free) if free is None else free
     em = _Emitter(model, free)
-    functions = _functions(em) + [_rhs(model), _jac(model), _guards(em)]
+    functions = _functions(em) + [_rhs(model), _jac(model), _guards(em), _observe()]
     load_factors = _load_factors(em)
     if load_factors:
         functions.append(load_factors)
@@ -272,15 +300,19 @@ def generate_module(model: Model, free: tuple[str, ...] | None = None) -> str:
         "MODE_REGIME": tuple(m.regime for m in model.modes),
         "MODE_FLANK": tuple({"a": 1, "b": -1}.get(m.flank, 0) for m in model.modes),
         "MODE_DIRECTION": tuple(m.direction for m in model.modes),
+        "MODE_DECLARED": tuple(m.declared for m in model.modes),
         "PARAM_NAMES": tuple(p.name for p in free_params), "PARAM_UNITS": tuple(p.unit for p in free_params),
         "PARAM_DEFAULTS": tuple(p.value for p in free_params), "FIXED": {p.name: p.value for p in fixed},
+        "LATCH_NAMES": tuple(str(latch.symbol) for latch in model.latches),
+        "OBSERVABLES": tuple(map(str, OBSERVABLES)),
         "GUARDS": guard_names(model), "HAS_LOAD_FACTORS": load_factors is not None,
         "RUN": dict(vars(scene.run)),
     }
     env = jinja2.Environment(loader=jinja2.FileSystemLoader(str(resources.files("derivation") / "templates")),
                              trim_blocks=True, lstrip_blocks=True, keep_trailing_newline=True)
     body = env.get_template("module.py.j2").render(
-        scene=scene, model=model, functions=functions, free=free_params, fixed=fixed, guards=guard_names(model),
+        scene=scene, model=model, functions=functions, free=free_params, latches=model.latches, fixed=fixed,
+        guards=guard_names(model),
         constants={k: repr(v) for k, v in constants.items()}, directions=_guard_directions(model))
     header = (f"# Generated by tswm {GENERATOR_VERSION} from scene '{scene.name}'. DO NOT EDIT: regenerate with "
               f"`tswm generate {scene.name}`.\n"

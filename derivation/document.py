@@ -151,7 +151,26 @@ def _laws_section(model: Model) -> Section:
                "brought over a common denominator, as above, it is regular there.")
     for e in model.events:
         s.text(f"Event: {e.doc}, where ${_l(e.expr)}$ changes sign.")
+    for latch in model.latches:
+        s.text(f"Latch ${_l(latch.symbol)}$: {latch.doc}. While ${_l(latch.armed)}$ the guard ${_l(latch.guard)}$ "
+               f"($S_1$ of the current mode) is watched; ${_l(latch.symbol)}$ is $+\\infty$ until it falls through "
+               "zero, and that time from then on.")
     return s
+
+
+def _slide_mode(s: Section, mode) -> None:
+    """Filippov's sliding mode along phi = 0: the rate of phi, the weight, a1 and the reactions."""
+    declared = "declared by the scene" if mode.declared else "not declared by the scene: a run stops there"
+    s.text(f"Mode `{mode.name}` ({mode.regime}; {declared}). The literal $a_1$ jumps across $\\varphi = 0$ (see the "
+           "audit), so `fwd_a` ($\\varphi > 0$) and `fwd_b` ($\\varphi < 0$) can both push the state onto it. "
+           "Along a mode with acceleration $a_1$, with the laws composed into $\\varphi$:")
+    s.math(f"\\dot\\varphi = {_l(mode.slide.rate)}")
+    s.text("With $\\dot\\varphi_a$, $\\dot\\varphi_b$ the rates along `fwd_a` and `fwd_b`, the state slides while "
+           "$\\dot\\varphi_a < 0 < \\dot\\varphi_b$, on Filippov's convex combination, which keeps "
+           "$\\dot\\varphi = 0$:")
+    s.math("\\lambda = \\frac{\\dot\\varphi_b}{\\dot\\varphi_b - \\dot\\varphi_a}, \\qquad "
+           "S_i = \\lambda S_{i,a} + (1 - \\lambda) S_{i,b}",
+           f"a_1 = \\lambda a_{{1,a}} + (1 - \\lambda) a_{{1,b}} = {_l(mode.accel)}")
 
 
 def _modes_section(model: Model) -> Section:
@@ -159,6 +178,9 @@ def _modes_section(model: Model) -> Section:
     s.text(f"Equations: {model.scene.equations}. States: " + ", ".join(f"${_l(x)}$" for x in model.states) + ".")
     s.math(f"\\varphi = {_l(model.switching)}")
     for mode in model.modes:
+        if mode.slide is not None:
+            _slide_mode(s, mode)
+            continue
         s.text(f"Mode `{mode.name}` ({mode.regime}):")
         s.math(_eq(M.a1, mode.accel), _eq(M.S1, mode.S1), _eq(M.S2, mode.S2))
     if model.stick is not None:

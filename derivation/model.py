@@ -12,12 +12,33 @@ from dataclasses import dataclass
 import sympy as sp
 
 from derivation import laws, mechanics, paper
-from derivation.mechanics import F1, F2, v1, x1
+from derivation.mechanics import F1, F2, S1, a1, t, v1, x1
 from derivation.scene import Param, Scene
 
 DIRECTIONS = {"forward": ("fwd", 1), "backward": ("bwd", -1)}
 REGIMES = {(1, "a"): "tractive", (1, "b"): "inverse-tractive",
            (-1, "a"): "backward on flank a", (-1, "b"): "backward on flank b"}
+T_TRIP = sp.Symbol("t_trip", real=True)
+
+
+@dataclass(frozen=True)
+class Slide:
+    """Filippov sliding along phi = 0 between fwd_a (valid where phi > 0) and fwd_b (phi < 0)."""
+
+    rate: sp.Expr                # d phi/dt along a mode, in terms of its a1 (the symbol a1)
+    rate_a: sp.Expr              # d phi/dt along fwd_a
+    rate_b: sp.Expr              # d phi/dt along fwd_b; sliding persists while rate_a < 0 < rate_b
+
+
+@dataclass(frozen=True)
+class Latch:
+    """A time parameter the runtime sets once, when the guard ``name`` fires (+inf until then)."""
+
+    symbol: sp.Symbol            # read from p after the free parameters
+    name: str                    # its guard
+    guard: sp.Expr               # falls through 0 when the latch fires; may use S1 of the mode
+    armed: sp.Expr               # the guard is computed while this holds
+    doc: str
 
 
 @dataclass(frozen=True)
@@ -44,6 +65,8 @@ class Mode:
     denominator: sp.Expr | None = None   # D: the mode is consistent while D > 0
     normal: sp.Expr | None = None        # contact normal force N (>= 0 while the flank holds)
     jam: sp.Expr | None = None           # cos(gamma + f s rho) (> 0, else the wedge jams)
+    slide: Slide | None = None           # the sliding mode along phi = 0 (literal equations only)
+    declared: bool = True                # False: generated, but the scene does not let a run enter it
 
 
 @dataclass(frozen=True)
@@ -68,6 +91,7 @@ class Model:
     switching: sp.Expr                   # phi
     modes: tuple[Mode, ...]
     stick: StickConditions | None
+    latches: tuple[Latch, ...] = ()      # p = (free parameters..., latches...)
 
     @property
     def params(self) -> tuple[Param, ...]:
@@ -87,7 +111,34 @@ def _friction_symbols(scene: Scene) -> dict[str, sp.Symbol]:
     return {f: sp.Symbol("rho" if shared else f"rho_{f}", real=True) for f in scene.flanks}
 
 
-def _laws(scene: Scene, rho_of: dict[str, sp.Symbol]) -> tuple[tuple[Quantity, ...], tuple[laws.LawEvent, ...]]:
+def compose_laws(quantities: tuple[Quantity, ...]) -> dict:
+    """Each law symbol -> its expression in states, t and parameters only."""
+    done: dict = {}
+    for q in quantities:
+        done[q.symbol] = q.expr.subs(done)
+    return done
+
+
+def switching_rate(switching: sp.Expr, composed: dict) -> sp.Expr:
+    """d phi/dt along a mode, in terms of the mode's a1: the laws composed into phi, chain rule."""
+    phi = switching.subs(composed)
+    return sp.diff(phi, t) + sp.diff(phi, x1) * v1 + sp.diff(phi, v1) * a1
+
+
+def _drive(scene: Scene) -> tuple[sp.Expr, str, tuple[Latch, ...]]:
+    """F1, its description, and the torque switch's latch: F1 is cut for good at t = t_trip."""
+    law = laws.drive_force(scene.drive, param_symbol)
+    if scene.torque_switch is None:
+        return law, f"drive force ({scene.drive.kind})", ()
+    trip = Latch(T_TRIP, "torque_switch", param_symbol(scene.torque_switch) - S1, t < T_TRIP,
+                 "the torque switch cuts the motor when S1 reaches S1_trip")
+    return (sp.Piecewise((law, t < T_TRIP), (0, True)),
+            f"drive force ({scene.drive.kind}, cut by the torque switch at t = t_trip)", (trip,))
+
+
+def _laws(scene: Scene, rho_of: dict[str, sp.Symbol]) -> tuple[tuple[Quantity, ...], tuple[laws.LawEvent, ...],
+                                                                 tuple[Latch, ...]]:
+    """The laws in evaluation order (x2 first when the load reads it), the load's events, the latches."""
     slope = param_symbol(scene.gamma[scene.flanks[0]])
     x2 = sp.Symbol("x2", real=True)
     load, events = laws.load_force(scene.load, param_symbol, x2)
@@ -95,7 +146,8 @@ def _laws(scene: Scene, rho_of: dict[str, sp.Symbol]) -> tuple[tuple[Quantity, .
     if x2 in load.free_symbols:
         x2_expr = mechanics.kinematics().x2_of_x1.subs(mechanics.gamma, slope)
         quantities.append(Quantity(x2, x2_expr, "position of body 2 (kinematic constraint)"))
-    quantities.append(Quantity(F1, laws.drive_force(scene.drive, param_symbol), f"drive force ({scene.drive.kind})"))
+    drive, doc, latches = _drive(scene)
+    quantities.append(Quantity(F1, drive, doc))
     quantities.append(Quantity(F2, load, f"load force ({scene.load.kind})"))
     done = set()
     for f in scene.flanks:
@@ -103,7 +155,7 @@ def _laws(scene: Scene, rho_of: dict[str, sp.Symbol]) -> tuple[tuple[Quantity, .
             done.add(rho_of[f])
             expr = laws.friction_angle(scene.friction[f], param_symbol, param_symbol(scene.gamma[f]))
             quantities.append(Quantity(rho_of[f], expr, f"friction angle ({scene.friction[f].kind})"))
-    return tuple(quantities), events
+    return tuple(quantities), events, latches
 
 
 def _specialise(scene: Scene, flank: str, rho_of: dict[str, sp.Symbol]) -> dict:
@@ -157,13 +209,34 @@ def _literal_modes(scene: Scene, rho_of: dict[str, sp.Symbol]) -> tuple[list[Mod
     return modes, paper.EQ7_SWITCHING.subs(sub)
 
 
+def _slide_mode(scene: Scene, switching: sp.Expr, composed: dict, fwd_a: Mode, fwd_b: Mode) -> Mode:
+    """Filippov sliding along phi = 0, where the literal a1 jumps (audit.literal_jump).
+
+    The consistent model needs no such mode: its a1 is continuous at phi = 0 (both flanks
+    give F1/m1 there), so the rates along fwd_a and fwd_b agree and the state crosses.
+    """
+    rate = switching_rate(switching, composed)
+    # Filippov's combination with the rates linear in a1, d phi/dt = drift + gain a1 along any mode.
+    drift, gain, acc_a, acc_b = sp.symbols("drift gain acc_a acc_b", real=True)
+    r_a, r_b = drift + gain * acc_a, drift + gain * acc_b
+    lam = sp.factor(r_b / (r_b - r_a))
+    combined = sp.simplify(lam * acc_a + (1 - lam) * acc_b)      # -drift/gain: d phi/dt = 0
+    values = {drift: rate.subs(a1, 0), gain: sp.diff(rate, a1), acc_a: fwd_a.accel, acc_b: fwd_b.accel}
+    weight, accel = lam.subs(values), combined.subs(values)
+    return Mode(name="slide_fwd", regime="sliding along phi = 0", flank="", direction=1, accel=accel,
+                S1=weight * fwd_a.S1 + (1 - weight) * fwd_b.S1, S2=weight * fwd_a.S2 + (1 - weight) * fwd_b.S2,
+                slide=Slide(rate, rate.subs(a1, fwd_a.accel), rate.subs(a1, fwd_b.accel)),
+                declared="sliding" in scene.modes)
+
+
 def build_model(scene: Scene) -> Model:
     """Specialise the mechanics to ``scene``."""
     rho_of = _friction_symbols(scene)
-    quantities, events = _laws(scene, rho_of)
+    quantities, events, latches = _laws(scene, rho_of)
     stick = None
     if scene.equations == "literal":
         modes, switching = _literal_modes(scene, rho_of)
+        modes.append(_slide_mode(scene, switching, compose_laws(quantities), *modes))
     else:
         modes = _sliding_modes(scene, rho_of)
         switching = mechanics.sliding(scene.flanks[0], 1).switching.subs(_specialise(scene, scene.flanks[0], rho_of))
@@ -175,4 +248,5 @@ def build_model(scene: Scene) -> Model:
     for q in quantities:     # a parameter may carry a law's name only if it is that law (constant F1, F2)
         assert str(q.symbol) not in symbols or q.expr == q.symbol, f"parameter {q.symbol} shadows the law {q.doc}"
     return Model(scene=scene, symbols=symbols, states=(x1, v1) if reads_x1 else (v1,),
-                 laws=quantities, events=events, switching=switching, modes=tuple(modes), stick=stick)
+                 laws=quantities, events=events, switching=switching, modes=tuple(modes), stick=stick,
+                 latches=latches)

@@ -17,9 +17,10 @@ from . import units
 
 DEG = math.pi / 180
 FLANKS = ("a", "b")
-MODES = ("forward", "backward", "stick")
+MODES = ("forward", "backward", "stick", "sliding")
+LITERAL_MODES = (("forward",), ("forward", "sliding"))
 EQUATIONS = ("consistent", "literal")
-METHODS = ("dopri5", "rosenbrock")
+METHODS = ("dopri5", "rosenbrock23")
 TOP_KEYS = ("name", "description", "equations", "wedge", "friction", "drive", "load",
             "reference", "modes", "run")
 NAME = re.compile(r"[a-z0-9][a-z0-9-]*")
@@ -77,14 +78,15 @@ class Scene:
     run: Run
     source: str
     digest: str
+    torque_switch: Param | None = None   # trip threshold S1_trip on S1 ([drive.torque_switch])
 
     def params(self) -> tuple[Param, ...]:
-        """Every distinct model parameter once: wedge, friction, drive, load, reference."""
-        laws = (*self.friction.values(), self.drive, self.load)
+        """Every distinct model parameter once: wedge, friction, drive, torque switch, load, reference."""
         return tuple(dict.fromkeys((
             *self.gamma.values(), self.m1, self.m2,
-            *(p for law in laws for p in law.params.values()),
-            *self.reference.values(),
+            *(p for law in self.friction.values() for p in law.params.values()),
+            *self.drive.params.values(), *([self.torque_switch] if self.torque_switch else []),
+            *self.load.params.values(), *self.reference.values(),
         )))
 
     def free_params(self) -> tuple[Param, ...]:
@@ -124,6 +126,7 @@ LOAD_LAWS = {
     "spring": {"k": Rule("stiffness", 0.0), "x2_contact": Rule("length"),
                "preload": Rule("force", 0.0, lo_in=True)},
 }
+TORQUE_SWITCH = Rule("force", 0.0)
 REFERENCE = {"Ft1": Rule("force", 0.0), "Ft2": Rule("force", 0.0)}
 RUN = {
     "t_end": Rule("time", 0.0, default=1.0),
@@ -331,9 +334,10 @@ class _Reader:
         return out
 
     def law(self, table: dict, path: str, laws: dict[str, dict[str, Rule]],
-            prefix: str = "") -> Law:
+            prefix: str = "", tables: tuple[str, ...] = ()) -> Law:
+        """The law's kind and parameters; ``tables`` are sub-tables allowed beside its keys."""
         kind = self.text(table, "law", path, tuple(laws))
-        self.keys(table, path, ("law", *laws[kind]))
+        self.keys(table, path, ("law", *laws[kind], *tables))
         return Law(kind, self.params(table, path, laws[kind], prefix))
 
     def only_modelled(self, table: dict, path: str, flank_of: dict[str, str],
@@ -402,6 +406,29 @@ class _Reader:
                                  "(else the wedge jams)",
                           units.show(p.value, FRICTION_LAWS[law.kind][key].quantity))
 
+    def torque_switch(self, drive: dict) -> Param | None:
+        """The optional [drive.torque_switch]: the motor is cut for good once S1 reaches S1."""
+        table = self.table(drive, "torque_switch", "drive", required=False)
+        if table is None:
+            return None
+        self.keys(table, "drive.torque_switch", ("S1",))
+        value, free = self.number(table, "S1", "drive.torque_switch", TORQUE_SWITCH)
+        return Param("S1_trip", value, units.si_unit("force"), free, "drive.torque_switch.S1")
+
+    def modes(self, doc: dict, equations: str) -> tuple[str, ...]:
+        table = self.table(doc, "modes", required=False) or {}
+        self.keys(table, "modes", ("include",))
+        modes = self.subset(table, "include", "modes", MODES, default=["forward"])
+        if equations == "literal" and modes not in LITERAL_MODES:
+            self.fail("modes.include", 'equations = "literal" allows ["forward"] or ["forward", '
+                      '"sliding"] only (the printed equations model forward sliding only)',
+                      _toml(list(modes)))
+        if equations == "consistent" and "sliding" in modes:
+            self.fail("modes.include", '"sliding" (along phi = 0) needs equations = "literal": '
+                      "the consistent model is continuous at phi = 0 (both flanks give the same "
+                      "a1 there), so it never slides", _toml(list(modes)))
+        return modes
+
     def run(self, doc: dict) -> Run:
         table = self.table(doc, "run", required=False) or {}
         self.keys(table, "run", (*RUN, "method"))
@@ -421,24 +448,21 @@ class _Reader:
         masses = self.params(wedge, "wedge", WEDGE)
         friction = self.friction(doc, flanks)
         self.check_jam(gamma, friction)
-        drive = self.law(self.table(doc, "drive"), "drive", DRIVE_LAWS)
+        drive_table = self.table(doc, "drive")
+        drive = self.law(drive_table, "drive", DRIVE_LAWS, tables=("torque_switch",))
+        torque_switch = self.torque_switch(drive_table)
         load = self.law(self.table(doc, "load"), "load", LOAD_LAWS)
         reference = self.table(doc, "reference", required=False)
         if reference is not None:
             self.keys(reference, "reference", tuple(REFERENCE))
             reference = self.params(reference, "reference", REFERENCE)
-        modes_table = self.table(doc, "modes", required=False) or {}
-        self.keys(modes_table, "modes", ("include",))
-        modes = self.subset(modes_table, "include", "modes", MODES, default=["forward"])
-        if equations == "literal" and modes != ("forward",):
-            self.fail("modes.include", 'equations = "literal" allows ["forward"] only (the '
-                      "printed equations model forward sliding only)", _toml(list(modes)))
+        modes = self.modes(doc, equations)
         if equations == "literal" and flanks != FLANKS:
             self.fail("wedge.flanks", 'equations = "literal" needs ["a", "b"] (the printed '
                       "model switches between both flanks)", _toml(list(flanks)))
         scene = Scene(name, description, equations, flanks, gamma, masses["m1"], masses["m2"],
                       friction, drive, load, reference or {}, modes, self.run(doc),
-                      self.source, digest)
+                      self.source, digest, torque_switch)
         names = [p.name for p in scene.params()]
         assert len(set(names)) == len(names) and all(n.isidentifier() for n in names), names
         return scene

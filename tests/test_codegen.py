@@ -147,13 +147,22 @@ def finite_difference_jacobian(m, mode, t, y, p, h=1e-6):
     return J, (f(t + dt, y) - f(t - dt, y)) / (2 * dt)
 
 
-@pytest.mark.parametrize("name,states", [("paper", [[0.7], [3.0], [7.0]]),
-                                         ("one_sided", [[0.001, 0.2], [0.1, 0.3], [0.2, -0.1]]),
-                                         ("asymmetric", [[-1.0], [2.0]]),
-                                         ("paper_literal", [[1.0], [5.0]])])
-def test_jacobian_matches_finite_differences(name, states):
+def parameters(m, *latches):
+    """p = free parameters at their defaults, then the latches (+inf: not fired)."""
+    latches = latches or (math.inf,) * len(m.LATCH_NAMES)
+    return np.array([*m.PARAM_DEFAULTS, *latches], dtype=float)
+
+
+@pytest.mark.parametrize("name,states,latches", [("paper", [[0.7], [3.0], [7.0]], ()),
+                                                 ("one_sided", [[0.001, 0.2], [0.1, 0.3], [0.2, -0.1]], ()),
+                                                 ("asymmetric", [[-1.0], [2.0]], ()),
+                                                 ("paper_literal", [[1.0], [5.0]], ()),
+                                                 ("seating", [[0.5, 3.0], [1.16, 7.0], [1.16, -0.5]], ()),
+                                                 ("seating", [[1.16, 7.0], [1.2, 0.5]], (0.1,))])
+def test_jacobian_matches_finite_differences(name, states, latches):
     m = load_module(name)
-    p = np.array(m.PARAM_DEFAULTS, dtype=float)
+    p = parameters(m, *latches)
+    assert len(p) == len(m.PARAM_NAMES) + len(m.LATCH_NAMES)
     for y in map(np.array, states):
         for mode in range(len(m.MODES)):
             if m.MODE_DIRECTION[mode] and np.sign(y[-1]) != m.MODE_DIRECTION[mode]:
@@ -211,3 +220,140 @@ def test_new_scene_file_generates_compiles_and_evaluates(tmp_path):
     g = np.zeros(len(m.GUARDS))
     m.guards(0, 0.0, y, p, g)
     assert g[m.GUARDS.index("load_contact")] == pytest.approx(x2 - 0.01)
+
+
+@pytest.mark.parametrize("name", shipped_scenes())
+def test_observe_gives_the_reactions_and_constants_fit(name):
+    m = load_module(name)
+    assert m.OBSERVABLES == ("S1", "S2")
+    assert len(m.MODE_DECLARED) == len(m.MODES) == len(m.GUARD_DIRECTIONS)
+    assert all(len(row) == len(m.GUARDS) for row in m.GUARD_DIRECTIONS)
+    p, out = parameters(m), np.zeros(2)
+    for mode in range(len(m.MODES)):
+        for v in (0.5, 4.0):
+            y = np.array([0.05, v] if len(m.STATES) == 2 else [v])
+            m.observe(mode, 0.1, y, p, out)
+            assert tuple(out) == m.reactions(mode, 0.1, y, p)
+            assert all(math.isfinite(x) for x in out)
+
+
+def test_paper_literal_has_an_undeclared_slide_mode_at_constant_speed():
+    m = load_module("paper_literal")
+    assert m.MODES == ("fwd_a", "fwd_b", "slide_fwd") and m.MODE_DECLARED == (True, True, False)
+    assert (m.MODE_FLANK[2], m.MODE_DIRECTION[2], m.MODE_REGIME[2]) == (0, 1, "sliding along phi = 0")
+    assert m.GUARDS == ("phi", "v1", "D", "slide_exit_a", "slide_exit_b") and m.LATCH_NAMES == ()
+    assert m.accel(2, 0.0, np.array([3.0]), parameters(m)) == 0.0
+    assert load_module("paper").MODE_DECLARED == (True, True, True)
+
+
+LITERAL_SLIDING = """
+name = "literal-spring"
+equations = "literal"
+[wedge]
+flanks = ["a", "b"]
+gamma = "4.76 deg"
+m1 = "11.8 kg"
+m2 = { value = "200 kg", free = true }
+[friction]
+law = "velocity"
+a = 0.161
+b = 0.535
+c = 0.088
+[drive]
+law = "kloss"
+Fmax = "2178 N"
+V0 = "7.85 m/s"
+Vmax = "6.5 m/s"
+[load]
+law = "spring"
+k = "2e5 N/m"
+x2_contact = "1 mm"
+preload = "100 N"
+[modes]
+include = ["forward", "sliding"]
+"""
+
+
+def hand_literal(f, F1, F2, rho, m1, m2, gamma):
+    """The paper's eqs. (6), (8), (9) as printed, flank a with Psi_1, b with Psi_2."""
+    psi = math.tan(gamma + f * rho)
+    a = (F1 - F2 * psi) / (m1 - m2 * psi * math.tan(gamma))
+    S1 = F1 - m1 * a
+    return a, S1, S1 / psi
+
+
+def test_literal_slide_mode_equals_filippov_by_hand(tmp_path):
+    scene = tmp_path / "literal.toml"
+    scene.write_text(LITERAL_SLIDING)
+    assert main(["generate", str(scene), "-o", str(tmp_path)]) == 0
+    m = load_module(tmp_path / "literal_spring.py")
+    assert m.MODES == ("fwd_a", "fwd_b", "slide_fwd") and m.MODE_DECLARED == (True, True, True)
+    assert m.GUARDS == ("phi", "v1", "D", "load_contact", "slide_exit_a", "slide_exit_b")
+    assert [row[-2:] for row in m.GUARD_DIRECTIONS] == [(-1, -1)] * 3
+    p, t, m2 = np.array([200.0]), 0.1, 200.0
+    for x1, v in ((0.05, 3.0), (0.3, 6.9), (0.02, 0.4)):
+        y = np.array([x1, v])
+        F1, F2 = kloss(v), -(100 + 2e5 * (x1 * math.tan(G) - 1e-3))
+        hand = [hand_literal(f, F1, F2, rho_paper(v), M1, m2, G) for f in (1, -1)]
+        for mode in (0, 1):
+            assert m.accel(mode, t, y, p) == pytest.approx(hand[mode][0], rel=1e-9)
+        # d phi/dt = dF1/dv1 a1 / m1 + k tan(gamma)^2 v1 / m2 for phi = F1/m1 - F2 tan(gamma)/m2 ...
+        slip, slip_max = 7.85 - v, 1.35
+        dF1 = -2 * 2178 * slip_max * (slip_max ** 2 - slip ** 2) / (slip ** 2 + slip_max ** 2) ** 2
+        rate_a, rate_b = (dF1 * a / M1 + 2e5 * math.tan(G) ** 2 * v / m2 for a, _, _ in hand)
+        # ... and by central differences of the module's own phi along the flow
+        h = 1e-6
+
+        def rate(a):
+            step = np.array([v, a]) * h
+            return (m.switching(t, y + step, p) - m.switching(t, y - step, p)) / (2 * h)
+
+        assert (rate(hand[0][0]), rate(hand[1][0])) == pytest.approx((rate_a, rate_b), rel=1e-6)
+        lam = rate_b / (rate_b - rate_a)
+        a1 = lam * hand[0][0] + (1 - lam) * hand[1][0]
+        assert m.accel(2, t, y, p) == pytest.approx(a1, rel=1e-9)
+        assert rate(m.accel(2, t, y, p)) == pytest.approx(0.0, abs=1e-6 * abs(rate_a))      # d phi/dt = 0
+        S = [lam * hand[0][i] + (1 - lam) * hand[1][i] for i in (1, 2)]
+        assert m.reactions(2, t, y, p) == pytest.approx(S, rel=1e-9)
+        out = np.zeros(2)
+        m.observe(2, t, y, p, out)
+        assert out == pytest.approx(S, rel=1e-9)
+        g = np.zeros(len(m.GUARDS))
+        m.guards(2, t, y, p, g)
+        assert g[-2:] == pytest.approx([-rate_a, rate_b], rel=1e-9)
+        assert g[1] == v and tuple(g[[0, 2]]) == (1.0, 1.0)       # phi and D are inactive while sliding
+        m.guards(0, t, y, p, g)
+        assert tuple(g[-2:]) == (1.0, 1.0)                         # the exits only while sliding
+        J, dfdt = np.zeros((2, 2)), np.zeros(2)
+        m.jac(2, t, y, p, J, dfdt)
+        J_fd, dfdt_fd = finite_difference_jacobian(m, 2, t, y, p)
+        assert J == pytest.approx(J_fd, rel=1e-5, abs=1e-6) and dfdt == pytest.approx(dfdt_fd, abs=1e-6)
+
+
+def test_seating_torque_switch_equals_hand_formulas():
+    m = load_module("seating")
+    assert m.LATCH_NAMES == ("t_trip",) and m.PARAM_NAMES == () and m.MODE_DECLARED == (True,) * 5
+    assert m.GUARDS[-1] == "torque_switch" and all(row[-1] == -1 for row in m.GUARD_DIRECTIONS)
+    trip = m.GUARDS.index("torque_switch")
+    k, x2c, m2 = 5e5, 0.095, 200.0
+    for x1, v in ((0.5, 3.0), (1.145, 7.8)):
+        y = np.array([x1, v])
+        F2 = -k * max(0.0, x1 * math.tan(G) - x2c)
+        for t_trip, t, F1 in ((math.inf, 0.1, kloss(v)), (0.15, 0.1, kloss(v)), (0.05, 0.1, 0.0)):
+            p = np.array([t_trip])
+            assert m.drive_force(t, y, p) == pytest.approx(F1, rel=1e-12, abs=1e-12)
+            g = np.zeros(len(m.GUARDS))
+            for mode in range(len(m.MODES)):
+                f, s = m.MODE_FLANK[mode], m.MODE_DIRECTION[mode]
+                S1 = hand_sliding(f, s, F1, F2, rho_paper(v), M1, m2, G)[1] if s else F1
+                assert m.reactions(mode, t, y, p)[0] == pytest.approx(S1, rel=1e-9, abs=1e-6)
+                m.guards(mode, t, y, p, g)
+                assert g[trip] == (pytest.approx(1500.0 - S1, rel=1e-9, abs=1e-6) if t < t_trip else 1.0)
+    # After the trip, stopped in the seat, the gear self-locks: both stick cones hold.
+    y, p = np.array([1.18, 0.0]), np.array([0.2])
+    F2 = -k * (1.18 * math.tan(G) - x2c)
+    normal, tangential = -F2 * math.cos(G), F2 * math.sin(G)
+    rho0 = rho_paper(0.0)
+    cones = m.stick_conditions(0.3, y, p)[:2]
+    assert cones == pytest.approx((math.tan(rho0) * normal - tangential, math.tan(rho0) * normal + tangential))
+    assert min(cones) > 0

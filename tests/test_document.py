@@ -10,7 +10,7 @@ import sympy as sp
 from derivation import audit, mechanics as M, paper
 from derivation.document import build_document, latex_prose, render
 from derivation.model import build_model
-from derivation.scene import load_scene
+from derivation.scene import load_scene, shipped_scenes
 from tswm_runtime.cli import main
 
 NEED_TEX = os.environ.get("CI") == "true"      # CI installs TeX and must compile the document
@@ -57,10 +57,21 @@ def test_markdown_has_every_step(paper_doc):
 
 
 @pytest.mark.skipif(not shutil.which("pdflatex") and not NEED_TEX, reason="no TeX engine here")
-def test_latex_compiles_to_pdf(tmp_path, paper_doc):
+@pytest.mark.parametrize("name", shipped_scenes())
+def test_latex_compiles_to_pdf(tmp_path, name):
     from derivation.latex import build_pdf
-    pdf = build_pdf(render(paper_doc, "latex"), tmp_path / "paper.pdf")
+    doc = build_document(build_model(load_scene(name)))
+    pdf = build_pdf(render(doc, "latex"), tmp_path / f"{name}.pdf")
     assert pdf.read_bytes()[:5] == b"%PDF-"
+
+
+def test_literal_document_shows_the_slide_mode_and_seating_the_latch():
+    md = render(build_document(build_model(load_scene("paper-literal"))), "markdown")
+    assert "Mode `slide_fwd` (sliding along phi = 0; not declared by the scene" in md
+    assert "a_1 = \\lambda a_{1,a} + (1 - \\lambda) a_{1,b} = 0" in md
+    assert "slide_fwd" not in render(build_document(build_model(load_scene("paper"))), "markdown")
+    md = render(build_document(build_model(load_scene("seating"))), "markdown")
+    assert "Latch $t_{trip}$" in md and "guard $- S_{1} + S_{1 trip}$" in md
 
 
 def test_cli_derive_writes_documents(tmp_path, capsys):

@@ -5,7 +5,7 @@ import pytest
 import sympy as sp
 
 from derivation import laws, mechanics as M, paper
-from derivation.model import build_model
+from derivation.model import T_TRIP, build_model, compose_laws, switching_rate
 from derivation.scene import load_scene, parse_scene
 
 BASE = """
@@ -125,3 +125,71 @@ def test_step_load_is_piecewise_with_time_event():
     assert F2.subs({M.t: 0.5, t_step: 0.3}) == sp.Symbol("F2_after", real=True)
     assert [e.name for e in model.events] == ["load_step"]
     assert paper.PSI_TRACTIVE == sp.tan(M.gamma + M.rho)
+
+
+def _rates(model):
+    """d phi/dt along fwd_a and fwd_b, the laws composed in, from switching_rate."""
+    composed = compose_laws(model.laws)
+    rate = switching_rate(model.switching, composed)
+    return [rate.subs(M.a1, model.mode(name).accel).subs(composed) for name in ("fwd_a", "fwd_b")]
+
+
+def test_consistent_model_never_slides():
+    """At phi = 0 both flanks give the same d phi/dt, so no sliding mode is needed (or made)."""
+    model = build_model(load_scene("paper"))
+    assert all(m.slide is None for m in model.modes)
+    m2, F2 = sp.Symbol("m2", real=True), sp.Symbol("F2", real=True)
+    fixed = {sp.Symbol(p.name, real=True): p.value for p in model.params if p.name not in ("m2", "F2")}
+    on_surface = sp.lambdify((M.v1, m2), sp.solve(model.switching.subs(compose_laws(model.laws)), F2)[0].subs(fixed))
+    rate_a, rate_b = _rates(model)
+    gap = sp.lambdify((M.v1, m2, F2), (rate_a - rate_b).subs(fixed))
+    for v, mass in ((0.3, 100.0), (3.0, 200.0), (6.9, 300.0)):
+        assert gap(v, mass, on_surface(v, mass)) == pytest.approx(0.0, abs=1e-9)
+        assert abs(gap(v, mass, -15000.0)) > 1.0                # off the surface the rates differ
+
+
+def test_literal_slide_mode_keeps_phi_and_combines_the_flanks():
+    model = build_model(parse_scene(BASE.format(flanks='["a", "b"]', friction=SHARED).replace(
+        'law = "constant"\nF1 = "400 N"', 'law = "linear"\nF0 = "400 N"\nV0 = "2 m/s"').replace(
+        'law = "constant"\nF2 = "-900 N"', 'law = "spring"\nk = "1e5 N/m"\nx2_contact = "1 mm"\npreload = "10 N"'
+    ).replace('["forward", "backward", "stick"]', '["forward", "sliding"]').replace(
+        'name = "variant"', 'name = "variant"\nequations = "literal"')))
+    slide = model.mode("slide_fwd")
+    assert (slide.regime, slide.flank, slide.direction, slide.declared) == ("sliding along phi = 0", "", 1, True)
+    composed = compose_laws(model.laws)
+    # phi = F1/m1 - F2 tan(gamma)/m2 with F1 = F0 (1 - v1/V0), F2 = -(preload + k (x1 tan(gamma) - x2_contact))
+    g, m1, m2, k, F0, V0 = 6 * math.pi / 180, 3.0, 40.0, 1e5, 400.0, 2.0
+    point = {M.x1: 0.05, M.v1: 0.7}
+    values = {**point, **{sp.Symbol(p.name, real=True): p.value for p in model.params}}
+    a_a, a_b, a_s = (float(model.mode(n).accel.subs(composed).subs(values)) for n in ("fwd_a", "fwd_b", "slide_fwd"))
+    rate_a, rate_b = (-F0 / V0 / m1 * a + k * math.tan(g) ** 2 / m2 * 0.7 for a in (a_a, a_b))
+    assert [float(r.subs(values)) for r in _rates(model)] == pytest.approx([rate_a, rate_b], rel=1e-12)
+    lam = rate_b / (rate_b - rate_a)
+    assert a_s == pytest.approx(lam * a_a + (1 - lam) * a_b, rel=1e-9)
+    assert -F0 / V0 / m1 * a_s + k * math.tan(g) ** 2 / m2 * 0.7 == pytest.approx(0.0, abs=1e-9)   # d phi/dt = 0
+    for field in ("S1", "S2"):
+        a_val, b_val, s_val = (float(getattr(model.mode(n), field).subs(composed).subs(values))
+                               for n in ("fwd_a", "fwd_b", "slide_fwd"))
+        assert s_val == pytest.approx(lam * a_val + (1 - lam) * b_val, rel=1e-9)
+
+
+def test_paper_literal_slides_at_constant_speed_undeclared():
+    """Its phi depends on v1 alone, so d phi/dt = 0 needs a1 = 0."""
+    model = build_model(load_scene("paper-literal"))
+    assert [m.name for m in model.modes] == ["fwd_a", "fwd_b", "slide_fwd"]
+    assert model.mode("slide_fwd").accel == 0 and not model.mode("slide_fwd").declared
+
+
+def test_torque_switch_cuts_the_drive_for_good():
+    model = build_model(load_scene("seating"))
+    assert [latch.symbol for latch in model.latches] == [T_TRIP]
+    F1 = compose_laws(model.laws)[M.F1]
+    values = {sp.Symbol(p.name, real=True): p.value for p in model.params}
+    slip = 7.85 - 2.0
+    assert float(F1.subs(values).subs({M.v1: 2.0, M.t: 0.1, T_TRIP: 0.2})) == pytest.approx(
+        2 * 2178 * slip * 1.35 / (slip ** 2 + 1.35 ** 2))
+    assert F1.subs(values).subs({M.v1: 2.0, M.t: 0.3, T_TRIP: 0.2}) == 0
+    assert F1.subs(values).subs({M.v1: 2.0, M.t: 0.3, T_TRIP: sp.oo}) != 0
+    trip = model.latches[0]
+    assert (trip.name, float(trip.guard.subs(values).subs(M.S1, 1600.0))) == ("torque_switch", -100.0)
+    assert build_model(load_scene("paper")).latches == ()

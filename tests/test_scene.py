@@ -57,7 +57,7 @@ def test_base_is_valid():
 
 
 def test_shipped_names():
-    assert shipped_scenes() == ("asymmetric", "one-sided", "paper", "paper-literal")
+    assert shipped_scenes() == ("asymmetric", "one-sided", "paper", "paper-literal", "paper-runup", "seating")
     for name in shipped_scenes():
         s = load_scene(name)
         assert s.name == name and s.source == f"shipped:{name}"
@@ -135,6 +135,36 @@ def test_asymmetric():
     assert {k: p.value for k, p in s.load.params.items()} == {
         "F2_before": 0.0, "F2_after": 3000.0, "t_step": 0.3}
     assert s.m2.value == 100.0 and s.modes == ("forward", "backward", "stick")
+
+
+def test_seating():
+    s, paper = load_scene("seating"), load_scene("paper")
+    assert s.equations == "consistent" and s.modes == ("forward", "backward", "stick")
+    same = ("gamma", "m1", "friction_a", "friction_b", "friction_c", "Fmax", "V0", "Vmax")
+    assert [(p.name, p.value) for p in s.params() if p.name in same] == [
+        (p.name, p.value) for p in paper.params() if p.name in same]
+    assert s.m2.value == 200.0 and s.free_params() == ()
+    switch = s.torque_switch
+    assert (switch.name, switch.value, switch.unit, switch.key) == (
+        "S1_trip", 1500.0, "N", "drive.torque_switch.S1")
+    assert [p.name for p in s.params()].index("S1_trip") == [p.name for p in s.params()].index("Vmax") + 1
+    assert s.load.kind == "spring" and s.load.params["k"].value == 5e5
+    # self-locking: the lead angle is below the friction angle at standstill, rho(0) = 1/c deg
+    gamma_deg, rho0_deg = math.degrees(s.gamma["a"].value), 1 / s.friction["a"].params["c"].value
+    assert gamma_deg == pytest.approx(4.76) and rho0_deg == pytest.approx(11.36, abs=0.01) and gamma_deg < rho0_deg
+    assert paper.torque_switch is None
+
+
+def test_torque_switch_free_and_missing_key():
+    s = scene(**{"drive.torque_switch.S1": '{ value = "2 kN", free = true }'})
+    assert s.torque_switch.value == 2000.0 and s.torque_switch in s.free_params()
+    with pytest.raises(SceneError, match=r"t.toml: drive.torque_switch.S1: missing required key \(force, > 0 N\)"):
+        parse_scene(scene_text({}) + "[drive.torque_switch]\n", "t.toml")
+
+
+def test_sliding_mode_keyword():
+    s = scene(**{"equations": '"literal"', "modes.include": '["sliding", "forward"]'})
+    assert s.modes == ("forward", "sliding")
 
 
 def test_load_scene_by_path(tmp_path):
@@ -217,7 +247,7 @@ BAD = [
     ({"wedge.m1": "true"}, ["wedge.m1 = true", "expected a mass"]),
     ({"wedge.m1": "[1, 2]"}, ["wedge.m1 = [1, 2]", "expected a mass"]),
     ({"friction.a": '"0.161"'}, ["friction.a", "plain number"]),
-    ({"run.method": "3"}, ["run.method = 3", '"dopri5", "rosenbrock"']),
+    ({"run.method": "3"}, ["run.method = 3", '"dopri5", "rosenbrock23"']),
     ({"description": "1"}, ["description = 1", "expected a string"]),
     ({"wedge": "5"}, ["wedge = 5", "expected a table"]),
     ({"run.max_steps": "1.5"}, ["run.max_steps = 1.5", "integer"]),
@@ -280,11 +310,23 @@ BAD = [
     ({**PER_FLANK, "friction.b.rho": '"88 deg"'}, ["friction.b.rho = 88 deg", "jams"]),
     ({"friction.law": '"coulomb"'}, ["friction.law = \"coulomb\"", '"constant", "velocity"']),
     # modes and equations
-    ({"modes.include": "[]"}, ["modes.include = []", '["forward", "backward", "stick"]']),
+    ({"modes.include": "[]"}, ["modes.include = []", '["forward", "backward", "stick", "sliding"]']),
     ({"modes.include": '["forward", "forward"]'}, ["modes.include", "distinct"]),
     ({"modes.include": '["sideways"]'}, ["modes.include", "forward"]),
     ({"equations": '"exact"'}, ['equations = "exact"', '"consistent", "literal"']),
-    ({"equations": '"literal"'}, ["modes.include", 'allows ["forward"] only']),
+    ({"equations": '"literal"'}, ["modes.include", 'allows ["forward"] or ["forward", "sliding"] only']),
+    ({"equations": '"literal"', "modes.include": '["sliding"]'}, ["modes.include = [\"sliding\"]",
+                                                                  'allows ["forward"] or']),
+    ({"modes.include": '["forward", "sliding"]'}, ["modes.include", 'needs equations = "literal"',
+                                                   "continuous at phi = 0", "never slides"]),
+    ({"modes.include": '["forward", "slide"]'}, ["modes.include", '"stick", "sliding"']),
+    # torque switch
+    ({"drive.torque_switch.S1": '"-5 N"'}, ["drive.torque_switch.S1 = -5 N", "must be > 0 N"]),
+    ({"drive.torque_switch.S1": '"0 kN"'}, ["drive.torque_switch.S1 = 0 kN (= 0 N)", "> 0 N"]),
+    ({"drive.torque_switch.S1": '"5 kg"'}, ["drive.torque_switch.S1", "mass unit"]),
+    ({"drive.torque_switch.S2": '"5 N"'}, ["drive.torque_switch.S2", "unknown key", "allowed here: S1"]),
+    ({"drive.torque_switch": '"1500 N"'}, ["drive.torque_switch = \"1500 N\"", "expected a table"]),
+    ({"drive.torque_swich.S1": '"5 N"'}, ["drive.torque_swich", "did you mean 'torque_switch'"]),
     ({"equations": '"literal"', "modes.include": '["forward"]', "wedge.flanks": '["a"]'},
      ["wedge.flanks", 'needs ["a", "b"]']),
     # run
@@ -292,7 +334,7 @@ BAD = [
     ({"run.rtol": "1"}, ["run.rtol = 1", "in [1e-13, 0.1]"]),
     ({"run.rtol": "1e-14"}, ["run.rtol = 1e-14", "in [1e-13, 0.1]"]),
     ({"run.atol": "0"}, ["run.atol = 0", "> 0"]),
-    ({"run.method": '"rk4"'}, ['run.method = "rk4"', '"dopri5", "rosenbrock"']),
+    ({"run.method": '"rk4"'}, ['run.method = "rk4"', '"dopri5", "rosenbrock23"']),
     ({"run.max_steps": "0"}, ["run.max_steps = 0", ">= 1"]),
     ({"run.t_end": '{ value = "1 s", free = true }'}, ["run.t_end", "model parameters only"]),
     # name, value tables

@@ -16,6 +16,7 @@ The model is written to a real file, as generated modules are.
     .venv/bin/python tools/bench_calling_convention.py
 """
 import argparse
+import importlib
 import json
 import os
 import subprocess
@@ -95,7 +96,7 @@ def phase(variant):
     """One process: import, first call (compiles or loads), steady-state timings."""
     t0 = time.perf_counter()
     import numpy as np
-    import numba  # noqa: F401
+    importlib.import_module("numba")      # timed: the import alone
     t_numba = time.perf_counter()
     from tswm_runtime import segment as seg
     import bench_model as model

@@ -47,6 +47,146 @@ def _generate(args: argparse.Namespace) -> int:
     return 0
 
 
+class UsageError(ValueError):
+    """A command-line input that cannot be used; the message names it (exit status 2)."""
+
+
+# simulate's setting names -> the option that sets them, for error messages
+SETTING_OPTIONS = {"t_end": "--t-end", "rtol": "--rtol", "atol": "--atol", "method": "--method",
+                   "points": "--points", "max_steps": "--max-steps", "max_events": "--max-events"}
+MAX_EVENT_LINES = 40
+
+
+def _shipped_modules() -> list[str]:
+    """Scene names of the generated modules shipped in ``generated/``."""
+    import pkgutil
+
+    import generated
+
+    return sorted(m.name.replace("_", "-") for m in pkgutil.iter_modules(generated.__path__))
+
+
+def _load_model(scene: str):
+    """The generated module of a shipped scene name or a .py path; UsageError otherwise."""
+    from tswm_runtime.contract import ContractError, load_module
+
+    if Path(scene).suffix != ".py" and ("/" in scene or "\\" in scene or Path(scene).suffix):
+        raise UsageError(f"scene {scene!r}: simulate takes a shipped scene name or a generated module "
+                         f"(.py); for a scene file run `tswm generate {scene}` and pass the module it writes")
+    try:
+        return load_module(scene)
+    except ModuleNotFoundError as error:
+        if not (error.name or "").startswith("generated."):
+            raise
+        raise UsageError(f"scene {scene!r}: no generated module (shipped: {', '.join(_shipped_modules())}); "
+                         f"run `tswm generate SCENE` or pass a module's .py path") from None
+    except ContractError as error:
+        raise UsageError(f"scene {scene!r}: {error}") from None
+
+
+def _parse_sets(items: list[str], module) -> dict:
+    """``--set name=value`` items as {name: value}; values in SI or "<number> <unit>".
+
+    Names the module does not have are passed on as written: ``simulate`` rejects them
+    with a message listing the free parameters."""
+    from derivation import units
+
+    quantity_of = {units.si_unit(q): q for q in units.UNITS}
+    unit_of = dict(zip(module.PARAM_NAMES, module.PARAM_UNITS))
+    params = {}
+    for item in items:
+        name, sep, raw = item.partition("=")
+        name, raw = name.strip(), raw.strip()
+        if not sep or not name or not raw:
+            raise UsageError(f"--set {item!r}: expected NAME=VALUE, e.g. F2=-5000")
+        value: object = raw
+        try:
+            value = float(raw)
+        except ValueError:
+            quantity = quantity_of.get(unit_of.get(name))
+            if quantity is not None:
+                try:
+                    value = units.to_si(raw, quantity)
+                except units.UnitError as error:
+                    raise UsageError(f"parameter {name} = {raw!r}: {error}") from None
+        params[name] = value
+    return params
+
+
+def _table(rows: list[tuple[str, ...]], indent: str = "    ") -> list[str]:
+    """Rows of strings as left-aligned columns."""
+    widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
+    return [indent + "  ".join(c.ljust(w) for c, w in zip(r, widths)).rstrip() for r in rows]
+
+
+def _print_summary(result, module, origin: str, t_load: float, t_run: float) -> None:
+    """The run at a glance: inputs, status, phases, events, maxima, KD, counts, wall time."""
+    units = dict(zip(module.PARAM_NAMES, module.PARAM_UNITS))
+    run = result.settings
+    print(f"scene {result.scene} ({module.EQUATIONS} equations, {origin})")
+    params = ", ".join(f"{k} = {v:g} {units[k]}".rstrip() for k, v in result.params.items())
+    print(f"  parameters: {params or 'none free'}")
+    print(f"  run: t_end = {run['t_end']:g} s, x1(0) = {run['x1']:g} m, v1(0) = {run['v1']:g} m/s, "
+          f"{run['method']}, rtol {run['rtol']:g}, atol {run['atol']:g}, {run['points']} points")
+    print(f"  status: {result.status}: {result.message}")
+    print(f"  phases ({len(result.phases)}):")
+    rows = [("regime", "mode", "t_start [s]", "t_end [s]")]
+    rows += [(ph.regime, ph.mode, f"{ph.t_start:.9g}", f"{ph.t_end:.9g}") for ph in result.phases]
+    print("\n".join(_table(rows)))
+    print(f"  events ({len(result.events)}):")
+    if result.events:
+        shown = result.events[:MAX_EVENT_LINES]
+        rows = [("t [s]", "kind", "from -> to")]
+        rows += [(f"{e.t:.9g}", e.kind, f"{e.from_mode} -> {e.to_mode or '(stop)'}") for e in shown]
+        print("\n".join(_table(rows)))
+        if len(result.events) > len(shown):
+            print(f"    ... {len(result.events) - len(shown)} more (all in the -o summary JSON)")
+    print(f"  S1 max = {result.S1_max:.6g} N at t = {result.t_S1_max:.6g} s")
+    print(f"  S2 max = {result.S2_max:.6g} N at t = {result.t_S2_max:.6g} s")
+    if result.KD1 is not None or result.KD2 is not None:
+        print(f"  KD1 = {result.KD1:.6g}, KD2 = {result.KD2:.6g}")
+    print(f"  steps {result.n_steps} (rejected {result.n_rejected}), rhs calls {result.nfev}, "
+          f"jacobian calls {result.njev}")
+    print(f"  wall time {t_load + t_run:.3g} s (runtime and module load {t_load:.3g} s, simulation {t_run:.3g} s)")
+
+
+def _simulate(args: argparse.Namespace) -> int:
+    import time
+
+    start = time.perf_counter()
+    from tswm_runtime.contract import ContractError
+    from tswm_runtime.simulate import SimulationInputError, simulate
+
+    module = _load_model(args.scene)
+    t_load = time.perf_counter() - start
+    params = _parse_sets(args.set, module)
+    overrides = {"t_end": args.t_end, "rtol": args.rtol, "atol": args.atol, "method": args.method,
+                 "points": args.points, "max_steps": args.max_steps, "max_events": args.max_events}
+    start = time.perf_counter()
+    try:
+        result = simulate(module, params, **overrides)
+    except SimulationInputError as error:
+        message = str(error)
+        key = message.split(" = ", 1)[0]
+        if key in SETTING_OPTIONS and overrides[key] is None:
+            message = f"the scene's [run] setting {message}"
+        elif key in SETTING_OPTIONS:
+            message = f"{SETTING_OPTIONS[key]}: {message}"
+        raise UsageError(message) from None
+    except ContractError as error:
+        raise UsageError(f"scene {args.scene!r}: {error}") from None
+    t_run = time.perf_counter() - start
+    origin = args.scene if args.scene.endswith(".py") else f"generated/{args.scene.replace('-', '_')}.py"
+    _print_summary(result, module, origin, t_load, t_run)
+    if args.output:
+        from tswm_runtime.export import write_outputs
+
+        for path in write_outputs(result, module, args.output, plot=not args.no_plot,
+                                  wall_time=t_load + t_run):
+            print(f"  wrote {path}")
+    return 0 if result.success else 1
+
+
 def _parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="tswm", description="Derive, generate and simulate wedge mechanisms.")
     sub = parser.add_subparsers(dest="command", required=True)
@@ -63,6 +203,28 @@ def _parser() -> argparse.ArgumentParser:
                           help="directory for the module (default: generated)")
     generate.add_argument("--force", action="store_true", help="overwrite a module that was edited by hand")
     generate.set_defaults(run=_generate)
+    simulate = sub.add_parser(
+        "simulate", help="simulate a scene's generated module and summarise the run",
+        description="Simulate a scene and print its phases, events, maxima of S1 and S2 and counts. "
+                    "Exit status: 0 finished, 1 the run stopped early (status and message printed), "
+                    "2 bad input.")
+    simulate.add_argument("scene", help="a shipped scene name (one with a module in generated/: paper, "
+                          "paper-literal, ...) or a path to a generated module .py")
+    simulate.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
+                          help="a free parameter's value: a plain number in SI units (F2=-5000) or a "
+                               "number with a unit of the parameter's quantity (F2='-5 kN', "
+                               "m2='200 kg'); repeatable")
+    simulate.add_argument("--t-end", type=float, metavar="T", help="end time [s] (default: the scene's)")
+    simulate.add_argument("--rtol", type=float, metavar="R", help="relative tolerance (default: the scene's)")
+    simulate.add_argument("--atol", type=float, metavar="A", help="absolute tolerance (default: the scene's)")
+    simulate.add_argument("--method", choices=("dopri5", "rosenbrock23"), help="integrator (default: the scene's)")
+    simulate.add_argument("--points", type=int, metavar="N", help="number of output points (default: 1001)")
+    simulate.add_argument("--max-steps", type=int, metavar="N", help="step attempts allowed (default: the scene's)")
+    simulate.add_argument("--max-events", type=int, metavar="N", help="size of the event log (default: 1000)")
+    simulate.add_argument("-o", "--output", metavar="DIR",
+                          help="write DIR/SCENE.csv, SCENE.npz, SCENE-summary.json and SCENE.png")
+    simulate.add_argument("--no-plot", action="store_true", help="with -o: do not write the PNG")
+    simulate.set_defaults(run=_simulate)
     return parser
 
 
@@ -74,7 +236,7 @@ def main(argv: list[str] | None = None) -> int:
 
     try:
         return args.run(args)
-    except (SceneError, TexUnavailable, EditedModuleError, FileNotFoundError) as error:
+    except (SceneError, TexUnavailable, EditedModuleError, FileNotFoundError, UsageError) as error:
         print(f"tswm {args.command}: error: {error}", file=sys.stderr)
         return 2
 

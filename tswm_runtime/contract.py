@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import importlib
 import importlib.util
+import sys
 from pathlib import Path
 from types import ModuleType
 
@@ -16,15 +17,20 @@ CONSTANTS = {
     "EQUATIONS": "'consistent' or 'literal'",
     "STATES": "state names: ('v1',) or ('x1', 'v1'); without x1 the runtime integrates v1 for it",
     "MODES": "mode names, indexed by the integer mode",
-    "MODE_REGIME": "regime of each mode (tractive, inverse-tractive, backward on flank a/b, stick)",
-    "MODE_FLANK": "+1 flank a, -1 flank b, 0 stick",
+    "MODE_REGIME": "regime of each mode (tractive, inverse-tractive, backward on flank a/b, stick, "
+                   "sliding along phi = 0)",
+    "MODE_FLANK": "+1 flank a, -1 flank b, 0 stick or sliding along phi = 0",
     "MODE_DIRECTION": "sign of v1 in each mode, 0 for stick",
+    "MODE_DECLARED": "per mode: whether a run may enter it (False: slide mode the scene does not declare)",
     "PARAM_NAMES": "free parameters, in the order of the vector p",
+    "LATCH_NAMES": "latched event times after the free parameters in p, len(p) = len(PARAM_NAMES) + "
+                   "len(LATCH_NAMES); each is +inf until the runtime sets it to the time its guard fired",
     "PARAM_UNITS": "SI unit of each free parameter",
     "PARAM_DEFAULTS": "scene value of each free parameter",
     "FIXED": "fixed parameters folded into the code: name -> value",
     "GUARDS": "names of the event functions, in the order guards() fills them",
     "GUARD_DIRECTIONS": "per mode, per guard: -1 falling, +1 rising, 0 either way",
+    "OBSERVABLES": "names of the quantities observe() fills: ('S1', 'S2')",
     "HAS_LOAD_FACTORS": "whether load_factors() exists (the scene gives Ft1, Ft2)",
     "RUN": "the scene's run settings: t_end, x1, v1, rtol, atol, method, max_steps",
 }
@@ -32,6 +38,7 @@ FUNCTIONS = {
     "rhs": "rhs(mode, t, y, p, dy): dy = d(states)/dt; explicit signature RHS_SIG",
     "jac": "jac(mode, t, y, p, J, dfdt): J = df/dy, dfdt = df/dt; explicit signature JAC_SIG",
     "guards": "guards(mode, t, y, p, g): event functions; inactive ones are 1.0; signature GUARDS_SIG",
+    "observe": "observe(mode, t, y, p, out): out = OBSERVABLES of `mode` (its reactions); signature GUARDS_SIG",
     "accel": "accel(mode, t, y, p) -> a1",
     "reactions": "reactions(mode, t, y, p) -> (S1, S2)",
     "switching": "switching(t, y, p) -> phi, zero where the contact force is",
@@ -61,8 +68,10 @@ def load_module(name_or_path: str | Path) -> ModuleType:
     if path.suffix == ".py":
         if not path.exists():
             raise FileNotFoundError(f"{path}: no such generated module")
-        spec = importlib.util.spec_from_file_location(f"tswm_model_{path.stem}", path)
+        name = f"tswm_model_{path.stem}"
+        spec = importlib.util.spec_from_file_location(name, path)
         module = importlib.util.module_from_spec(spec)
+        sys.modules[name] = module  # numba's disk cache re-imports a function's module by name
         spec.loader.exec_module(module)
         return check_module(module)
     return check_module(importlib.import_module(f"generated.{str(name_or_path).replace('-', '_')}"))

@@ -13,7 +13,16 @@ Rules (see docs/architecture.md, "Lessons from the peers' trackers"):
   sign change and back) are seen when they fall in different subintervals
   (scipy issue 9228; DifferentialEquations.jl's interpolation points).
 * A guard that is zero at the segment start (|g| <= gtol) is disarmed until it
-  has left zero; so a restart on a switching surface does not fire again.
+  has left zero; so a restart on a switching surface does not fire again. If it
+  leaves zero to the side its direction leads to (a restart on the surface in
+  the wrong mode), that is an event at once.
+* Noise band (``band`` on): a sign change counts only if the new value exceeds
+  the guard's own integration noise, sum_i |g(y + tol_i e_i) - g(y)| with
+  tol_i = atol_i + rtol |y_i| (the guard's change under a state error at the
+  tolerance). A guard dithering about zero within the accuracy asked for, as phi
+  does when v1 settles at the no-load speed, then reports no switches; a real
+  crossing is still located at its root. The band is computed only at samples
+  where a sign change was seen.
 * The root is located by the Illinois method (modified regula falsi, here with a
   bisection safeguard; also used by SUNDIALS CVODE's rootfinder) to the relative
   time tolerance (4 eps + ttol) max(1, |t|), and the end of the final bracket on
@@ -94,10 +103,12 @@ def bracket_next(state, tol):
 @njit(cache=True, error_model="numpy")
 def bracket_update(state, c, fc):
     """Replace the end on c's side; halve the kept end's value if it was kept twice
-    in a row (the Illinois modification, superlinear convergence)."""
+    in a row (the Illinois modification, superlinear convergence). An exact zero
+    counts as pre-crossing, so b stays strictly on the far side: a restart from it
+    has the guard armed with its new sign and sees the next crossing."""
     a, fa, b, fb, side, w1 = state[0], state[1], state[2], state[3], state[4], state[5]
     width = b - a
-    if fc == 0.0 or (fc > 0.0) == (fb > 0.0):
+    if fc != 0.0 and (fc > 0.0) == (fb > 0.0):
         if side > 0.0:
             fa *= 0.5
         return (a, fa, c, fc, 1.0, width, w1)
@@ -115,23 +126,47 @@ def sample_time(t_a, t_b, j):
 
 
 @njit(cache=True, error_model="numpy")
-def _sign_changes(G, j, directions, gtol, sgn, cand):
+def _sign_changes(G, j, directions, gtol, sgn, cand, ignore):
     """Update the guards' last signs with sample j; mark sign changes in an allowed
-    direction in cand (their sgn is kept: the pre-crossing sign). True if any."""
+    direction in cand (their sgn is kept: the pre-crossing sign), and disarmed guards
+    leaving zero to their post-event side. Guards in ``ignore`` are skipped. True if any."""
     found = False
     for k in range(G.shape[1]):
         g = G[j, k]
-        if abs(g) <= gtol:
+        if abs(g) <= gtol or ignore[k]:
             continue
         s = 1 if g > 0.0 else -1
         if sgn[k] == 0:
-            sgn[k] = s
+            if directions[k] == s:
+                cand[k] = True
+                found = True
+            else:
+                sgn[k] = s
         elif s != sgn[k]:
             if directions[k] == 0 or directions[k] == s:
                 cand[k] = True
                 found = True
             else:
                 sgn[k] = s
+    return found
+
+
+@njit(cache=True, error_model="numpy")
+def _drop_noise(guards, mode, p, t, y, g, atol, rtol, cand, y_tmp, g_tmp):
+    """Unmark candidates whose value g[k] at (t, y) lies within the guard's noise band
+    (module docstring); their sign stays the pre-crossing one. True if any is left."""
+    band = np.zeros(g.size)
+    for i in range(y.size):
+        y_tmp[:] = y
+        y_tmp[i] += atol[i] + rtol * abs(y[i])
+        guards(mode, t, y_tmp, p, g_tmp)
+        for k in range(g.size):
+            band[k] += abs(g_tmp[k] - g[k])
+    found = False
+    for k in range(g.size):
+        if cand[k] and abs(g[k]) <= band[k]:
+            cand[k] = False
+        found = found or cand[k]
     return found
 
 
@@ -160,12 +195,12 @@ def _root_on_dense(guards, mode, p, k, t_a, y_a, h, t_b, Q, G, j, tol, y_tmp, g_
 
 
 @njit(cache=True, error_model="numpy")
-def _zero_at_end(G, directions, gtol, sgn):
+def _zero_at_end(G, directions, gtol, sgn, ignore):
     """Lowest armed guard that reached zero at the last sample in an allowed direction."""
     last = G.shape[0] - 1
     for k in range(G.shape[1]):
         arriving = directions[k] == 0 or directions[k] == -sgn[k]
-        if sgn[k] != 0 and arriving and abs(G[last, k]) <= gtol:
+        if sgn[k] != 0 and arriving and abs(G[last, k]) <= gtol and not ignore[k]:
             return k
     return -1
 
@@ -186,25 +221,40 @@ def _earliest_root(guards, mode, p, t_a, y_a, h, t_b, Q, G, j, ttol, cand, y_tmp
 
 
 @njit(cache=True, error_model="numpy")
-def find_event(guards, mode, p, t_a, y_a, h, t_b, Q, G, directions, gtol, ttol, sgn, at_end,
-               cand, y_tmp, g_tmp):
+def find_event(guards, mode, p, t_a, y_a, h, t_b, y_b, Q, G, directions, gtol, band, atol,
+               rtol, ttol, sgn, at_end, cand, y_tmp, g_tmp, y_pert, j_start, ignore):
     """Earliest event in the accepted step [t_a, t_b]; returns (k, t_event, j).
 
     G[0] (guards at t_a) and G[-1] (at t_b, from the step's own y_b) are given; the
     interior rows are filled here from the dense output. sgn carries each guard's
     last sign across steps. k = -1: no event. j is the sample at which guard k was
     seen on its new side (the far end of the bracket). at_end: t_b is the segment
-    end, where a guard that reaches zero counts as an event.
+    end, where a guard that reaches zero counts as an event. band: apply the noise
+    band (module docstring) with atol, rtol. The scan starts at sample j_start and
+    skips the guards in ``ignore`` (crossings already found false in this step).
     """
     cand[:] = False
-    for j in range(1, GUARD_SUBINTERVALS + 1):
+    for j in range(j_start, GUARD_SUBINTERVALS + 1):
+        t_j = sample_time(t_a, t_b, j)
         if j < GUARD_SUBINTERVALS:
-            t_j = sample_time(t_a, t_b, j)
             dense_eval(y_a, h, Q, (t_j - t_a) / h, y_tmp)
             guards(mode, t_j, y_tmp, p, G[j])
-        if _sign_changes(G, j, directions, gtol, sgn, cand):
+        else:
+            y_tmp[:] = y_b
+        if _sign_changes(G, j, directions, gtol, sgn, cand, ignore) and (not band or _drop_noise(
+                guards, mode, p, t_j, y_tmp, G[j], atol, rtol, cand, y_pert, g_tmp)):
             return _earliest_root(guards, mode, p, t_a, y_a, h, t_b, Q, G, j, ttol, cand,
                                   y_tmp, g_tmp)
     if at_end:
-        return _zero_at_end(G, directions, gtol, sgn), t_b, GUARD_SUBINTERVALS
+        return _zero_at_end(G, directions, gtol, sgn, ignore), t_b, GUARD_SUBINTERVALS
     return -1, t_b, GUARD_SUBINTERVALS
+
+
+@njit(cache=True, error_model="numpy")
+def dense_integral(y_a, h, Q, theta, out):
+    """out = integral of the dense output from t_a to t_a + theta h (exact for the polynomial)."""
+    for i in range(out.size):
+        poly = Q[i, 3] / 5.0
+        for j in range(2, -1, -1):
+            poly = poly * theta + Q[i, j] / (j + 2.0)
+        out[i] = h * theta * (y_a[i] + h * theta * poly)

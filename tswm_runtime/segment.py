@@ -18,15 +18,14 @@ Conventions: forward integration (t_end >= t0); the last step is clipped to land
 exactly on t_end; the mode never changes inside a segment (error estimators are
 not valid across a switch, scipy issue 18039), the caller restarts after events.
 
-Caching caveat: numba keys the on-disk cache of integrate_segment on the content
-of this file only, while the cached code contains dopri5, rosenbrock and events.
-After editing one of those, delete tswm_runtime/__pycache__/*.nb[ic] (or the
-NUMBA_CACHE_DIR), otherwise the old code keeps running.
+``integrate_segment`` is the single-segment entry point (no noise band, no
+quadrature, no monitored observables); the hybrid driver (``hybrid``) calls the
+step loop ``_run`` with all three.
 """
 import numpy as np
 from numba import njit, types
 
-from tswm_runtime import dopri5, events, rosenbrock
+from tswm_runtime import cache_guard, dopri5, events, rosenbrock
 from tswm_runtime.signatures import (JAC_SIG, MATRIX, VECTOR, GuardsFunction,
                                      JacFunction, RhsFunction)
 
@@ -139,26 +138,45 @@ def _state_at(method, rhs, guards, mode, p, t_a, y_a, f_a, t_b, y_b, t, work, y,
 @njit(cache=True, error_model="numpy")
 def _event_state(method, rhs, guards, mode, p, t_a, y_a, f_a, t_b, y_b, k, t_star, j, G,
                  gtol, ttol, work, y_ev, y_tmp, g_tmp, counters):
-    """Event time and state y_ev for guard k crossing at t_star (found on the dense output).
+    """(event time, True) and state y_ev for guard k crossing at t_star (found on the
+    dense output); (t_star, False) if the re-taken steps show no crossing (the
+    interpolant's error made it: no event).
 
-    The state comes from a re-taken step. If guard k is still on its old side there,
-    Illinois continues on phi(t) = g_k(t, step(t_a, y_a, t - t_a)) between t_star and
-    sample j (where the crossing was seen), keeping the far-side end.
+    The root is refined on the re-taken steps, phi(t) = g_k(t, step(t_a, y_a, t - t_a)),
+    whose error is the step's local error, not the interpolant's: Illinois between a
+    pre- and a post-crossing point, keeping the far-side end (and its state in y_ev).
+    The first bracket is tight about t_star: [t_star - w, t_star] or [t_star, t_star
+    + w] with w 1e-3 of the step, widened to [t_a, .] or [., sample j] if needed.
     """
     post = G[j, k]
     _state_at(method, rhs, guards, mode, p, t_a, y_a, f_a, t_b, y_b, t_star, work, y_ev, g_tmp,
               counters)
     g_star = g_tmp[k]
-    if g_star * post >= 0.0 or abs(g_star) <= gtol:
-        return t_star
-    t_hi = events.sample_time(t_a, t_b, j)
-    _state_at(method, rhs, guards, mode, p, t_a, y_a, f_a, t_b, y_b, t_hi, work, y_tmp, g_tmp,
+    t_far = events.sample_time(t_a, t_b, j)
+    if (g_star != 0.0 and abs(g_star) <= gtol) or (g_star == 0.0 and t_star >= t_far):
+        return t_star, True  # within gtol, or a zero at the segment end (nothing lies beyond)
+    far = g_star * post > 0.0
+    w = 1e-3 * (t_b - t_a)
+    t_probe = max(t_star - w, t_a) if far else min(t_star + w, t_far)
+    _state_at(method, rhs, guards, mode, p, t_a, y_a, f_a, t_b, y_b, t_probe, work, y_tmp, g_tmp,
               counters)
-    if g_tmp[k] * post <= 0.0:
-        return t_star  # The re-taken steps show no crossing: keep the dense-output root.
-    y_ev[:] = y_tmp
-    state = events.bracket_start(t_star, g_star, t_hi, g_tmp[k])
-    tol = events.time_tolerance(t_hi, ttol)
+    g_probe = g_tmp[k]
+    if (g_probe * post > 0.0) == far:  # the probe is on the same side: widen to the ends
+        t_probe = t_a if far else t_far
+        _state_at(method, rhs, guards, mode, p, t_a, y_a, f_a, t_b, y_b, t_probe, work, y_tmp,
+                  g_tmp, counters)
+        g_probe = g_tmp[k]
+        if (g_probe * post > 0.0) == far:
+            if far:  # already across at t_a (it crossed inside the noise band): report t_a
+                y_ev[:] = y_tmp
+                return t_probe, True
+            return t_star, False
+    if far:
+        state = events.bracket_start(t_probe, g_probe, t_star, g_star)
+    else:
+        y_ev[:] = y_tmp
+        state = events.bracket_start(t_star, g_star, t_probe, g_probe)
+    tol = events.time_tolerance(state[2], ttol)
     while not events.bracket_done(state, tol):
         c = events.bracket_next(state, tol)
         _state_at(method, rhs, guards, mode, p, t_a, y_a, f_a, t_b, y_b, c, work, y_tmp, g_tmp,
@@ -166,19 +184,91 @@ def _event_state(method, rhs, guards, mode, p, t_a, y_a, f_a, t_b, y_b, k, t_sta
         state = events.bracket_update(state, c, g_tmp[k])
         if state[2] == c:
             y_ev[:] = y_tmp
-    return state[2]
+    return state[2], True
 
 
 @njit(cache=True, error_model="numpy")
-def _write_samples(t_out, i, y_out, t_a, y_a, h, Q, t_hi, y_hi):
-    """Rows y_out[i:] for the output times in (t_a, t_hi]; returns the next free index."""
+def _write_samples(t_out, i, y_out, t_a, y_a, h, Q, t_hi, y_hi, quad, q_tmp):
+    """Rows y_out[i:] for the output times in (t_a, t_hi]; returns the next free index.
+
+    With quadrature (quad.size = n), columns n: of a row get quad (the integral up
+    to t_a) plus the integral of the dense output from t_a to the row's time.
+    """
+    n = y_a.size
     while i < t_out.size and t_out[i] <= t_hi:
+        theta = (t_out[i] - t_a) / h
         if t_out[i] == t_hi:
-            y_out[i, :] = y_hi
+            y_out[i, :n] = y_hi
         else:
-            events.dense_eval(y_a, h, Q, (t_out[i] - t_a) / h, y_out[i])
+            events.dense_eval(y_a, h, Q, theta, y_out[i, :n])
+        if quad.size > 0:
+            events.dense_integral(y_a, h, Q, theta, q_tmp)
+            y_out[i, n:] = quad + q_tmp
         i += 1
     return i
+
+
+@njit(cache=True, error_model="numpy")
+def _monitor(observe, mode, t, y, p, mon, obs, t_a, h, y_a, Q, t_hi, win_f, win_y, win_Q, win_s):
+    """Track max |observable k| at (t, y) in mon[k] = (|value|, value, t).
+
+    A new maximum at the end of the step [t_a, t_hi] (h > 0) remembers that step's
+    dense output in slot 0 of the refinement window, and the following step in slot
+    1: the true maximum lies in one of the two (``_refine``).
+    """
+    observe(mode, t, y, p, obs)
+    for k in range(mon.shape[0]):
+        if abs(obs[k]) > mon[k, 0]:
+            mon[k, 0], mon[k, 1], mon[k, 2] = abs(obs[k]), obs[k], t
+            slot, win_s[k] = 0, (1 if h > 0.0 else 0)
+        elif win_s[k] == 1:
+            slot, win_s[k] = 1, 2
+        else:
+            continue
+        if h > 0.0:
+            win_f[k, slot, 0], win_f[k, slot, 1], win_f[k, slot, 2] = t_a, h, t_hi
+            win_y[k, slot] = y_a
+            win_Q[k, slot] = Q
+
+
+REFINE_ITERATIONS = 40  # Golden-section steps: the window shrinks by 0.618^40 = 4e-9.
+
+
+@njit(cache=True, error_model="numpy")
+def _window_value(observe, mode, p, k, t, win_f, win_y, win_Q, win_s, y_tmp, obs):
+    """Observable k at t, from the window slot whose step contains t."""
+    slot = 0 if (t <= win_f[k, 0, 2] or win_s[k] < 2) else 1
+    t_a, h = win_f[k, slot, 0], win_f[k, slot, 1]
+    events.dense_eval(win_y[k, slot], h, win_Q[k, slot], (t - t_a) / h, y_tmp)
+    observe(mode, t, y_tmp, p, obs)
+    return obs[k]
+
+
+@njit(cache=True, error_model="numpy")
+def _refine(observe, mode, p, mon, obs, win_f, win_y, win_Q, win_s, y_tmp):
+    """Golden-section search of max |observable| on each pending window; resets them."""
+    r = 0.5 * (np.sqrt(5.0) - 1.0)
+    for k in range(mon.shape[0]):
+        if win_s[k] == 0:
+            continue
+        lo, hi = win_f[k, 0, 0], win_f[k, win_s[k] - 1, 2]
+        c, d = hi - r * (hi - lo), lo + r * (hi - lo)
+        fc = abs(_window_value(observe, mode, p, k, c, win_f, win_y, win_Q, win_s, y_tmp, obs))
+        fd = abs(_window_value(observe, mode, p, k, d, win_f, win_y, win_Q, win_s, y_tmp, obs))
+        for _ in range(REFINE_ITERATIONS):
+            if fc >= fd:
+                hi, d, fd = d, c, fc
+                c = hi - r * (hi - lo)
+                fc = abs(_window_value(observe, mode, p, k, c, win_f, win_y, win_Q, win_s, y_tmp, obs))
+            else:
+                lo, c, fc = c, d, fd
+                d = lo + r * (hi - lo)
+                fd = abs(_window_value(observe, mode, p, k, d, win_f, win_y, win_Q, win_s, y_tmp, obs))
+        t_best = c if fc >= fd else d
+        value = _window_value(observe, mode, p, k, t_best, win_f, win_y, win_Q, win_s, y_tmp, obs)
+        if abs(value) > mon[k, 0]:
+            mon[k, 0], mon[k, 1], mon[k, 2] = abs(value), value, t_best
+        win_s[k] = 0
 
 
 @njit(cache=True, error_model="numpy")
@@ -198,10 +288,12 @@ def _valid(method, t0, y0, t_end, rtol, atol, hmax, max_steps, directions, t_out
 
 
 @njit(cache=True, error_model="numpy")
-def _run(method, rhs, jac, guards, mode, p, t0, t_end, rtol, atol, h0, hmin, hmax, max_steps,
-         directions, gtol, ttol, t_out, i, y_out, y, counters):
+def _run(method, rhs, jac, guards, observe, mode, p, t0, t_end, rtol, atol, h0, hmin, hmax,
+         max_steps, directions, gtol, band, ttol, t_out, i, y_out, y, quad, mon, counters):
     """The step loop of integrate_segment; y is the current state (updated in place).
 
+    observe and mon: observables tracked for their maxima (mon.shape[0] of them,
+    none if 0); quad: the integral of y, carried along if quad.size == y.size.
     Returns (status, t, event index, next output index, proposed next step).
     """
     n = y.size
@@ -210,11 +302,18 @@ def _run(method, rhs, jac, guards, mode, p, t0, t_end, rtol, atol, h0, hmin, hma
             np.empty(n), np.empty((n, n)), np.empty(n, np.int64))
     Q, J, dfdt = work[1], work[2], work[3]
     f_a, y_b, f_b, err = np.empty(n), np.empty(n), np.empty(n), np.empty(n)
-    y_ev, y_tmp = np.empty(n), np.empty(n)
+    y_ev, y_tmp, y_pert, q_tmp = np.empty(n), np.empty(n), np.empty(n), np.empty(quad.size)
     G = np.empty((events.GUARD_SUBINTERVALS + 1, m))
     g_b = G[events.GUARD_SUBINTERVALS]
     g_tmp, sgn, cand = np.empty(m), np.zeros(m, np.int64), np.zeros(m, np.bool_)
+    ignore = np.zeros(m, np.bool_)
+    n_mon = mon.shape[0]
+    obs = np.empty(n_mon)
+    win_f, win_y = np.zeros((n_mon, 2, 3)), np.zeros((n_mon, 2, n))
+    win_Q, win_s = np.zeros((n_mon, 2, n, 4)), np.zeros(n_mon, np.int64)
     t = t0
+    if n_mon > 0:
+        _monitor(observe, mode, t, y, p, mon, obs, t, 0.0, y, Q, t, win_f, win_y, win_Q, win_s)
     if t_end == t0:
         return REACHED_END, t, -1, i, h0
     rhs(mode, t, y, p, f_a)
@@ -230,13 +329,15 @@ def _run(method, rhs, jac, guards, mode, p, t0, t_end, rtol, atol, h0, hmin, hma
         counters[N_RHS] += 1
     rejected = False
     jac_current = False
+    status, k = MAX_STEPS, -1
     for _ in range(max_steps):
         if method == ROSENBROCK23 and not jac_current:
             jac(mode, t, y, p, J, dfdt)
             counters[N_JAC] += 1
             jac_current = True
             if not (_all_finite(J) and _all_finite(dfdt)):
-                return NOT_FINITE, t, -1, i, h_prop
+                status = NOT_FINITE
+                break
         h_want = min(h_prop, hmax)
         h = h_want
         t_new = t + h
@@ -253,7 +354,8 @@ def _run(method, rhs, jac, guards, mode, p, t0, t_end, rtol, atol, h0, hmin, hma
             rejected = True
             h_prop = h * factor
             if h_prop < max(hmin, MIN_STEP_ULPS * (np.nextafter(t, np.inf) - t)):
-                return STEP_TOO_SMALL, t, -1, i, h_prop
+                status = STEP_TOO_SMALL
+                break
             continue
         counters[N_STEPS] += 1
         if rejected:
@@ -262,26 +364,46 @@ def _run(method, rhs, jac, guards, mode, p, t0, t_end, rtol, atol, h0, hmin, hma
         h_prop = max(h * factor, h_want) if h < h_want else h * factor
         _dense(method, work)
         if not _eval_guards(guards, mode, t_new, y_b, p, g_b):
-            return NOT_FINITE, t, -1, i, h_prop
-        if m > 0:
-            k, t_star, j = events.find_event(guards, mode, p, t, y, h, t_new, Q, G, directions,
-                                             gtol, ttol, sgn, t_new == t_end, cand, y_tmp, g_tmp)
-            if k >= 0:
-                t_ev = _event_state(method, rhs, guards, mode, p, t, y, f_a, t_new, y_b, k,
-                                    t_star, j, G, gtol, ttol, work, y_ev, y_tmp, g_tmp, counters)
-                i = _write_samples(t_out, i, y_out, t, y, h, Q, t_ev, y_ev)
-                y[:] = y_ev
-                return EVENT, t_ev, k, i, h_prop
-        i = _write_samples(t_out, i, y_out, t, y, h, Q, t_new, y_b)
+            status = NOT_FINITE
+            break
+        k, j = -1, 1
+        ignore[:] = False
+        for _ in range(m):  # each pass finds an event or ignores one more guard
+            k, t_star, j = events.find_event(guards, mode, p, t, y, h, t_new, y_b, Q, G,
+                                             directions, gtol, band, atol, rtol, ttol, sgn,
+                                             t_new == t_end, cand, y_tmp, g_tmp, y_pert, j, ignore)
+            if k < 0:
+                break
+            t_ev, real = _event_state(method, rhs, guards, mode, p, t, y, f_a, t_new, y_b, k,
+                                      t_star, j, G, gtol, ttol, work, y_ev, y_tmp, g_tmp, counters)
+            if real:
+                t_new = t_ev
+                y_b[:] = y_ev
+                break
+            ignore[k] = True  # an artefact of the interpolant: look on from sample j
+            k = -1
+        i = _write_samples(t_out, i, y_out, t, y, h, Q, t_new, y_b, quad, q_tmp)
+        if quad.size > 0:
+            events.dense_integral(y, h, Q, (t_new - t) / h, q_tmp)
+            quad += q_tmp
+        if n_mon > 0:
+            _monitor(observe, mode, t_new, y_b, p, mon, obs, t, h, y, Q, t_new, win_f, win_y,
+                     win_Q, win_s)
         t = t_new
         y[:] = y_b
+        if k >= 0:
+            status = EVENT
+            break
         f_a[:] = f_b
         G[0, :] = g_b
         rejected = False
         jac_current = False
         if t == t_end:
-            return REACHED_END, t, -1, i, h_prop
-    return MAX_STEPS, t, -1, i, h_prop
+            status = REACHED_END
+            break
+    if n_mon > 0:
+        _refine(observe, mode, p, mon, obs, win_f, win_y, win_Q, win_s, y_tmp)
+    return status, t, k, i, h_prop
 
 
 SEGMENT_SIG = types.Tuple((types.int64, types.float64, types.int64, types.int64, types.float64))(
@@ -298,7 +420,7 @@ SEGMENT_SIG = types.Tuple((types.int64, types.float64, types.int64, types.int64,
 )
 
 
-@njit(SEGMENT_SIG, cache=True, error_model="numpy")
+@cache_guard.compile_cached(SEGMENT_SIG, error_model="numpy")
 def integrate_segment(method, rhs, jac, guards, mode, p, t0, y0, t_end, rtol, atol, h0, hmin,
                       hmax, max_steps, directions, gtol, ttol, t_out, i_out, y_out, y_stop,
                       counters):
@@ -336,7 +458,8 @@ def integrate_segment(method, rhs, jac, guards, mode, p, t0, y0, t_end, rtol, at
     while i < t_out.size and t_out[i] <= t0:
         y_out[i, :] = y0
         i += 1
-    status, t, k, i, h_next = _run(method, rhs, jac, guards, mode, p, t0, t_end, rtol, atol, h0,
-                                   hmin, hmax, max_steps, directions, gtol, ttol, t_out, i, y_out,
-                                   y_stop, counters)
+    status, t, k, i, h_next = _run(method, rhs, jac, guards, guards, mode, p, t0, t_end, rtol,
+                                   atol, h0, hmin, hmax, max_steps, directions, gtol, False, ttol,
+                                   t_out, i, y_out, y_stop, np.empty(0), np.empty((0, 3)),
+                                   counters)
     return status, t, k, i - i_out, h_next

@@ -1,0 +1,47 @@
+"""Eager, cached compilation that notices edits in the kernel modules it inlines.
+
+numba keys a function's on-disk cache on its own source file only (dependencies are
+not tracked, as numba's caching docs say), while the compiled integrators inline
+dopri5, rosenbrock, events and segment. ``compile_cached`` stores a sha256 over all
+kernel sources beside the function's cache and flushes that cache when it differs,
+so an edited kernel can never run as stale machine code.
+"""
+from __future__ import annotations
+
+import hashlib
+from pathlib import Path
+
+from numba import njit
+
+from tswm_runtime.files import write_atomic
+
+KERNEL_SOURCES = ("dopri5.py", "rosenbrock.py", "events.py", "segment.py", "hybrid.py")
+
+
+def kernel_digest() -> str:
+    """sha256 over the kernel sources of this package."""
+    h = hashlib.sha256()
+    here = Path(__file__).parent
+    for name in KERNEL_SOURCES:
+        h.update(name.encode() + (here / name).read_bytes())
+    return h.hexdigest()
+
+
+def compile_cached(signature, **options):
+    """Like ``njit(signature, cache=True, **options)``, with the kernel check above."""
+    def decorate(py_func):
+        dispatcher = njit(cache=True, **options)(py_func)
+        cache = dispatcher._cache  # numba has no public accessor; cache_path and flush() are public
+        marker = Path(cache.cache_path) / f"{py_func.__module__}.{py_func.__qualname__}.kernel-sha256"
+        digest = kernel_digest()
+        known = marker.read_text() if marker.exists() else ""
+        if known != digest:
+            cache.flush()
+            try:
+                write_atomic(marker, digest)
+            except OSError:  # a read-only cache directory: numba then compiles in memory anyway
+                pass
+        dispatcher.compile(signature)
+        dispatcher.disable_compile()
+        return dispatcher
+    return decorate

@@ -1,0 +1,311 @@
+"""The mode machine: integrate a generated model across regime changes, in nopython mode.
+
+``integrate_hybrid`` runs segments of fixed mode (``segment._run``) and, at each
+event, decides the next mode from the guard that fired and the model's own
+functions, generically over the contract (modes and guards are described by the
+integer tables built in ``modes.py``):
+
+* phi (the switching function) crosses 0: the contact moves to the other flank.
+  In the consistent model a1 is continuous there (a kink). Where a1 jumps (the
+  paper's printed equations), both neighbouring modes may push the state onto
+  phi = 0; the slide mode's guards tell (Filippov: d phi/dt < 0 on the phi > 0
+  side and > 0 on the other). The state then slides along phi = 0 in the slide
+  mode if the scene declares it, else the run stops with status SLIDING.
+* v1 reaches 0: at rest, the static friction cones decide: stick (v1 stays 0;
+  the Filippov sliding motion on v1 = 0), or sliding on in the direction whose
+  cone is violated. Stick ends when a cone guard falls through 0 (breakaway).
+* D or the jam factor reaches 0: no contact force satisfies the constraint
+  (Painleve-type inconsistency): status INCONSISTENT.
+* A law event (a load step in time, a spring contact, the torque switch, which
+  also latches the trip time into p): the mode is re-selected at once, since the
+  law may have moved the state across phi = 0 or out of the friction cone.
+* A mode the state needs but the scene did not declare: status UNDECLARED, with
+  the mode needed (NEED_*), for a message naming it; NEED_FLANK when a one-sided
+  scene's only contact force vanishes (body 2 would lift off the flank).
+
+Chattering guard: more than MAX_SAME_TIME events without the time advancing
+stops the run with status CHATTERING instead of looping.
+"""
+import numpy as np
+from numba import njit, types
+
+from tswm_runtime import cache_guard, segment
+from tswm_runtime.signatures import MATRIX, VECTOR, GuardsFunction, JacFunction, RhsFunction
+
+# Guard kinds (modes.GUARD_KINDS maps the generated GUARDS names to these).
+G_PHI, G_V1, G_D, G_JAM, G_CONE_F, G_CONE_B, G_FLANK_N, G_LAW, G_SLIDE_A, G_SLIDE_B, G_TRIP = range(11)
+# Mode kinds.
+M_SLIDING, M_STICK, M_FILIPPOV = 0, 1, 2
+
+# Status codes; the integrator's own failures keep segment's codes.
+FINISHED = 0
+STEP_TOO_SMALL = segment.STEP_TOO_SMALL
+MAX_STEPS = segment.MAX_STEPS
+NOT_FINITE = segment.NOT_FINITE
+INVALID_INPUT = segment.INVALID_INPUT
+SLIDING = -5  # Filippov sliding along phi = 0, which the scene does not declare.
+INCONSISTENT = -6  # D <= 0 or jam factor <= 0 in the mode the state asks for.
+UNDECLARED = -7  # The state needs a mode the scene does not declare (see NEED_*).
+CHATTERING = -8  # MAX_SAME_TIME events at one instant.
+TOO_MANY_EVENTS = -9  # The event log is full.
+
+# What an UNDECLARED stop needs.
+NEED_NOTHING, NEED_STICK, NEED_FORWARD, NEED_BACKWARD, NEED_FLANK = 0, 1, 2, 3, 4
+
+MAX_SAME_TIME = 8  # Events allowed at one instant before CHATTERING.
+SAME_TIME_ULPS = 64.0  # "One instant": within 64 ulp(t).
+
+TABLES = types.Tuple((types.int64[::1], types.int64[::1], types.int64[::1], types.int64[::1],
+                      types.int64[:, ::1], types.int64[::1]))
+
+
+@njit(cache=True, error_model="numpy")
+def _guard(kind, guard_kind):
+    """Index of the first guard of ``kind``, -1 if the model has none."""
+    for k in range(guard_kind.size):
+        if guard_kind[k] == kind:
+            return k
+    return -1
+
+
+@njit(cache=True, error_model="numpy")
+def _mode(kind, flank, direction, tables):
+    """Index of the mode of ``kind`` (sliding: on ``flank`` in ``direction``; flank 0 = any)."""
+    mode_kind, mode_flank, mode_dir = tables[0], tables[1], tables[2]
+    for m in range(mode_kind.size):
+        if mode_kind[m] != kind:
+            continue
+        if kind == M_STICK or (mode_dir[m] == direction and (flank == 0 or mode_flank[m] == flank)):
+            return m
+    return -1
+
+
+@njit(cache=True, error_model="numpy")
+def _phi_sign(rhs, guards, mode, t, y, p, atol, rtol, k_phi, g, y_tmp, f):
+    """Sign of phi at (t, y) for entering a sliding mode. If phi is zero within its
+    noise (its change under a v1 error at the tolerance), the sign phi takes after
+    a probe step along ``mode`` that moves v1 by that tolerance."""
+    n = y.size
+    tol = atol[n - 1] + rtol * abs(y[n - 1])
+    y_tmp[:] = y
+    y_tmp[n - 1] += tol
+    guards(mode, t, y_tmp, p, g)
+    phi_moved = g[k_phi]
+    guards(mode, t, y, p, g)
+    phi = g[k_phi]
+    if abs(phi) > abs(phi_moved - phi):
+        return 1 if phi > 0.0 else -1
+    rhs(mode, t, y, p, f)
+    if f[n - 1] == 0.0:
+        return 1 if phi >= 0.0 else -1
+    dt = tol / abs(f[n - 1])
+    for i in range(n):
+        y_tmp[i] = y[i] + dt * f[i]
+    guards(mode, t + dt, y_tmp, p, g)
+    return -1 if g[k_phi] < 0.0 else 1
+
+
+@njit(cache=True, error_model="numpy")
+def _sliding(direction, rhs, guards, t, y, p, atol, rtol, tables, g, y_tmp, f):
+    """(mode, need) for sliding in ``direction`` from (t, y): the flank from the sign of phi."""
+    m = _mode(M_SLIDING, 0, direction, tables)
+    if m < 0:
+        return -1, (NEED_FORWARD if direction > 0 else NEED_BACKWARD)
+    k_phi = _guard(G_PHI, tables[5])
+    if k_phi < 0:
+        return m, NEED_NOTHING
+    flank = _phi_sign(rhs, guards, m, t, y, p, atol, rtol, k_phi, g, y_tmp, f)
+    m = _mode(M_SLIDING, flank, direction, tables)
+    if m < 0:  # one-sided: the contact force on the only flank vanishes (lift-off)
+        return -1, NEED_FLANK
+    return m, NEED_NOTHING
+
+
+@njit(cache=True, error_model="numpy")
+def _at_rest(rhs, guards, t, y, p, atol, rtol, tables, g, y_tmp, f, start):
+    """(mode, need) at v1 = 0: stick inside both friction cones, else sliding off in the
+    direction whose cone is violated. Without a stick mode only a start can go on: in
+    the direction its sliding acceleration points to."""
+    ms = _mode(M_STICK, 0, 0, tables)
+    if ms < 0:
+        if not start:
+            return -1, NEED_STICK
+        for direction in (1, -1):
+            m, need = _sliding(direction, rhs, guards, t, y, p, atol, rtol, tables, g, y_tmp, f)
+            if m >= 0:
+                rhs(m, t, y, p, f)
+                if f[y.size - 1] * direction > 0.0:
+                    return m, NEED_NOTHING
+        return -1, NEED_STICK
+    guards(ms, t, y, p, g)
+    cone_f, cone_b = g[_guard(G_CONE_F, tables[5])], g[_guard(G_CONE_B, tables[5])]
+    if cone_f < 0.0:
+        return _sliding(1, rhs, guards, t, y, p, atol, rtol, tables, g, y_tmp, f)
+    if cone_b < 0.0:
+        return _sliding(-1, rhs, guards, t, y, p, atol, rtol, tables, g, y_tmp, f)
+    return ms, NEED_NOTHING
+
+
+@njit(cache=True, error_model="numpy")
+def _filippov(mode, guards, t, y, p, tables, g):
+    """The slide mode if phi = 0 attracts from both sides at (t, y), else -1."""
+    ms = _mode(M_FILIPPOV, 0, tables[2][mode], tables)
+    if ms < 0:
+        return -1
+    guards(ms, t, y, p, g)
+    exit_a, exit_b = g[_guard(G_SLIDE_A, tables[5])], g[_guard(G_SLIDE_B, tables[5])]
+    return ms if exit_a > 0.0 and exit_b > 0.0 else -1
+
+
+@njit(cache=True, error_model="numpy")
+def _select(mode, kind, rhs, guards, t, y, p, atol, rtol, tables, g, y_tmp, f):
+    """(next mode, status, need) after guard ``kind`` fired in ``mode`` at (t, y)."""
+    mode_kind, mode_dir, declared = tables[0], tables[2], tables[3]
+    n = y.size
+    direction = mode_dir[mode]
+    if kind == G_D or kind == G_JAM:
+        return -1, INCONSISTENT, NEED_NOTHING
+    if kind == G_SLIDE_A or kind == G_SLIDE_B:
+        m = _mode(M_SLIDING, 1 if kind == G_SLIDE_A else -1, direction, tables)
+        return m, FINISHED, NEED_NOTHING
+    if kind == G_CONE_F or kind == G_CONE_B:  # breakaway from stick
+        m, need = _sliding(1 if kind == G_CONE_F else -1, rhs, guards, t, y, p, atol, rtol,
+                           tables, g, y_tmp, f)
+    elif kind == G_FLANK_N:  # the pressed flank changes while sticking
+        m, need = mode, NEED_NOTHING
+    elif kind == G_V1 or mode_kind[mode] == M_STICK:  # came to rest, or a law event in stick
+        y[n - 1] = 0.0
+        m, need = _at_rest(rhs, guards, t, y, p, atol, rtol, tables, g, y_tmp, f, False)
+    elif mode_kind[mode] == M_FILIPPOV:  # a law event while sliding along phi = 0
+        guards(mode, t, y, p, g)
+        m, need = mode, NEED_NOTHING
+        if g[_guard(G_SLIDE_A, tables[5])] <= 0.0:
+            m = _mode(M_SLIDING, 1, direction, tables)
+        elif g[_guard(G_SLIDE_B, tables[5])] <= 0.0:
+            m = _mode(M_SLIDING, -1, direction, tables)
+    else:  # phi, or a law event while sliding: the flank from the sign of phi
+        m, need = _sliding(direction, rhs, guards, t, y, p, atol, rtol, tables, g, y_tmp, f)
+        ms = _filippov(mode, guards, t, y, p, tables, g) if kind == G_PHI else -1
+        if ms >= 0:
+            if declared[ms] == 0:
+                return -1, SLIDING, NEED_NOTHING
+            m = ms
+    if m < 0:
+        return -1, UNDECLARED, need
+    return m, FINISHED, NEED_NOTHING
+
+
+@njit(cache=True, error_model="numpy")
+def _consistent(mode, guards, t, y, p, tables, g):
+    """False if D or the jam factor of ``mode`` is <= 0 at (t, y)."""
+    guards(mode, t, y, p, g)
+    for kind in (G_D, G_JAM):
+        k = _guard(kind, tables[5])
+        if k >= 0 and g[k] <= 0.0:
+            return False
+    return True
+
+
+@njit(cache=True, error_model="numpy")
+def _log(ev_t, ev_i, ev_y, n_ev, t, k, mode_from, mode_to, y, quad):
+    """Append an event (time, guard, from, to, state) to the log."""
+    n = y.size
+    ev_t[n_ev] = t
+    ev_i[n_ev, 0], ev_i[n_ev, 1], ev_i[n_ev, 2] = k, mode_from, mode_to
+    ev_y[n_ev, :n] = y
+    ev_y[n_ev, n:] = quad
+    return n_ev + 1
+
+
+HYBRID_SIG = types.Tuple((types.int64, types.float64, types.int64, types.int64, types.int64,
+                          types.int64))(
+    types.int64,  # method
+    RhsFunction, JacFunction, GuardsFunction, GuardsFunction,  # rhs, jac, guards, observe
+    VECTOR, TABLES,  # p (written: latched trip time), mode tables
+    types.float64, VECTOR, VECTOR, types.int64, types.float64,  # t0, y0, quad, mode0, t_end
+    types.float64, VECTOR, types.float64, types.int64,  # rtol, atol, hmax, max_steps
+    VECTOR, MATRIX, types.int64[::1],  # t_out, y_out, mode_out
+    VECTOR, types.int64[:, ::1], MATRIX,  # ev_t, ev_i, ev_y
+    MATRIX, types.int64[::1],  # mon, counters
+)
+
+
+@cache_guard.compile_cached(HYBRID_SIG, error_model="numpy")
+def integrate_hybrid(method, rhs, jac, guards, observe, p, tables, t0, y0, quad, mode0, t_end,
+                     rtol, atol, hmax, max_steps, t_out, y_out, mode_out, ev_t, ev_i, ev_y, mon,
+                     counters):
+    """Integrate the model from (t0, y0) to t_end through its mode changes.
+
+    tables: (mode_kind, mode_flank, mode_direction, mode_declared, guard_directions,
+        guard_kind), from ``modes.tables``. p: parameters; a torque switch writes its
+        trip time into p[trip index] (the guard's latch), so pass a copy.
+    quad: the integral of the states at t0 (x1 when v1 is the only state), carried
+        in columns n: of y_out and ev_y; size 0 for none. mode0: the initial mode,
+        or -1 to select it from y0 (at v1 = 0 from the friction cones).
+    t_out, y_out, mode_out: output times (sorted, >= t0) and the rows filled there;
+        rows after a stop keep their contents, mode_out -1.
+    ev_t, ev_i, ev_y: the event log (time; guard, from-mode, to-mode (-1: stop);
+        state), its capacity is ev_t.size. mon: (K, 3) running max |observable k|
+        as (|value|, value, t), K = number of observables; pass zeros.
+    counters: int64[4] as in segment (steps, rejected, rhs calls, jac calls).
+
+    Returns (status, t_stop, number of events, last mode (for INCONSISTENT the mode
+    found inconsistent), need, initial mode).
+    """
+    n = y0.size
+    n_guards = tables[4].shape[1]
+    if not (n >= 1 and t_end > t0 and rtol > 0.0 and (quad.size == 0 or quad.size == n)
+            and y_out.shape[1] == n + quad.size and mode_out.size == t_out.size
+            and ev_y.shape[1] == n + quad.size and tables[4].shape[0] == tables[0].size):
+        return INVALID_INPUT, t0, 0, -1, NEED_NOTHING, -1
+    y, q = y0.copy(), quad.copy()
+    g, y_tmp, f = np.empty(n_guards), np.empty(n), np.empty(n)
+    mode_out[:] = -1
+    mode, need, status = mode0, NEED_NOTHING, FINISHED
+    if mode < 0:
+        v = y[n - 1]
+        if v == 0.0:
+            mode, need = _at_rest(rhs, guards, t0, y, p, atol, rtol, tables, g, y_tmp, f, True)
+        else:
+            mode, need = _sliding(1 if v > 0.0 else -1, rhs, guards, t0, y, p, atol, rtol, tables,
+                                  g, y_tmp, f)
+    if mode < 0:
+        return UNDECLARED, t0, 0, -1, need, -1
+    if not _consistent(mode, guards, t0, y, p, tables, g):
+        return INCONSISTENT, t0, 0, mode, NEED_NOTHING, mode
+    first = mode
+    t, i, n_ev, same, h = t0, 0, 0, 0, 0.0
+    while True:
+        steps = counters[segment.N_STEPS] + counters[segment.N_REJECTED]
+        i0 = i
+        seg_status, t_new, k, i, h = segment._run(
+            method, rhs, jac, guards, observe, mode, p, t, t_end, rtol, atol, h, 0.0, hmax,
+            max(max_steps - steps, 0), tables[4][mode], 0.0, True, 0.0, t_out, i, y_out, y, q,
+            mon, counters)
+        mode_out[i0:i] = mode
+        same = same + 1 if t_new - t <= SAME_TIME_ULPS * (np.nextafter(t, np.inf) - t) else 0
+        t = t_new
+        if seg_status != segment.EVENT:
+            status = FINISHED if seg_status == segment.REACHED_END else seg_status
+            break
+        if n_ev == ev_t.size:
+            status = TOO_MANY_EVENTS
+            break
+        kind = tables[5][k]
+        if kind == G_TRIP:
+            p[p.size - 1] = t
+        new, status, need = _select(mode, kind, rhs, guards, t, y, p, atol, rtol, tables, g,
+                                    y_tmp, f)
+        if status == FINISHED and not _consistent(new, guards, t, y, p, tables, g):
+            status = INCONSISTENT
+        n_ev = _log(ev_t, ev_i, ev_y, n_ev, t, k, mode, new if status == FINISHED else -1, y, q)
+        if status != FINISHED:
+            mode = new if status == INCONSISTENT else mode
+            break
+        if same >= MAX_SAME_TIME:
+            status = CHATTERING
+            break
+        mode = new
+        if t == t_end:
+            break
+    return status, t, n_ev, mode, need, first

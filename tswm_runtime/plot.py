@@ -1,0 +1,80 @@
+"""The figure of a simulation: a1, S1, S2 against t with the mode bands and the events.
+
+Uses matplotlib's object API with the Agg canvas (no pyplot, no display, no global state).
+"""
+from __future__ import annotations
+
+import io
+from types import ModuleType
+
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
+from matplotlib.lines import Line2D
+from matplotlib.patches import Patch
+
+from tswm_runtime.result import Result
+
+DPI = 200
+REGIME_COLOURS = {
+    "tractive": "tab:blue", "inverse-tractive": "tab:orange", "stick": "tab:gray",
+    "backward on flank a": "tab:green", "backward on flank b": "tab:red",
+}
+SPARE_COLOURS = ("tab:purple", "tab:brown", "tab:pink", "tab:olive", "tab:cyan")
+PANELS = (("a1", "a1 [m/s^2]", None), ("S1", "S1 [N]", ("S1_max", "t_S1_max")),
+          ("S2", "S2 [N]", ("S2_max", "t_S2_max")))
+
+
+def regime_colours(regimes) -> dict[str, str]:
+    """A colour for each regime: fixed ones for the known regimes, spares for the others."""
+    colours, spare = {}, iter(SPARE_COLOURS * 4)
+    for regime in regimes:
+        if regime not in colours:
+            colours[regime] = REGIME_COLOURS.get(regime) or next(spare, "tab:gray")
+    return colours
+
+
+def title(result: Result, module: ModuleType) -> str:
+    """Scene, free parameters with units and, for a failed run, its status."""
+    units = dict(zip(module.PARAM_NAMES, module.PARAM_UNITS))
+    params = ", ".join(f"{k} = {v:g} {units.get(k, '')}".rstrip() for k, v in result.params.items())
+    text = f"{result.scene}: {params or 'no free parameters'}"
+    if not result.success:
+        text += f"\nstatus {result.status} at t = {result.t_stop:.6g} s"
+    return text
+
+
+def figure(result: Result, module: ModuleType) -> Figure:
+    """Three stacked panels sharing t: a1, S1, S2; phases shaded by regime, events as dashed
+    vertical lines, the maxima of S1 and S2 marked."""
+    fig = Figure(figsize=(8.0, 8.0), layout="constrained")
+    FigureCanvasAgg(fig)
+    axes = fig.subplots(len(PANELS), 1, sharex=True)
+    colours = regime_colours(ph.regime for ph in result.phases)
+    for ax, (name, label, peak) in zip(axes, PANELS):
+        for ph in result.phases:
+            ax.axvspan(ph.t_start, ph.t_end, color=colours[ph.regime], alpha=0.15, linewidth=0)
+        for e in result.events:
+            ax.axvline(e.t, color="black", linestyle="--", linewidth=0.6, alpha=0.6)
+        ax.plot(result.t, getattr(result, name), color="black", linewidth=1.0)
+        if peak is not None and result.t.size:
+            value, at = getattr(result, peak[0]), getattr(result, peak[1])
+            ax.plot([at], [value], marker="o", color="tab:red", markersize=5, linestyle="none")
+            ax.annotate(f"{name} = {value:.4g} N at t = {at:.4g} s", (at, value),
+                        textcoords="offset points", xytext=(6, 4), fontsize=8, color="tab:red")
+        ax.set_ylabel(label)
+        ax.grid(True, linewidth=0.3, alpha=0.5)
+    axes[-1].set_xlabel("t [s]")
+    handles = [Patch(color=c, alpha=0.3, label=r) for r, c in colours.items()]
+    if result.events:
+        handles.append(Line2D([], [], color="black", linestyle="--", linewidth=0.6, label="event"))
+    handles.append(Line2D([], [], color="tab:red", marker="o", linestyle="none", label="largest |S|"))
+    fig.legend(handles=handles, loc="outside lower center", ncols=min(len(handles), 4), fontsize=8)
+    fig.suptitle(title(result, module), fontsize=10)
+    return fig
+
+
+def png_bytes(result: Result, module: ModuleType, dpi: int = DPI) -> bytes:
+    """The figure rendered as PNG into memory (for an atomic write)."""
+    buffer = io.BytesIO()
+    figure(result, module).savefig(buffer, format="png", dpi=dpi)
+    return buffer.getvalue()

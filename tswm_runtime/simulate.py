@@ -1,0 +1,107 @@
+"""Simulate one scene: check the inputs, run the mode machine, return a ``Result``.
+
+``simulate("paper", {"F2": -5000.0})`` loads the generated module of a shipped scene
+(or takes a module), validates every input with a message that names it, runs
+``hybrid.integrate_hybrid`` and evaluates a1, S1, S2, F1, F2 at the output times.
+"""
+from __future__ import annotations
+
+import math
+from types import ModuleType
+
+import numpy as np
+
+from tswm_runtime import hybrid, modes, segment
+from tswm_runtime.contract import load_module
+from tswm_runtime.result import Event, Result, status_message
+
+METHODS = {"dopri5": segment.DOPRI5, "rosenbrock23": segment.ROSENBROCK23}
+RTOL_RANGE = (1e-13, 0.1)
+DEFAULT_POINTS = 1001
+DEFAULT_MAX_EVENTS = 1000
+
+
+class SimulationInputError(ValueError):
+    """An input to ``simulate`` that is out of its allowed range; the message names it."""
+
+
+def _check(ok: bool, field: str, value, allowed: str) -> None:
+    if not ok:
+        raise SimulationInputError(f"{field} = {value!r}: must be {allowed}")
+
+
+def _finite(field: str, value) -> float:
+    try:
+        value = float(value)
+    except (TypeError, ValueError):
+        raise SimulationInputError(f"{field} = {value!r}: must be a number") from None
+    _check(math.isfinite(value), field, value, "finite")
+    return value
+
+
+def parameter_vector(module: ModuleType, params: dict | None) -> np.ndarray:
+    """The free parameters (scene defaults, overridden by ``params``) plus latches (inf)."""
+    values = dict(zip(module.PARAM_NAMES, module.PARAM_DEFAULTS))
+    for name, value in (params or {}).items():
+        if name not in values:
+            fixed = f"; {name} is fixed in this scene (make it free in the scene file)" if name in module.FIXED else ""
+            free = ", ".join(module.PARAM_NAMES) or "none"
+            raise SimulationInputError(f"parameter {name!r}: scene {module.SCENE!r} has no such free "
+                                       f"parameter (free: {free}){fixed}")
+        values[name] = _finite(f"parameter {name}", value)
+    latches = getattr(module, "LATCH_NAMES", ())
+    return np.array([*values.values(), *(math.inf for _ in latches)], dtype=np.float64)
+
+
+def settings(module: ModuleType, overrides: dict) -> dict:
+    """The run settings: the scene's [run] table with ``overrides`` applied, validated."""
+    run = {**module.RUN, "points": DEFAULT_POINTS, "max_events": DEFAULT_MAX_EVENTS, "hmax": math.inf}
+    for key, value in overrides.items():
+        _check(key in run, "setting", key, f"one of {', '.join(run)}")
+        if value is not None:
+            run[key] = value
+    _check(run["method"] in METHODS, "method", run["method"], f"one of {', '.join(METHODS)}")
+    for key in ("t_end", "x1", "v1", "rtol", "atol", "hmax"):
+        run[key] = float(run[key]) if key == "hmax" else _finite(key, run[key])
+    lo, hi = RTOL_RANGE
+    _check(lo <= run["rtol"] <= hi, "rtol", run["rtol"], f"in [{lo:g}, {hi:g}]")
+    _check(run["atol"] > 0.0, "atol", run["atol"], "> 0")
+    _check(run["t_end"] > 0.0, "t_end", run["t_end"], "> t0 = 0 s")
+    _check(run["hmax"] > 0.0, "hmax", run["hmax"], "> 0 s")
+    for key in ("max_steps", "points", "max_events"):
+        _check(isinstance(run[key], int) and run[key] >= 1, key, run[key], "an integer >= 1")
+    return run
+
+
+def simulate(model: str | ModuleType, params: dict | None = None, **overrides) -> Result:
+    """Run a scene. ``model``: a shipped scene name, a path to a generated module, or the
+    module; ``params``: free parameters by name; ``overrides``: run settings (t_end,
+    x1, v1, rtol, atol, method, max_steps, points, max_events, hmax)."""
+    module = model if isinstance(model, ModuleType) else load_module(model)
+    p = parameter_vector(module, params)
+    run = settings(module, overrides)
+    n = len(module.STATES)
+    y0 = np.array([run["x1"], run["v1"]][2 - n:], dtype=np.float64)
+    quad = np.array([run["x1"]]) if n == 1 else np.empty(0)
+    width = n + quad.size
+    t_out = np.linspace(0.0, run["t_end"], run["points"])
+    y_out, mode_out = np.full((t_out.size, width), np.nan), np.empty(t_out.size, np.int64)
+    cap = run["max_events"]
+    ev_t, ev_i, ev_y = np.empty(cap), np.empty((cap, 3), np.int64), np.empty((cap, width))
+    mon, counters = np.zeros((len(module.OBSERVABLES), 3)), np.zeros(segment.N_COUNTERS, np.int64)
+    jac = module.jac if run["method"] == "rosenbrock23" else segment.no_jacobian
+    status, t_stop, n_ev, last, need, first = hybrid.integrate_hybrid(
+        METHODS[run["method"]], module.rhs, jac, module.guards, module.observe, p, modes.tables(module),
+        0.0, y0, quad, -1, run["t_end"], run["rtol"], np.full(n, run["atol"]), run["hmax"],
+        run["max_steps"], t_out, y_out, mode_out, ev_t, ev_i, ev_y, mon, counters)
+    keep = mode_out >= 0
+    y_stop = ev_y[n_ev - 1, :n].copy() if n_ev else y0
+    x1 = y_out[keep, n] if n == 1 else y_out[keep, 0]
+    events = [Event(float(ev_t[e]), module.GUARDS[ev_i[e, 0]], module.MODES[ev_i[e, 1]],
+                    module.MODES[ev_i[e, 2]] if ev_i[e, 2] >= 0 else None,
+                    float(ev_y[e, n] if n == 1 else ev_y[e, 0]), float(ev_y[e, n - 1]))
+              for e in range(n_ev)]
+    return Result.build(module, p, run, t_out[keep], x1, y_out[keep, n - 1], mode_out[keep], events,
+                        mon, counters, hybrid_status=status, t_stop=t_stop,
+                        first_mode=first, message=status_message(module, status, t_stop, y_stop, last,
+                                                                 need, events, p))
