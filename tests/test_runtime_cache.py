@@ -1,0 +1,47 @@
+"""On-disk caches across processes: kernel edits invalidate, path-loaded models reload."""
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+from tswm_runtime import cache_guard
+
+ROOT = Path(__file__).parents[1]
+KERNEL_USER = '''
+from tswm_runtime.cache_guard import compile_cached
+
+@compile_cached("float64(float64)")
+def twice(x):
+    return 2.0 * x
+
+print(twice(21.0))
+'''
+
+
+def _python(code: str, cwd: Path) -> str:
+    done = subprocess.run([sys.executable, "-c", code], cwd=cwd, capture_output=True, text=True,
+                          env={"PYTHONPATH": f"{ROOT}:{cwd}", "PATH": ""})
+    assert done.returncode == 0, done.stderr
+    return done.stdout
+
+
+def test_a_stale_kernel_digest_flushes_the_cache_and_is_renewed(tmp_path):
+    """The marker beside the cache holds the kernel digest; a stale one (as after an edit
+    of dopri5.py, rosenbrock.py or events.py) makes the next import flush and renew it."""
+    (tmp_path / "kernel_user.py").write_text(KERNEL_USER)
+    assert _python("import kernel_user", tmp_path).strip() == "42.0"
+    [marker] = tmp_path.rglob("*.kernel-sha256")
+    assert marker.read_text() == cache_guard.kernel_digest()
+    marker.write_text("an older kernel")
+    assert _python("import kernel_user", tmp_path).strip() == "42.0"
+    assert marker.read_text() == cache_guard.kernel_digest()
+
+
+def test_a_module_loaded_by_path_runs_again_from_its_cache(tmp_path):
+    """numba rebuilds a cached function's module by name: load_module must register it."""
+    shutil.copy(ROOT / "generated" / "paper.py", tmp_path / "paper.py")
+    code = ("from tswm_runtime.simulate import simulate; "
+            f"print(simulate({str(tmp_path / 'paper.py')!r}, {{'F2': -1000.0}}).status)")
+    assert _python(code, tmp_path).strip() == "finished"
+    assert list(tmp_path.glob("__pycache__/*.nbi")), "the model was cached"
+    assert _python(code, tmp_path).strip() == "finished"
