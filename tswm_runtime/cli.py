@@ -187,6 +187,28 @@ def _simulate(args: argparse.Namespace) -> int:
     return 0 if result.success else 1
 
 
+def _paper(args: argparse.Namespace) -> int:
+    import time
+
+    start = time.perf_counter()
+    from tswm_runtime.paper_report import build_report
+
+    cases = None
+    if args.case:
+        try:
+            cases = [tuple(float(v) for v in item.split(",")) for item in args.case]
+        except ValueError:
+            cases = []
+        if not cases or any(len(c) != 2 for c in cases):
+            raise UsageError(f"--case {args.case!r}: expected M2,F2 in SI, e.g. --case 200,-15000")
+    report = build_report(args.output, cases, derivation=not args.no_derivation, progress=not args.no_progress)
+    for path in report["paths"].values():
+        print(f"  wrote {path}")
+    print(f"tswm paper: report in {Path(args.output) / 'paper-report.html'} "
+          f"(wall time {time.perf_counter() - start:.2f} s)")
+    return 0
+
+
 def _parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="tswm", description="Derive, generate and simulate wedge mechanisms.")
     sub = parser.add_subparsers(dest="command", required=True)
@@ -225,6 +247,21 @@ def _parser() -> argparse.ArgumentParser:
                           help="write DIR/SCENE.csv, SCENE.npz, SCENE-summary.json and SCENE.png")
     simulate.add_argument("--no-plot", action="store_true", help="with -o: do not write the PNG")
     simulate.set_defaults(run=_simulate)
+    from tswm_runtime import sweep_cli  # sweep and bench: argument parsing only, work imported lazily
+
+    sweep_cli.add_parsers(sub)
+    paper = sub.add_parser("paper", help="the paper's Table 3 and Figure 2 against tswm: a Markdown/HTML report",
+                           description="Run the paper's cases in three readings (consistent, printed equations, "
+                                       "run-up then load) and write DIR/paper-report.{md,html,json}, the Figure 2 "
+                                       "PNGs and the derivation document.")
+    paper.add_argument("-o", "--output", default="tswm-report", metavar="DIR",
+                       help="directory for the report (default: tswm-report)")
+    paper.add_argument("--case", action="append", metavar="M2,F2",
+                       help="only this case (m2 [kg], F2 [N]); repeatable (default: all the paper lists)")
+    paper.add_argument("--no-derivation", action="store_true",
+                       help="do not build the derivation document (and do not load SymPy)")
+    paper.add_argument("--no-progress", action="store_true", help="no progress bar")
+    paper.set_defaults(run=_paper)
     return parser
 
 

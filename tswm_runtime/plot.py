@@ -43,9 +43,11 @@ def title(result: Result, module: ModuleType) -> str:
     return text
 
 
-def figure(result: Result, module: ModuleType) -> Figure:
+def figure(result: Result, module: ModuleType, *, heading: str | None = None,
+           event_labels: bool = False) -> Figure:
     """Three stacked panels sharing t: a1, S1, S2; phases shaded by regime, events as dashed
-    vertical lines, the maxima of S1 and S2 marked."""
+    vertical lines, the maxima of S1 and S2 marked. ``heading`` replaces the title;
+    ``event_labels`` writes each event's guard and time beside its line in the top panel."""
     fig = Figure(figsize=(8.0, 8.0), layout="constrained")
     FigureCanvasAgg(fig)
     axes = fig.subplots(len(PANELS), 1, sharex=True)
@@ -63,18 +65,23 @@ def figure(result: Result, module: ModuleType) -> Figure:
                         textcoords="offset points", xytext=(6, 4), fontsize=8, color="tab:red")
         ax.set_ylabel(label)
         ax.grid(True, linewidth=0.3, alpha=0.5)
+    if event_labels:
+        for e in result.events[:12]:
+            axes[0].annotate(f"{e.guard}: t = {e.t:.4g} s", (e.t, 1.0), xycoords=("data", "axes fraction"),
+                             xytext=(3, -3), textcoords="offset points", rotation=90, va="top",
+                             fontsize=7)
     axes[-1].set_xlabel("t [s]")
     handles = [Patch(color=c, alpha=0.3, label=r) for r, c in colours.items()]
     if result.events:
         handles.append(Line2D([], [], color="black", linestyle="--", linewidth=0.6, label="event"))
     handles.append(Line2D([], [], color="tab:red", marker="o", linestyle="none", label="largest |S|"))
     fig.legend(handles=handles, loc="outside lower center", ncols=min(len(handles), 4), fontsize=8)
-    fig.suptitle(title(result, module), fontsize=10)
+    fig.suptitle(heading or title(result, module), fontsize=10)
     return fig
 
 
-def png_bytes(result: Result, module: ModuleType, dpi: int = DPI) -> bytes:
-    """The figure rendered as PNG into memory (for an atomic write)."""
+def png_bytes(result: Result, module: ModuleType, dpi: int = DPI, **options) -> bytes:
+    """The figure rendered as PNG into memory (for an atomic write); ``options`` go to ``figure``."""
     buffer = io.BytesIO()
-    figure(result, module).savefig(buffer, format="png", dpi=dpi)
+    figure(result, module, **options).savefig(buffer, format="png", dpi=dpi)
     return buffer.getvalue()

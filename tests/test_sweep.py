@@ -1,0 +1,119 @@
+"""Sweeps: rows equal simulate(), failures recorded, resume, dask, CLI errors."""
+import math
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from tswm_runtime.cli import main
+from tswm_runtime.contract import load_module
+from tswm_runtime.result import STATUS_NAMES
+from tswm_runtime.simulate import simulate
+from tswm_runtime.sweep import REGIME_LETTERS, SweepInputError, grid_cases, parse_grid, sweep
+
+LETTER = REGIME_LETTERS
+
+
+def _check_rows_match_simulate(scene, table, overrides):
+    module = load_module(scene)
+    for row in table.to_dict("records"):
+        params = {name: row[name] for name in module.PARAM_NAMES}
+        r = simulate(scene, params, **overrides)
+        assert row["status"] == r.status, (params, r.message)
+        assert row["S1m"] == r.S1_max and row["S2m"] == r.S2_max, params
+        assert row["tS1m"] == r.t_S1_max and row["t_stop"] == r.t_stop
+        assert row["regimes"] == "".join(LETTER[ph.regime] for ph in r.phases), params
+        assert row["n_events"] == len(r.events) and row["steps"] == r.n_steps and row["nfev"] == r.nfev
+        if r.status == "finished":
+            assert row["v1"] == r.v1[-1] and row["x1"] == pytest.approx(r.x1[-1], rel=1e-14, abs=1e-300)
+        if r.KD1 is not None:
+            assert row["KD1"] == r.KD1 and row["KD2"] == r.KD2
+
+
+def test_sweep_rows_equal_simulate_runup():
+    module = load_module("paper-runup")
+    P = grid_cases(module, parse_grid(["m2=150:250:2", "F2_after=-15000:5000:3"], module))
+    out = sweep("paper-runup", P, {"rtol": 1e-7, "atol": 1e-10}, chunk_size=4)
+    assert len(out.table) == 6 and list(out.table.columns[:3]) == ["m2", "F2_after", "t_step"]
+    assert set(out.table["t_step"]) == {0.3}
+    _check_rows_match_simulate("paper-runup", out.table, {"rtol": 1e-7, "atol": 1e-10})
+
+
+def test_failed_cases_are_recorded_and_the_sweep_goes_on():
+    """paper from v1 = 0.05: m2 = 5000, F2 = 30000 is inconsistent (Painleve), the
+    others run; with max_steps = 5 every moving case stops with max-steps."""
+    module = load_module("paper")
+    P = np.array([[5000.0, 30000.0], [200.0, -15000.0], [200.0, -1000.0]])
+    out = sweep(module, P, {"v1": 0.05})
+    assert list(out.table["status"]) == ["inconsistent", "finished", "finished"]
+    assert out.table["regimes"][1] == "TS"  # slows down and sticks
+    _check_rows_match_simulate("paper", out.table, {"v1": 0.05})
+    out = sweep(module, P, {"v1": 2.0, "max_steps": 5})
+    assert set(out.table["status"]) <= set(STATUS_NAMES.values())
+    assert (out.table["status"] == "max-steps").sum() >= 2
+    assert math.isnan(out.table["v1"][out.table["status"] == "max-steps"].iloc[0])
+    _check_rows_match_simulate("paper", out.table, {"v1": 2.0, "max_steps": 5})
+
+
+def test_resume_skips_finished_chunks(tmp_path):
+    module = load_module("paper")
+    P = grid_cases(module, parse_grid(["F2=-15000:-1000:6"], module))
+    first = sweep(module, P, {"v1": 2.0}, output=tmp_path, chunk_size=2)
+    assert first.computed == [0, 1, 2] and first.skipped == []
+    chunks = sorted((tmp_path / "chunks").glob("chunk-*.parquet"))
+    assert len(chunks) == 3
+    chunks[1].unlink()
+    again = sweep(module, P, {"v1": 2.0}, output=tmp_path, chunk_size=2)
+    assert again.computed == [1] and again.skipped == [0, 2]
+    pd.testing.assert_frame_equal(first.table, again.table)
+    changed = sweep(module, P, {"v1": 2.5}, output=tmp_path, chunk_size=2)  # other settings: no reuse
+    assert changed.computed == [0, 1, 2]
+    on_disk = pd.read_parquet(tmp_path / "paper-sweep.parquet")
+    pd.testing.assert_frame_equal(on_disk, changed.table)
+    csv = pd.read_csv(tmp_path / "paper-sweep.csv")
+    assert list(csv.columns) == list(on_disk.columns) and len(csv) == 6
+
+
+def test_dask_local_cluster_rows_equal_in_process_rows():
+    distributed = pytest.importorskip("distributed")
+    module = load_module("paper-runup")
+    P = grid_cases(module, parse_grid(["m2=150:250:2", "F2_after=-15000:5000:2"], module))
+    local = sweep(module, P, chunk_size=1)
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=False,
+                                  dashboard_address=None) as cluster, distributed.Client(cluster) as client:
+        remote = sweep(module, P, chunk_size=1, client=client, scene_spec="paper-runup")
+    assert remote.computed and sorted(remote.computed) == [0, 1, 2, 3]
+    pd.testing.assert_frame_equal(local.table, remote.table)
+
+
+def test_cli_sweep_writes_tables(tmp_path, capsys):
+    assert main(["sweep", "paper", "--samples", "5", "--range", "F2=-15000:-1000", "--seed", "3",
+                 "-o", str(tmp_path), "--no-progress"]) == 0
+    table = pd.read_parquet(tmp_path / "paper-sweep.parquet")
+    assert len(table) == 5 and table["F2"].between(-15000, -1000).all() and (table["m2"] == 200).all()
+    assert "5 cases" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("argv, fragment", [
+    (["--grid", "mass=1:2:3"], "'mass'"),
+    (["--grid", "gamma=0.1:0.2:3"], "gamma is fixed"),
+    (["--grid", "F2=1:2"], "F2=1:2"),
+    (["--grid", "F2=1:2:0"], "count 0 must be >= 1"),
+    (["--grid", "F2=a:2:3"], "'a' is not a number"),
+    (["--samples", "4", "--range", "F2=5:1"], "lo = 5 must be < hi = 1"),
+    (["--samples", "0", "--range", "F2=1:5"], "--samples 0"),
+    (["--samples", "4"], "--range"),
+    ([], "--grid"),
+    (["--grid", "F2=1:2:2", "--rtol", "2"], "--rtol"),
+])
+def test_cli_sweep_bad_input_exits_2_naming_it(argv, fragment, capsys):
+    assert main(["sweep", "paper", "--no-progress", *argv]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("tswm sweep: error: ") and fragment in err, err
+
+
+def test_parse_grid_single_value_and_duplicates():
+    module = load_module("paper")
+    assert parse_grid(["F2=-5"], module)["F2"].tolist() == [-5.0]
+    with pytest.raises(SweepInputError, match="twice"):
+        parse_grid(["F2=1:2:2", "F2=3"], module)

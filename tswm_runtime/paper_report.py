@@ -1,0 +1,436 @@
+"""`tswm paper`: the paper's Table 3 and Figure 2 against what tswm computes, as a report.
+
+Every number in the report comes from ``simulate`` on the shipped generated modules
+(``paper``, ``paper-literal``, ``paper-runup``) or from those modules' own functions; the
+paper's printed numbers come from ``paper_data``. Nothing is fitted to the paper.
+This module does not import SymPy; only ``derivation_document`` does (on request).
+"""
+from __future__ import annotations
+
+import base64
+import json
+import math
+import os
+import platform
+import shutil
+import sys
+import time
+from dataclasses import dataclass
+from importlib import metadata
+from pathlib import Path
+from typing import Callable
+
+import jinja2
+import numpy as np
+
+from tswm_runtime.contract import load_module
+from tswm_runtime.export import jsonable
+from tswm_runtime.files import write_atomic
+from tswm_runtime.paper_data import F2_LISTED, FIGURE2, M2_LISTED, SOURCE, TABLE3_PRINTED, printed
+from tswm_runtime.result import Result
+from tswm_runtime.simulate import simulate
+
+TOLERANCE = 0.05   # a computed value "agrees" with a printed one within 5 % and with the same sign
+NOISE = 1e-6      # a dissipation rate counts as negative below -NOISE * max |input power| of the run
+QUANTITIES = (("S1m", "S1_max", "N"), ("KD1", "KD1", ""), ("S2m", "S2_max", "N"), ("KD2", "KD2", ""))
+FILES = {"md": "paper-report.md", "html": "paper-report.html", "json": "paper-report.json"}
+
+
+@dataclass(frozen=True)
+class Reading:
+    """One way of reading the paper's scene: a shipped scene and how a case sets it."""
+
+    key: str
+    label: str
+    scene: str
+    title: str
+    params: Callable[[float, float], dict]
+
+
+READINGS = (
+    Reading("consistent", "(a)", "paper", "consistent derivation, load from t = 0 (the scene as printed)",
+            lambda m2, F2: {"m2": m2, "F2": F2}),
+    Reading("literal", "(b)", "paper-literal", "the paper's equations (6), (7), (9) as printed, load from t = 0",
+            lambda m2, F2: {"m2": m2, "F2": F2}),
+    Reading("runup", "(c)", "paper-runup", "consistent derivation, free run-up, then F2 from t_step = 0.3 s",
+            lambda m2, F2: {"m2": m2, "F2_after": F2}),
+)
+
+
+def all_cases() -> list[tuple[float, float]]:
+    """The (m2, F2) inputs the paper lists: Table 3's six and the untabulated m2 = 300 kg."""
+    return [(m2, F2) for m2 in M2_LISTED for F2 in F2_LISTED]
+
+
+def run(reading: Reading, m2: float, F2: float) -> Result:
+    """The run behind one cell of the report (the tests call exactly this)."""
+    return simulate(reading.scene, reading.params(m2, F2))
+
+
+# ---------------------------------------------------------------- words and numbers
+
+def drive_word(result: Result) -> str:
+    """Whether the drive starts, stalls or self-locks, read from the run's phases and status."""
+    if result.status != "finished":
+        return f"stopped early: {result.status}"
+    phases = result.phases
+    if not phases:
+        return "no phases"
+    if all(ph.regime == "stick" for ph in phases):
+        return "does not start (self-locked)"
+    if phases[-1].regime == "stick":
+        return f"stalls (self-locks at t = {phases[-1].t_start:.4g} s)"
+    return "runs"
+
+
+def regime_text(result: Result) -> str:
+    """The phases with their switch times: 'tractive 0-0.0232 s -> inverse-tractive 0.0232-1 s'."""
+    return " → ".join(f"{ph.regime} {ph.t_start:.4g}–{ph.t_end:.4g} s" for ph in result.phases)
+
+
+def fmt(value: float | None) -> str:
+    """A number for a table: whole newtons above 1000, else 4 significant digits."""
+    if value is None:
+        return "–"
+    if not math.isfinite(value):
+        return str(value)
+    return f"{value:.0f}" if abs(value) >= 1000 else f"{value:.4g}"
+
+
+def agrees(computed: float | None, paper: float) -> bool:
+    """Same sign and within TOLERANCE of the printed value."""
+    return computed is not None and computed * paper > 0 and abs(computed - paper) <= TOLERANCE * abs(paper)
+
+
+def statics(module, F2: float) -> dict:
+    """The starting force against the static friction cone at v1 = 0, load F2 from t = 0.
+
+    Hand statics: normal force N = F1 sin(gamma) - F2 cos(gamma), tangential T = F1
+    cos(gamma) + F2 sin(gamma); stick holds while tan(rho(0)) |N| >= T, so breaking away
+    forward needs F1 > tan(gamma + rho(0)) |F2| (F2 < 0). Cross-checked with the generated
+    module's ``stick_conditions`` (its cone_forward margin at F1(0))."""
+    y = np.zeros(1)
+    p = np.array([FIGURE2["m2"], F2])
+    gamma = float(module.FIXED["gamma"])
+    F1_0 = float(module.drive_force(0.0, y, p))
+    rho0 = float(module.friction_angle(0.0, y, p))
+    normal = F1_0 * math.sin(gamma) - F2 * math.cos(gamma)
+    tangential = F1_0 * math.cos(gamma) + F2 * math.sin(gamma)
+    margin_hand = math.tan(rho0) * abs(normal) - tangential
+    margin_module = float(module.stick_conditions(0.0, y, p)[0])
+    return {"F2": F2, "F1_0": F1_0, "rho0_deg": math.degrees(rho0), "gamma_deg": math.degrees(gamma),
+            "breakaway_F1": math.tan(gamma + rho0) * abs(F2), "cone_margin_hand": margin_hand,
+            "cone_margin_module": margin_module, "sticks": margin_module >= 0.0}
+
+
+def energy_balance(result: Result, module) -> dict:
+    """Work and kinetic energy along a run, from the Result's arrays with numpy.
+
+    KE = m1 v1^2/2 + m2 v2^2/2, input power P = F1 v1 + F2 v2; friction dissipates
+    P - dKE/dt (pointwise with a2 = a1 tan(gamma)); integrated by the trapezoid rule,
+    E_diss = W_in - (KE(end) - KE(0)). A negative dissipation is non-physical."""
+    m1, m2 = float(module.FIXED["m1"]), float(result.params["m2"])
+    slope = math.tan(float(module.FIXED["gamma"]))
+    t, v1, v2 = result.t, result.v1, result.v2
+    ke = 0.5 * m1 * v1**2 + 0.5 * m2 * v2**2
+    power = result.F1 * v1 + result.F2 * v2
+    rate = power - (m1 * v1 * result.a1 + m2 * v2 * result.a1 * slope)
+    work = float(np.trapezoid(power, t))
+    dke = float(ke[-1] - ke[0])
+    tolerance = NOISE * max(1.0, float(np.max(np.abs(power))))
+    negative = rate < -tolerance
+    return {"tolerance_W": tolerance, "W_in": work, "dKE": dke, "E_diss": work - dke, "E_diss_pointwise": float(np.trapezoid(rate, t)),
+            "min_rate": float(rate.min()), "t_min_rate": float(t[int(rate.argmin())]),
+            "negative_fraction": float(np.mean(negative)), "v1_end": float(v1[-1]), "a1_0": float(result.a1[0])}
+
+
+# ---------------------------------------------------------------- the report
+
+def _versions() -> dict:
+    names = ("tswm", "numpy", "scipy", "numba", "sympy", "jinja2", "matplotlib")
+    versions = {"python": platform.python_version()}
+    for name in names:
+        try:
+            versions[name] = metadata.version(name)
+        except metadata.PackageNotFoundError:
+            versions[name] = "not installed"
+    return versions
+
+
+def _machine() -> dict:
+    return {"platform": platform.platform(), "machine": platform.machine(),
+            "processor": platform.processor() or "unknown", "cpus": os.cpu_count()}
+
+
+def derivation_document(out_dir: Path) -> dict:
+    """Write the derivation of scene ``paper`` exactly as ``tswm derive paper`` does (the same
+    functions); PDF when pdflatex is present, else the Markdown is the linked document."""
+    from derivation.document import build_document, render
+    from derivation.latex import TexUnavailable, build_pdf
+    from derivation.model import build_model
+    from derivation.scene import load_scene
+
+    doc = build_document(build_model(load_scene("paper")))
+    md = write_atomic(out_dir / "paper-derivation.md", render(doc, "markdown"))
+    latex = render(doc, "latex")
+    tex = write_atomic(out_dir / "paper-derivation.tex", latex)
+    try:
+        pdf = build_pdf(latex, out_dir / "paper-derivation.pdf")
+        return {"link": pdf.name, "note": "PDF built with pdflatex; Markdown and LaTeX beside it",
+                "files": [md.name, tex.name, pdf.name]}
+    except TexUnavailable:
+        return {"link": md.name, "note": "no pdflatex here: the Markdown version (LaTeX source beside it)",
+                "files": [md.name, tex.name]}
+
+
+def _statements(rows: list[dict], checks: dict, cases_printed: int) -> list[dict]:
+    """Which columns agree with the paper and why, each backed by the numbers of this run."""
+    out = []
+    counts = []
+    for reading in READINGS:
+        parts = []
+        for q, _, _ in QUANTITIES:
+            n = sum(1 for r in rows if r["printed"] and r[reading.key]["agree"][q])
+            parts.append(f"{q} {n}/{cases_printed}")
+        counts.append(f"{reading.label} {reading.scene}: " + ", ".join(parts))
+    out.append({"title": f"Agreement with the printed Table 3 (same sign, within {TOLERANCE:.0%})",
+                "text": "; ".join(counts) + "."})
+
+    st = checks["statics"]
+    words = sorted({r["consistent"]["drive"] for r in rows})
+    brk = ", ".join(f"{s['breakaway_F1']:.0f} N (F2 = {s['F2']:.0f} N)" for s in st)
+    diff = max(abs(s["cone_margin_hand"] - s["cone_margin_module"]) for s in st)
+    all_stick = all(s["sticks"] for s in st)
+    out.append({"title": "(a) consistent, load from t = 0",
+                "text": f"At standstill the motor gives F1(0) = {st[0]['F1_0']:.1f} N; with rho(0) = "
+                        f"{st[0]['rho0_deg']:.2f} deg > gamma = {st[0]['gamma_deg']:.2f} deg the gear is "
+                        f"self-locking, and breaking away against the load needs F1 > tan(gamma + rho(0)) |F2| = "
+                        f"{brk} (hand statics: N = F1 sin(gamma) - F2 cos(gamma), T = F1 cos(gamma) + F2 "
+                        f"sin(gamma), stick while tan(rho(0)) |N| >= T; the generated module's stick_conditions "
+                        f"give the same cone margin, difference {diff:.1e} N). "
+                        + ("So F1(0) lies inside the static friction cone in every case: "
+                           if all_stick else "F1(0) leaves the cone in some cases: ")
+                        + f"the runs say {' / '.join(words)}. S1 = F1(0) and S2 = F2 are static values; the "
+                        "paper's dynamic maxima (S1m up to " + fmt(max((c.S1m for c in TABLE3_PRINTED), default=0)) +
+                        " N, |S2m| above |F2|) cannot come from this reading."})
+
+    lit = checks["energy"]["literal"]
+    first_switch = [r["literal"]["phases"][1]["t_start"] for r in rows if len(r["literal"]["phases"]) > 1]
+    s1 = [r["literal"]["values"]["S1m"] for r in rows]
+    out.append({"title": "(b) the printed equations",
+                "text": f"Taken as printed, eqs. (6), (7), (9) switch from tractive to inverse-tractive at t = "
+                        f"{min(first_switch, default=float('nan')):.3g}-{max(first_switch, default=float('nan')):.3g} s "
+                        f"and stay there; S1 is negative from t = 0, because eq. (6) as printed lets the resisting "
+                        f"load accelerate the worm (a1(0) = {lit['a1_0']:.4g} m/s^2, F1(0) = {st[0]['F1_0']:.1f} N, "
+                        f"m1 = 11.8 kg): S1m = {fmt(min(s1))} to {fmt(max(s1))} N where the "
+                        "paper prints S1m > 0 and concludes the drive stays tractive. Energy balance along the run "
+                        f"of the Figure 2 case (m2 = {lit['m2']:.0f} kg, F2 = {lit['F2']:.0f} N): input work "
+                        f"W = integral(F1 v1 + F2 v2) dt = {lit['W_in']:.4g} J, kinetic energy change "
+                        f"{lit['dKE']:.4g} J, so friction would have to dissipate W - dKE = {lit['E_diss']:.4g} J; "
+                        f"the dissipation rate P - dKE/dt is negative in {lit['negative_fraction']:.1%} of the output "
+                        f"points (minimum {lit['min_rate']:.4g} W at t = {lit['t_min_rate']:.3g} s). "
+                        + ("Negative dissipation means friction supplies energy: the printed equations are "
+                           "non-physical." if lit["E_diss"] < 0 or lit["min_rate"] < 0 else
+                           "The dissipation stays non-negative along this run.")})
+
+    run = checks["energy"]["runup"]
+    over = [abs(r["runup"]["values"]["S2m"]) - abs(r["F2"]) for r in rows]
+    ratios_c = [r["runup"]["values"]["S2m"] / r["runup"]["values"]["S1m"] for r in rows]
+    ratios_p = [r["printed"]["S2m"] / r["printed"]["S1m"] for r in rows if r["printed"]]
+    over_p = [abs(r["printed"]["S2m"]) - abs(r["F2"]) for r in rows if r["printed"]]
+    words = sorted({r["runup"]["drive"] for r in rows})
+    near = [f"test {r['test']} {q}" for r in rows if r["printed"] for q, _, _ in QUANTITIES if r["runup"]["agree"][q]]
+    regimes = sorted({"/".join(ph["regime"] for ph in r["runup"]["phases"]) for r in rows})
+    out.append({"title": "(c) run up, then load",
+                "text": f"The drive {' / '.join(words)} with regimes {', '.join(regimes)}: tractive throughout, as "
+                        f"the paper concludes. But the load comes on quasi-statically: |S2m| - |F2| is only "
+                        f"{min(over):.3g} to {max(over):.3g} N"
+                        + (f", where the paper prints |S2m| {min(over_p):.0f}-{max(over_p):.0f} N above |F2|; "
+                           if over_p else "; ")
+                        + 
+                        f"S2m/S1m is {min(ratios_c):.3g} to {max(ratios_c):.3g} here, "
+                        + (f"{min(ratios_p):.3g} to {max(ratios_p):.3g} printed. " if ratios_p else "")
+                        + f"Friction dissipates {run['E_diss']:.4g} J in the Figure 2 case (minimum rate "
+                        f"{run['min_rate']:.4g} W)"
+                        + (": energy balances with non-negative dissipation." if run["E_diss"] >= 0
+                           and run["negative_fraction"] == 0 else ": negative dissipation, check the run.")
+                        + (f" Cells within {TOLERANCE:.0%} of the paper: {', '.join(near)}." if near else
+                           f" No cell is within {TOLERANCE:.0%} of the paper.")})
+    return out
+
+
+def _figure(result: Result, module, reading: Reading, m2: float, F2: float) -> bytes:
+    from tswm_runtime.plot import png_bytes
+
+    heading = (f"{reading.label} {reading.scene}: {reading.title}\n"
+               f"m2 = {m2:g} kg, F2 = {F2:g} N; {drive_word(result)}")
+    return png_bytes(result, module, dpi=200, heading=heading, event_labels=True)
+
+
+def _environment() -> jinja2.Environment:
+    return jinja2.Environment(loader=jinja2.PackageLoader("tswm_runtime", "templates"),
+                              autoescape=jinja2.select_autoescape(["html.j2"]), keep_trailing_newline=True,
+                              trim_blocks=True, lstrip_blocks=True, undefined=jinja2.StrictUndefined)
+
+
+def build_report(out_dir: str | Path = "tswm-report", cases: list[tuple[float, float]] | None = None, *,
+                 derivation: bool = True, progress: bool = True) -> dict:
+    """Run every reading for every case, write the report files into ``out_dir``; return
+    {'paths': {...}, 'data': the JSON sidecar's content, 'wall_time': s}."""
+    from tqdm import tqdm
+
+    start = time.perf_counter()
+    out_dir = Path(out_dir)
+    cases = list(cases) if cases is not None else all_cases()
+    fig_case = (FIGURE2["m2"], FIGURE2["F2"])
+    modules = {r.key: load_module(r.scene) for r in READINGS}
+    steps = len(cases) * len(READINGS) + len(READINGS) + len(cases) + (1 if derivation else 0) + 1
+    bar = tqdm(total=steps, desc="tswm paper", unit="step", disable=not progress, file=sys.stderr)
+
+    rows, results = [], {}
+    for test_index, (m2, F2) in enumerate(cases):
+        paper = printed(m2, F2)
+        row = {"m2": m2, "F2": F2, "test": paper.test if paper else None,
+               "printed": None if paper is None else {q: getattr(paper, q) for q, _, _ in QUANTITIES}}
+        for reading in READINGS:
+            bar.set_postfix_str(f"{reading.scene} m2={m2:g} F2={F2:g}")
+            result = run(reading, m2, F2)
+            results[(reading.key, m2, F2)] = result
+            values = {q: (None if getattr(result, attr) is None else float(getattr(result, attr)))
+                      for q, attr, _ in QUANTITIES}
+            row[reading.key] = {
+                "scene": reading.scene, "params": dict(result.params), "status": result.status,
+                "message": result.message, "values": values,
+                "t_S1m": result.t_S1_max, "t_S2m": result.t_S2_max,
+                "agree": {q: bool(paper) and agrees(values[q], getattr(paper, q)) for q, _, _ in QUANTITIES},
+                "regimes": regime_text(result), "drive": drive_word(result),
+                "phases": [{"regime": ph.regime, "mode": ph.mode, "t_start": ph.t_start, "t_end": ph.t_end}
+                           for ph in result.phases],
+                "events": [{"t": e.t, "guard": e.guard, "from": e.from_mode, "to": e.to_mode} for e in result.events],
+                "v1_end": float(result.v1[-1]),
+            }
+            bar.update()
+        rows.append(row)
+
+    bar.set_postfix_str("statics and energy")
+    consistent = modules["consistent"]
+    checks = {"statics": [statics(consistent, F2) for F2 in sorted({F2 for _, F2 in cases}, reverse=True)],
+              "energy": {}}
+    if fig_case not in cases:
+        fig_case = cases[-1]
+    energy_rows = []
+    for m2, F2 in cases:
+        for reading in READINGS:
+            e = energy_balance(results[(reading.key, m2, F2)], modules[reading.key])
+            e.update(m2=m2, F2=F2)
+            energy_rows.append({"reading": f"{reading.label} {reading.scene}", **e})
+            if (m2, F2) == fig_case:
+                checks["energy"][reading.key] = e
+        bar.update()
+    checks["energy_table"] = energy_rows
+
+    figures = []
+    for reading in READINGS:
+        bar.set_postfix_str(f"figure {reading.scene}")
+        result = results[(reading.key, *fig_case)]
+        png = _figure(result, modules[reading.key], reading, *fig_case)
+        name = f"figure2-{reading.key}.png"
+        write_atomic(out_dir / name, png)
+        figures.append({"file": name, "label": reading.label, "scene": reading.scene, "title": reading.title,
+                        "regimes": regime_text(result), "drive": drive_word(result),
+                        "data": base64.b64encode(png).decode("ascii")})
+        bar.update()
+
+    doc = None
+    if derivation:
+        bar.set_postfix_str("derivation document")
+        doc = derivation_document(out_dir)
+        bar.update()
+
+    settings = {r.scene: {k: results[(r.key, *cases[0])].settings[k]
+                          for k in ("method", "rtol", "atol", "t_end", "points", "max_steps", "max_events")}
+                for r in READINGS}
+    data = {
+        "source": SOURCE, "tolerance": TOLERANCE, "figure_case": {"m2": fig_case[0], "F2": fig_case[1]},
+        "readings": [{"key": r.key, "label": r.label, "scene": r.scene, "title": r.title} for r in READINGS],
+        "cases": rows, "checks": checks,
+        "settings": settings, "versions": _versions(), "machine": _machine(),
+        "command": "tswm paper " + " ".join(sys.argv[2:]) if sys.argv[1:2] == ["paper"] else "tswm paper",
+        "derivation": doc,
+    }
+    cases_printed = sum(1 for r in rows if r["printed"])
+    data["statements"] = _statements(rows, checks, cases_printed)
+    data["wall_time_s"] = time.perf_counter() - start   # before rendering; the CLI prints the total
+    context = _context(data, figures)
+    env = _environment()
+    paths = {"json": write_atomic(out_dir / FILES["json"], json.dumps(jsonable(data), indent=2, allow_nan=False) + "\n"),
+             "md": write_atomic(out_dir / FILES["md"], env.get_template("paper_report.md.j2").render(context)),
+             "html": write_atomic(out_dir / FILES["html"], env.get_template("paper_report.html.j2").render(context))}
+    paths.update({f["file"]: out_dir / f["file"] for f in figures})
+    if doc:
+        paths.update({name: out_dir / name for name in doc["files"]})
+    bar.update()
+    bar.close()
+    return {"paths": paths, "data": data, "wall_time": time.perf_counter() - start}
+
+
+def table3_rows(data: dict) -> tuple[list[str], list[list[str]]]:
+    """Table 3 side by side: header and rows of strings (agreeing cells marked ✓)."""
+    header = ["Test", "m2 [kg]", "F2 [N]"]
+    for q, _, unit in QUANTITIES:
+        header += [f"{q}{f' [{unit}]' if unit else ''} paper"] + [f"{q} {r.label}" for r in READINGS]
+    rows = []
+    for row in data["cases"]:
+        cells = [str(row["test"]) if row["test"] else "–", f"{row['m2']:g}", f"{row['F2']:g}"]
+        for q, _, _ in QUANTITIES:
+            cells.append((f"{row['printed'][q]:.2f}" if q.startswith("KD") else fmt(row["printed"][q]))
+                         if row["printed"] else "not printed")
+            for r in READINGS:
+                cell = row[r.key]
+                cells.append(fmt(cell["values"][q]) + (" ✓" if cell["agree"][q] else ""))
+        rows.append(cells)
+    return header, rows
+
+
+def _context(data: dict, figures: list[dict]) -> dict:
+    header, rows = table3_rows(data)
+    regime_header = ["Case (test)", "m2 [kg]", "F2 [N]"] + [f"{r.label} {r.scene}" for r in READINGS]
+    regime_rows = [[str(row["test"]) if row["test"] else "–", f"{row['m2']:g}", f"{row['F2']:g}"]
+                   + [f"{row[r.key]['drive']}: {row[r.key]['regimes']}"
+                      + ("" if row[r.key]["status"] == "finished" else f" ({row[r.key]['message']})")
+                      for r in READINGS] for row in data["cases"]]
+    statics_header = ["F2 [N]", "F1(0) [N]", "rho(0) [deg]", "breakaway F1 [N]", "cone margin, hand [N]",
+                      "cone margin, module [N]", "stick holds"]
+    statics_rows = [[f"{s['F2']:g}", f"{s['F1_0']:.1f}", f"{s['rho0_deg']:.3f}", f"{s['breakaway_F1']:.1f}",
+                     f"{s['cone_margin_hand']:.2f}", f"{s['cone_margin_module']:.2f}", "yes" if s["sticks"] else "no"]
+                    for s in data["checks"]["statics"]]
+    energy_header = ["reading", "m2 [kg]", "F2 [N]", "W_in [J]", "dKE [J]", "W_in - dKE [J]",
+                     "min dissipation rate [W]", "points with rate < -1e-6 max|P|"]
+    energy_rows = [[e["reading"], f"{e['m2']:g}", f"{e['F2']:g}", f"{e['W_in']:.4g}", f"{e['dKE']:.4g}",
+                    f"{e['E_diss']:.4g}", f"{e['min_rate']:.4g}", f"{e['negative_fraction']:.1%}"]
+                   for e in data["checks"]["energy_table"]]
+    settings_rows = [[scene, s["method"], f"{s['rtol']:g}", f"{s['atol']:g}", f"{s['t_end']:g} s", str(s["points"]),
+                      str(s["max_steps"])] for scene, s in data["settings"].items()]
+    return {"data": data, "figures": figures, "readings": READINGS,
+            "table3": (header, rows), "regimes": (regime_header, regime_rows),
+            "statics": (statics_header, statics_rows), "energy": (energy_header, energy_rows),
+            "settings": (["scene", "integrator", "rtol", "atol", "t_end", "output points", "max steps"],
+                         settings_rows),
+            "tolerance": f"{TOLERANCE:.0%}", "generated": time.strftime("%Y-%m-%d %H:%M:%S %Z"),
+            "pdflatex": shutil.which("pdflatex") is not None}
+
+
+def read_markdown_table(text: str, first_header: str) -> list[list[str]]:
+    """The rows (header first) of the Markdown table whose first header cell is ``first_header``."""
+    lines = text.splitlines()
+    for i, line in enumerate(lines):
+        if line.startswith("|") and [c.strip() for c in line.strip("|").split("|")][0] == first_header:
+            table = []
+            for row in lines[i:]:
+                if not row.startswith("|"):
+                    break
+                cells = [c.strip() for c in row.strip().strip("|").split("|")]
+                if not all(set(c) <= set("-: ") for c in cells):
+                    table.append(cells)
+            return table
+    raise ValueError(f"no table starting with {first_header!r}")

@@ -1,0 +1,298 @@
+"""Parameter sweeps: one scene over a grid or random samples of its free parameters.
+
+The cases are split into chunks; each chunk is one call of the parallel numba batch
+(``batch.run_batch``, prange over cases on all cores) and is written atomically to
+``DIR/chunks/chunk-NNNNN-HASH.parquet``, HASH a sha256 over the scene module's digest,
+the run settings and the chunk's parameter rows. A rerun skips every chunk whose file
+exists under the expected name, so an interrupted sweep resumes without recomputing
+(and a changed grid or setting never reuses a stale chunk). With a dask.distributed
+``Client`` the chunks run as tasks on its workers instead.
+
+One row per case: the free parameters, then
+
+    status    'finished' or why the run stopped (result.STATUS_NAMES)
+    t_stop    where the run ended [s]
+    S1m, tS1m, S2m, tS2m   the value of S1 (S2) where |S1| (|S2|) is largest, and its time
+    KD1, KD2  eq. (10) from S1m, S2m when the scene gives Ft1, Ft2 (else NaN)
+    x1, v1    the state at t_stop (NaN when the run stopped inside a step)
+    regimes   the regime code: one letter per phase, in order (REGIME_LETTERS: T tractive,
+              I inverse-tractive, S stick, A/B backward on flank a/b, F sliding along
+              phi = 0); e.g. 'ST' = stuck, then broke away into tractive sliding
+    modes     the same phases as mode indices into the module's MODES, space separated
+    n_events, steps, rejected, nfev, njev   events logged, accepted and rejected steps,
+              rhs and Jacobian calls
+"""
+from __future__ import annotations
+
+import hashlib
+import io
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from types import ModuleType
+
+import numpy as np
+
+from tswm_runtime import batch, modes, segment
+from tswm_runtime.contract import load_module
+from tswm_runtime.files import write_atomic
+from tswm_runtime.result import STATUS_NAMES
+from tswm_runtime.simulate import METHODS, parameter_vector, settings
+
+REGIME_LETTERS = {"tractive": "T", "inverse-tractive": "I", "stick": "S", "backward on flank a": "A",
+                  "backward on flank b": "B", "sliding along phi = 0": "F"}
+SEQ_LEN = 32  # modes kept per case; longer sequences end in '…'
+DEFAULT_CHUNK = 512
+RESULT_COLUMNS = ("status", "t_stop", "S1m", "tS1m", "S2m", "tS2m", "KD1", "KD2", "x1", "v1",
+                  "regimes", "modes", "n_events", "steps", "rejected", "nfev", "njev")
+
+
+class SweepInputError(ValueError):
+    """A sweep input that cannot be used; the message names it."""
+
+
+def _free(module: ModuleType, name: str, option: str) -> None:
+    if name in module.PARAM_NAMES:
+        return
+    free = ", ".join(module.PARAM_NAMES) or "none"
+    fixed = f"; {name} is fixed in this scene (make it free in the scene file)" if name in module.FIXED else ""
+    raise SweepInputError(f"{option} {name!r}: scene {module.SCENE!r} has no such free parameter "
+                          f"(free: {free}){fixed}")
+
+
+def _number(text: str, what: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise SweepInputError(f"{what}: {text!r} is not a number") from None
+    if not math.isfinite(value):
+        raise SweepInputError(f"{what}: {text!r} is not finite")
+    return value
+
+
+def parse_grid(items: list[str], module: ModuleType) -> dict[str, np.ndarray]:
+    """``name=start:stop:count`` (count points, both ends included) or ``name=value``."""
+    grid = {}
+    for item in items:
+        name, sep, spec = (s.strip() for s in item.partition("="))
+        if not sep or not name or not spec:
+            raise SweepInputError(f"--grid {item!r}: expected NAME=START:STOP:COUNT, e.g. F2=-15000:0:11")
+        _free(module, name, "--grid")
+        if name in grid:
+            raise SweepInputError(f"--grid {item!r}: {name} is given twice")
+        parts = spec.split(":")
+        if len(parts) == 1:
+            grid[name] = np.array([_number(parts[0], f"--grid {item!r}")])
+            continue
+        if len(parts) != 3:
+            raise SweepInputError(f"--grid {item!r}: expected NAME=START:STOP:COUNT, e.g. F2=-15000:0:11")
+        start, stop = (_number(v, f"--grid {item!r}") for v in parts[:2])
+        try:
+            count = int(parts[2])
+        except ValueError:
+            raise SweepInputError(f"--grid {item!r}: count {parts[2]!r} is not an integer") from None
+        if count < 1:
+            raise SweepInputError(f"--grid {item!r}: count {count} must be >= 1")
+        grid[name] = np.linspace(start, stop, count)
+    return grid
+
+
+def parse_ranges(items: list[str], module: ModuleType) -> dict[str, tuple[float, float]]:
+    """``name=lo:hi`` with lo < hi."""
+    ranges = {}
+    for item in items:
+        name, sep, spec = (s.strip() for s in item.partition("="))
+        parts = spec.split(":")
+        if not sep or not name or len(parts) != 2:
+            raise SweepInputError(f"--range {item!r}: expected NAME=LO:HI, e.g. m2=100:400")
+        _free(module, name, "--range")
+        lo, hi = (_number(v, f"--range {item!r}") for v in parts)
+        if not lo < hi:
+            raise SweepInputError(f"--range {item!r}: lo = {lo:g} must be < hi = {hi:g}")
+        ranges[name] = (lo, hi)
+    return ranges
+
+
+def grid_cases(module: ModuleType, grid: dict[str, np.ndarray]) -> np.ndarray:
+    """All combinations (the first grid name varies slowest) as rows of the free parameters;
+    parameters not in the grid keep the scene's defaults."""
+    base = np.array(module.PARAM_DEFAULTS, dtype=np.float64)
+    axes = [grid[name] for name in grid]
+    mesh = np.meshgrid(*axes, indexing="ij") if axes else []
+    n = int(np.prod([a.size for a in axes])) if axes else 1
+    P = np.tile(base, (n, 1))
+    for name, values in zip(grid, mesh):
+        P[:, module.PARAM_NAMES.index(name)] = values.ravel()
+    return P
+
+
+def sample_cases(module: ModuleType, samples: int, ranges: dict, seed: int) -> np.ndarray:
+    """``samples`` rows, each ranged parameter uniform in [lo, hi) (numpy default_rng(seed))."""
+    if samples < 1:
+        raise SweepInputError(f"--samples {samples}: must be >= 1")
+    if not ranges:
+        raise SweepInputError("--samples needs at least one --range NAME=LO:HI")
+    rng = np.random.default_rng(seed)
+    P = np.tile(np.array(module.PARAM_DEFAULTS, dtype=np.float64), (samples, 1))
+    for name, (lo, hi) in ranges.items():
+        P[:, module.PARAM_NAMES.index(name)] = rng.uniform(lo, hi, samples)
+    return P
+
+
+def _full_parameters(module: ModuleType, P: np.ndarray) -> np.ndarray:
+    """Free parameters plus latch slots (inf), as parameter_vector builds them."""
+    latches = len(getattr(module, "LATCH_NAMES", ()))
+    return np.ascontiguousarray(np.hstack([P, np.full((P.shape[0], latches), np.inf)]))
+
+
+def run_cases(module: ModuleType, P: np.ndarray, run: dict):
+    """Integrate every row of P (free parameters) in one parallel batch; a DataFrame."""
+    import pandas as pd
+
+    if P.size:
+        parameter_vector(module, dict(zip(module.PARAM_NAMES, P[0])))  # validates the names
+    n = len(module.STATES)
+    y0 = np.array([run["x1"], run["v1"]][2 - n:], dtype=np.float64)
+    quad = np.array([run["x1"]]) if n == 1 else np.empty(0)
+    cases = P.shape[0]
+    out_f = np.full((cases, batch.N_F), np.nan)
+    out_i = np.zeros((cases, batch.N_I), np.int64)
+    seq = np.full((cases, SEQ_LEN), -1, np.int64)
+    jac = module.jac if run["method"] == "rosenbrock23" else segment.no_jacobian
+    if cases:
+        batch.run_batch(METHODS[run["method"]], module.rhs, jac, module.guards, module.observe,
+                        _full_parameters(module, P), modes.tables(module), y0, quad, run["t_end"],
+                        run["rtol"], np.full(n, run["atol"]), run["hmax"], run["max_steps"],
+                        run["max_events"], len(module.OBSERVABLES), out_f, out_i, seq)
+    letters = [REGIME_LETTERS.get(r, "?") for r in module.MODE_REGIME]
+    regimes, mode_codes = [], []
+    for c in range(cases):
+        k = int(out_i[c, batch.I_NMODES])
+        idx = seq[c, :min(k, SEQ_LEN)].tolist()
+        more = "…" if k > SEQ_LEN else ""
+        regimes.append("".join(letters[m] for m in idx) + more)
+        mode_codes.append(" ".join(map(str, idx)) + (" " + more if more else ""))
+    KD1 = np.full(cases, np.nan)
+    KD2 = np.full(cases, np.nan)
+    if module.HAS_LOAD_FACTORS:
+        for c in range(cases):
+            KD1[c], KD2[c] = module.load_factors(out_f[c, batch.F_S1M], out_f[c, batch.F_S2M],
+                                                 _full_parameters(module, P[c:c + 1])[0])
+    columns = {name: P[:, j] for j, name in enumerate(module.PARAM_NAMES)}
+    columns.update({
+        "status": [STATUS_NAMES[int(s)] for s in out_i[:, batch.I_STATUS]],
+        "t_stop": out_f[:, batch.F_T_STOP], "S1m": out_f[:, batch.F_S1M], "tS1m": out_f[:, batch.F_TS1M],
+        "S2m": out_f[:, batch.F_S2M], "tS2m": out_f[:, batch.F_TS2M], "KD1": KD1, "KD2": KD2,
+        "x1": out_f[:, batch.F_X1], "v1": out_f[:, batch.F_V1], "regimes": regimes, "modes": mode_codes,
+        "n_events": out_i[:, batch.I_EVENTS], "steps": out_i[:, batch.I_STEPS],
+        "rejected": out_i[:, batch.I_REJECTED], "nfev": out_i[:, batch.I_RHS], "njev": out_i[:, batch.I_JAC],
+    })
+    return pd.DataFrame(columns)
+
+
+def _chunk_task(scene: str, P: np.ndarray, run: dict):
+    """One chunk on a dask worker: load the module there, run the batch."""
+    return run_cases(load_module(scene), P, run)
+
+
+@dataclass
+class SweepOutcome:
+    """What a sweep did: the rows, the files written, chunks computed and skipped."""
+
+    table: object  # pandas.DataFrame
+    parquet: Path | None
+    csv: Path | None
+    computed: list[int] = field(default_factory=list)
+    skipped: list[int] = field(default_factory=list)
+    seconds: float = 0.0
+
+
+def _chunk_hash(module: ModuleType, run: dict, P: np.ndarray) -> str:
+    h = hashlib.sha256()
+    h.update(getattr(module, "SCENE_DIGEST", module.__name__).encode())
+    h.update(json.dumps(run, sort_keys=True, default=str).encode())
+    h.update(np.ascontiguousarray(P, dtype=np.float64).tobytes())
+    return h.hexdigest()[:16]
+
+
+def _parquet_bytes(table) -> bytes:
+    buffer = io.BytesIO()
+    table.to_parquet(buffer, index=False)
+    return buffer.getvalue()
+
+
+def sweep(model: str | ModuleType, P: np.ndarray, overrides: dict | None = None, *,
+          output: str | Path | None = None, chunk_size: int = DEFAULT_CHUNK, client=None,
+          progress: bool = False, scene_spec: str | None = None) -> SweepOutcome:
+    """Run the rows of P (free parameters of the scene, in PARAM_NAMES order).
+
+    output: a directory for chunks/ and SCENE-sweep.parquet/.csv (None: in memory only;
+    no resume). client: a dask.distributed Client to run the chunks on (its workers
+    load the module by ``scene_spec``, a shipped name or a module path).
+    """
+    import time
+
+    import pandas as pd
+
+    start = time.perf_counter()
+    module = model if isinstance(model, ModuleType) else load_module(model)
+    scene_spec = scene_spec or (model if isinstance(model, str) else module.SCENE)
+    run = settings(module, overrides or {})
+    P = np.ascontiguousarray(P, dtype=np.float64).reshape(-1, len(module.PARAM_NAMES))
+    if chunk_size < 1:
+        raise SweepInputError(f"--chunk-size {chunk_size}: must be >= 1")
+    bounds = [(a, min(a + chunk_size, P.shape[0])) for a in range(0, P.shape[0], chunk_size)]
+    out = Path(output) if output is not None else None
+    names = [f"chunk-{i:05d}-{_chunk_hash(module, run, P[a:b])}.parquet" for i, (a, b) in enumerate(bounds)]
+    tables: dict[int, object] = {}
+    outcome = SweepOutcome(table=None, parquet=None, csv=None)
+    todo = []
+    for i, name in enumerate(names):
+        if out is not None and (out / "chunks" / name).exists():
+            tables[i] = pd.read_parquet(out / "chunks" / name)
+            outcome.skipped.append(i)
+        else:
+            todo.append(i)
+
+    def finish(i, table):
+        if out is not None:
+            write_atomic(out / "chunks" / names[i], _parquet_bytes(table))
+        tables[i] = table
+        outcome.computed.append(i)
+
+    bar = None
+    if progress and todo:
+        from tqdm import tqdm
+
+        bar = tqdm(total=len(bounds), initial=len(outcome.skipped), unit="chunk", desc=module.SCENE)
+    if client is None:
+        for i in todo:
+            a, b = bounds[i]
+            finish(i, run_cases(module, P[a:b], run))
+            if bar:
+                bar.update()
+    elif todo:
+        from distributed import as_completed
+
+        futures = {client.submit(_chunk_task, scene_spec, P[bounds[i][0]:bounds[i][1]], run, pure=False): i
+                   for i in todo}
+        for future in as_completed(futures):
+            finish(futures[future], future.result())
+            if bar:
+                bar.update()
+    if bar:
+        bar.close()
+    frames = [tables[i] for i in range(len(bounds))]
+    outcome.table = (pd.concat(frames, ignore_index=True) if frames
+                     else run_cases(module, P[:0], run))
+    if out is not None:
+        stem = module.SCENE
+        outcome.parquet = write_atomic(out / f"{stem}-sweep.parquet", _parquet_bytes(outcome.table))
+        outcome.csv = write_atomic(out / f"{stem}-sweep.csv", outcome.table.to_csv(index=False))
+        write_atomic(out / f"{stem}-sweep.json", json.dumps({
+            "scene": module.SCENE, "scene_digest": getattr(module, "SCENE_DIGEST", None), "settings": run,
+            "cases": int(P.shape[0]), "chunk_size": chunk_size, "chunks": names,
+            "columns": list(outcome.table.columns)}, indent=2, default=str))
+    outcome.seconds = time.perf_counter() - start
+    return outcome

@@ -1,0 +1,116 @@
+"""The ``tswm sweep`` and ``tswm bench`` subcommands (argument parsing only; the work is
+imported when a command runs)."""
+from __future__ import annotations
+
+import argparse
+
+
+def _sweep(args: argparse.Namespace) -> int:
+    from tswm_runtime.cli import SETTING_OPTIONS, UsageError, _load_model
+    from tswm_runtime.simulate import SimulationInputError
+    from tswm_runtime.sweep import SweepInputError, grid_cases, parse_grid, parse_ranges, sample_cases, sweep
+
+    module = _load_model(args.scene)
+    try:
+        if args.grid and args.samples is not None:
+            raise SweepInputError("give either --grid or --samples with --range, not both")
+        if args.range and args.samples is None:
+            raise SweepInputError("--range needs --samples N")
+        if args.samples is not None:
+            P = sample_cases(module, args.samples, parse_ranges(args.range, module), args.seed)
+        elif args.grid:
+            P = grid_cases(module, parse_grid(args.grid, module))
+        else:
+            raise SweepInputError("give --grid NAME=START:STOP:COUNT ... or --samples N --range NAME=LO:HI ...")
+        overrides = {"t_end": args.t_end, "rtol": args.rtol, "atol": args.atol, "method": args.method,
+                     "max_steps": args.max_steps, "max_events": args.max_events}
+        client = cluster = None
+        if args.scheduler:
+            from distributed import Client, LocalCluster
+
+            if args.scheduler == "local":
+                cluster = LocalCluster(n_workers=1, threads_per_worker=1, processes=False,
+                                       dashboard_address=None)
+                client = Client(cluster)
+            else:
+                client = Client(args.scheduler)
+        try:
+            outcome = sweep(module, P, overrides, output=args.output, chunk_size=args.chunk_size,
+                            client=client, progress=not args.no_progress, scene_spec=args.scene)
+        finally:
+            if client is not None:
+                client.close()
+            if cluster is not None:
+                cluster.close()
+    except SweepInputError as error:
+        raise UsageError(str(error)) from None
+    except SimulationInputError as error:
+        message = str(error)
+        key = message.split(" = ", 1)[0]
+        if key in SETTING_OPTIONS:
+            message = f"{SETTING_OPTIONS[key]}: {message}"
+        raise UsageError(message) from None
+    table = outcome.table
+    n = len(table)
+    print(f"scene {module.SCENE}: {n} cases in {outcome.seconds:.3g} s "
+          f"({n / outcome.seconds if outcome.seconds else 0:.4g} cases/s incl. load and writing); "
+          f"chunks computed {len(outcome.computed)}, reused {len(outcome.skipped)}")
+    counts = table["status"].value_counts()
+    print("  status: " + ", ".join(f"{k} {v}" for k, v in counts.items()))
+    regimes = table["regimes"].value_counts().head(8)
+    print("  regime codes (T tractive, I inverse-tractive, S stick, A/B backward, F phi = 0): "
+          + ", ".join(f"{k or '-'} {v}" for k, v in regimes.items()))
+    if outcome.parquet:
+        print(f"  wrote {outcome.parquet}\n  wrote {outcome.csv}")
+    return 0
+
+
+def _bench(args: argparse.Namespace) -> int:
+    from tswm_runtime import bench
+
+    return bench.main(quick=args.quick, output=args.output, cases=args.cases)
+
+
+def add_parsers(sub) -> None:
+    """Add ``sweep`` and ``bench`` to the ``tswm`` subparsers."""
+    sweep = sub.add_parser(
+        "sweep", help="run a scene over a grid or random samples of its free parameters, in parallel",
+        description="Run a scene over a grid (--grid) or seeded random samples (--samples, --range) of "
+                    "its free parameters on all cores; one row per case (parameters, status, S1/S2 "
+                    "maxima, KD1/KD2, final state, regime code, counts) in DIR/SCENE-sweep.parquet "
+                    "and .csv. Work is done in chunks written to DIR/chunks/; a rerun skips finished "
+                    "chunks. Exit status 2: bad input.")
+    sweep.add_argument("scene", help="a shipped scene name or a generated module's .py path")
+    sweep.add_argument("--grid", action="append", default=[], metavar="NAME=START:STOP:COUNT",
+                       help="COUNT values from START to STOP (both included), or NAME=VALUE; repeatable: "
+                            "all combinations")
+    sweep.add_argument("--samples", type=int, metavar="N", help="N random cases (with --range)")
+    sweep.add_argument("--range", action="append", default=[], metavar="NAME=LO:HI",
+                       help="with --samples: NAME uniform in [LO, HI); repeatable")
+    sweep.add_argument("--seed", type=int, default=0, help="random seed for --samples (default 0)")
+    sweep.add_argument("-o", "--output", metavar="DIR", help="write DIR/chunks/, DIR/SCENE-sweep.parquet, "
+                       ".csv and .json (without -o: print the summary only, no resume)")
+    sweep.add_argument("--chunk-size", type=int, default=512, metavar="N", help="cases per chunk (default 512)")
+    sweep.add_argument("--scheduler", metavar="ADDRESS",
+                       help="run the chunks on a dask.distributed scheduler at ADDRESS; 'local' starts a "
+                            "LocalCluster in this process")
+    sweep.add_argument("--t-end", type=float, metavar="T", help="end time [s] (default: the scene's)")
+    sweep.add_argument("--rtol", type=float, metavar="R", help="relative tolerance (default: the scene's)")
+    sweep.add_argument("--atol", type=float, metavar="A", help="absolute tolerance (default: the scene's)")
+    sweep.add_argument("--method", choices=("dopri5", "rosenbrock23"), help="integrator (default: the scene's)")
+    sweep.add_argument("--max-steps", type=int, metavar="N", help="step attempts per case (default: the scene's)")
+    sweep.add_argument("--max-events", type=int, metavar="N", help="event log size per case (default: 1000)")
+    sweep.add_argument("--no-progress", action="store_true", help="no progress bar")
+    sweep.set_defaults(run=_sweep)
+    bench = sub.add_parser(
+        "bench", help="work-precision benchmark against scipy and SUNDIALS, and sweep throughput",
+        description="Error against a high-accuracy reference versus wall time per scene for tswm and "
+                    "peers (scipy solve_ivp, CVODE via scikit-sundae), and sweep throughput. Writes a "
+                    "Markdown report, CSV tables and plots.")
+    bench.add_argument("--quick", action="store_true",
+                       help="smoke run: one scene, two tolerances, one peer (a few seconds)")
+    bench.add_argument("-o", "--output", default="tswm-report/bench", metavar="DIR",
+                       help="output directory (default tswm-report/bench)")
+    bench.add_argument("--cases", type=int, default=1000, metavar="N",
+                       help="cases in the sweep-throughput run (default 1000)")
+    bench.set_defaults(run=_bench)
