@@ -288,6 +288,9 @@ def integrate_hybrid(method, rhs, jac, guards, observe, p, tables, t0, y0, quad,
         if seg_status != segment.EVENT:
             status = FINISHED if seg_status == segment.REACHED_END else seg_status
             break
+        if same >= MAX_SAME_TIME:
+            status = CHATTERING
+            break
         if n_ev == ev_t.size:
             status = TOO_MANY_EVENTS
             break
@@ -298,12 +301,11 @@ def integrate_hybrid(method, rhs, jac, guards, observe, p, tables, t0, y0, quad,
                                     y_tmp, f)
         if status == FINISHED and not _consistent(new, guards, t, y, p, tables, g):
             status = INCONSISTENT
+        if status == FINISHED and new == mode and kind == G_PHI:
+            continue  # phi crossed within its noise (the probe keeps the flank): no event
         n_ev = _log(ev_t, ev_i, ev_y, n_ev, t, k, mode, new if status == FINISHED else -1, y, q)
         if status != FINISHED:
             mode = new if status == INCONSISTENT else mode
-            break
-        if same >= MAX_SAME_TIME:
-            status = CHATTERING
             break
         mode = new
         if t == t_end:
