@@ -14,6 +14,8 @@ from derivation.scene import load_scene, shipped_scenes
 from tswm_runtime import signatures
 from tswm_runtime.cli import main
 from tswm_runtime.contract import check_module, load_module
+from tswm_runtime.paper_gear import kloss, rho as rho_paper
+from hard_cases.reference import printed as hand_literal
 
 GENERATED = Path(__file__).resolve().parents[1] / "generated"
 G = math.radians(4.76)
@@ -57,15 +59,6 @@ def test_hand_edited_module_is_refused_unless_forced(tmp_path, capsys):
 
 
 # ---- the paper scene against formulas written out by hand -------------------------------
-
-def kloss(v):
-    slip, slip_max = 7.85 - v, 7.85 - 6.5
-    return 2 * 2178 * slip * slip_max / (slip ** 2 + slip_max ** 2)
-
-
-def rho_paper(v):
-    return math.radians(1 / (0.161 * (abs(v) / math.cos(G)) ** 0.535 + 0.088))
-
 
 def hand_sliding(f, s, F1, F2, rho, m1, m2, gamma):
     psi = math.tan(gamma + f * s * rho)
@@ -272,14 +265,6 @@ preload = "100 N"
 [modes]
 include = ["forward", "sliding"]
 """
-
-
-def hand_literal(f, F1, F2, rho, m1, m2, gamma):
-    """The paper's eqs. (6), (8), (9) as printed, flank a with Psi_1, b with Psi_2."""
-    psi = math.tan(gamma + f * rho)
-    a = (F1 - F2 * psi) / (m1 - m2 * psi * math.tan(gamma))
-    S1 = F1 - m1 * a
-    return a, S1, S1 / psi
 
 
 def test_literal_slide_mode_equals_filippov_by_hand(tmp_path):

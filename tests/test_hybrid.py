@@ -10,6 +10,7 @@ import math
 import numpy as np
 import pytest
 
+from tswm_runtime.paper_gear import cones
 from tswm_runtime.simulate import simulate
 
 SCENE = """
@@ -77,13 +78,6 @@ def mode_of(p, f, s, F2):
     return Mode(f, s, p["gamma"], p["friction_rho"], p["m1"], p["m2"], p["F0"], p["V0"], F2)
 
 
-def stick_cones(F1, F2, gamma, rho):
-    """(cone_forward, cone_backward) of the statics at rest, by hand."""
-    normal = F1 * math.sin(gamma) - F2 * math.cos(gamma)
-    tangential = F1 * math.cos(gamma) + F2 * math.sin(gamma)
-    return math.tan(rho) * abs(normal) - tangential, math.tan(rho) * abs(normal) + tangential
-
-
 @pytest.fixture(scope="module")
 def model(scene_module):
     return scene_module(SCENE)
@@ -124,7 +118,7 @@ def test_self_locking_wedge_stops_and_sticks(model):
     decel = a.alpha  # beta ~ 0: constant deceleration
     assert decel < 0
     t_rest = v0 / -decel
-    cone_f, cone_b = stick_cones(100.0, -3000.0, p["gamma"], p["friction_rho"])
+    cone_f, cone_b = cones(100.0, -3000.0, p["gamma"], p["friction_rho"])
     assert cone_f > 0 and cone_b > 0, "the statics must hold the wedge"
     r = simulate(model, p, v1=v0, **TIGHT)
     assert r.status == "finished", r.message
@@ -144,7 +138,7 @@ def test_non_locking_wedge_reverses_into_backward_sliding(model):
     v0 = 0.5
     fwd, bwd = mode_of(p, 1, 1, -3000.0), mode_of(p, 1, -1, -3000.0)
     t_rest = v0 / -fwd.alpha
-    assert stick_cones(100.0, -3000.0, p["gamma"], p["friction_rho"])[1] < 0, "the load must win backward"
+    assert cones(100.0, -3000.0, p["gamma"], p["friction_rho"])[1] < 0, "the load must win backward"
     r = simulate(model, p, v1=v0, **TIGHT)
     assert r.status == "finished", r.message
     assert [(e.guard, e.to_mode) for e in r.events] == [("v1", "bwd_a")]
@@ -156,8 +150,8 @@ def test_non_locking_wedge_reverses_into_backward_sliding(model):
 def test_load_step_breaks_a_stuck_wedge_away_at_the_step_time(model):
     p = params(gamma=math.radians(4), rho=math.radians(8), F0=500.0, V0=CONSTANT_DRIVE,
                F2_before=-3000.0, F2_after=-1000.0, t_step=0.1)
-    assert min(stick_cones(500.0, -3000.0, p["gamma"], p["friction_rho"])) > 0
-    assert stick_cones(500.0, -1000.0, p["gamma"], p["friction_rho"])[0] < 0
+    assert min(cones(500.0, -3000.0, p["gamma"], p["friction_rho"])) > 0
+    assert cones(500.0, -1000.0, p["gamma"], p["friction_rho"])[0] < 0
     after = mode_of(p, 1, 1, -1000.0)
     r = simulate(model, p, v1=0.0, **TIGHT)
     assert r.status == "finished", r.message

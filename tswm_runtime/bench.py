@@ -15,7 +15,7 @@ overhead (~115 us per call for the function-typed arguments) is not what is meas
 the simulate() time (validation, 1001 output points, Result) is reported beside it.
 
 The peer runner is written as a user would: the forward-sliding ODE from hand
-formulas (tests/hard_cases/reference.py's force balance), solve_ivp with terminal
+formulas (``paper_gear``), solve_ivp with terminal
 events for phi = 0 (flank switch) and v1 = 0 (rest), restarted after each event;
 at rest a stick test with the static friction cone; a known load step splits the
 time span. max |S1| is taken over the accepted steps and refined on the dense
@@ -28,7 +28,6 @@ from __future__ import annotations
 import json
 import math
 import os
-import platform
 import statistics
 import subprocess
 import sys
@@ -37,41 +36,17 @@ from pathlib import Path
 
 import numpy as np
 
-GAMMA = math.radians(4.76)
-TG = math.tan(GAMMA)
-M1 = 11.8
-FMAX, V0, VMAX = 2178.0, 7.85, 6.5
-
-
-# ---------------------------------------------------------------- hand formulas (peer)
-def kloss(v):
-    s, sk = V0 - v, V0 - VMAX
-    return 2 * FMAX * s * sk / (s * s + sk * sk)
-
-
-def rho(v):
-    return math.radians(1.0 / (0.161 * (abs(v) / math.cos(GAMMA)) ** 0.535 + 0.088))
-
-
-def accel(v, flank, F2, m2):
-    psi = math.tan(GAMMA + flank * rho(v))
-    return (kloss(v) + psi * F2) / (M1 + psi * m2 * TG)
+from tswm_runtime import provenance
+from tswm_runtime.paper_gear import GAMMA, accel, cones, kloss, phi, reactions, rho
 
 
 def S1(v, flank, F2, m2):
-    psi = math.tan(GAMMA + flank * rho(v))
-    return psi * (kloss(v) * m2 * TG - F2 * M1) / (M1 + m2 * TG * psi)
-
-
-def phi(v, F2, m2):
-    return kloss(v) * TG / M1 - F2 / m2
+    return reactions(v, flank, F2, m2)[0]
 
 
 def sticks(F2):
-    """At rest: T = F1 cos g + F2 sin g against tan(rho0) |F1 sin g - F2 cos g|."""
-    F1 = kloss(0.0)
-    T = F1 * math.cos(GAMMA) + F2 * math.sin(GAMMA)
-    return T <= math.tan(rho(0.0)) * abs(F1 * math.sin(GAMMA) - F2 * math.cos(GAMMA))
+    """At rest against F2: inside the forward static friction cone."""
+    return cones(kloss(0.0), F2, GAMMA, rho(0.0))[0] >= 0.0
 
 
 MAX_PEER_EVENTS = 100  # restarts after which a peer run is given up (spurious phi crossings)
@@ -199,7 +174,7 @@ def _tswm_case(scene, params, v1, rtol, method, n_cases, threads=1):
     import numba
 
     from tswm_runtime.contract import load_module
-    from tswm_runtime.simulate import simulate
+    from tswm_runtime.simulate import settings, simulate
     from tswm_runtime.sweep import run_cases
 
     module = load_module(scene)
@@ -212,7 +187,6 @@ def _tswm_case(scene, params, v1, rtol, method, n_cases, threads=1):
         t0 = time.perf_counter()
         simulate(module, p, **overrides)
         sim_times.append(time.perf_counter() - t0)
-    from tswm_runtime.simulate import settings
     run = settings(module, overrides)
     P = np.tile(np.array([p[k] for k in module.PARAM_NAMES]), (n_cases, 1))
     old = numba.get_num_threads()
@@ -247,27 +221,9 @@ def _peer_time(method, rtol, args, repeats):
 
 
 def machine() -> dict:
-    import numba
-    import scipy
-
-    info = {"python": sys.version.split()[0], "platform": platform.platform(),
-            "cpu": platform.processor() or platform.machine(), "cores": os.cpu_count(),
-            "numpy": np.__version__, "scipy": scipy.__version__, "numba": numba.__version__,
+    """The machine, the versions of the packages measured, numba's threading layer (set later)."""
+    return {**provenance.machine(), **provenance.package_versions(("numpy", "scipy", "numba", "scikit-sundae")),
             "numba_threading_layer": None}
-    try:
-        with open("/proc/cpuinfo") as f:
-            for line in f:
-                if line.startswith("model name"):
-                    info["cpu"] = line.split(":", 1)[1].strip()
-                    break
-    except OSError:
-        pass
-    try:
-        import sksundae
-        info["scikit-sundae"] = sksundae.__version__
-    except Exception:  # noqa: BLE001 - optional peer
-        info["scikit-sundae"] = "not installed"
-    return info
 
 
 def work_precision(scenes, tswm_tols, peer_tols, peers, n_cases, repeats, log=print):

@@ -52,8 +52,15 @@ class UsageError(ValueError):
 
 
 # simulate's setting names -> the option that sets them, for error messages
-SETTING_OPTIONS = {"t_end": "--t-end", "rtol": "--rtol", "atol": "--atol", "method": "--method",
-                   "points": "--points", "max_steps": "--max-steps", "max_events": "--max-events"}
+SETTING_OPTIONS = {  # run setting: (option, type, metavar, help)
+    "t_end": ("--t-end", float, "T", "end time [s] (default: the scene's)"),
+    "rtol": ("--rtol", float, "R", "relative tolerance (default: the scene's)"),
+    "atol": ("--atol", float, "A", "absolute tolerance (default: the scene's)"),
+    "method": ("--method", str, None, "integrator, dopri5 or rosenbrock23 (default: the scene's)"),
+    "points": ("--points", int, "N", "number of output points (default: 1001)"),
+    "max_steps": ("--max-steps", int, "N", "step attempts allowed per run (default: the scene's)"),
+    "max_events": ("--max-events", int, "N", "size of the event log per run (default: 1000)"),
+}
 MAX_EVENT_LINES = 40
 
 
@@ -82,6 +89,31 @@ def _load_model(scene: str):
                          f"run `tswm generate SCENE` or pass a module's .py path") from None
     except ContractError as error:
         raise UsageError(f"scene {scene!r}: {error}") from None
+
+
+def add_setting_options(parser: argparse.ArgumentParser, keys) -> None:
+    """The run-setting options (SETTING_OPTIONS) that simulate and sweep share."""
+    for key in keys:
+        option, kind, metavar, help_text = SETTING_OPTIONS[key]
+        if key == "method":
+            parser.add_argument(option, choices=("dopri5", "rosenbrock23"), help=help_text)
+        else:
+            parser.add_argument(option, type=kind, metavar=metavar, help=help_text)
+
+
+def setting_overrides(args: argparse.Namespace, keys) -> dict:
+    return {key: getattr(args, key) for key in keys}
+
+
+def setting_error(error: Exception, overrides: dict) -> UsageError:
+    """A SimulationInputError as a usage error naming the option (or the scene's [run] key)."""
+    message = str(error)
+    key = message.split(" = ", 1)[0]
+    if key in overrides and overrides[key] is None:
+        message = f"the scene's [run] setting {message}"
+    elif key in SETTING_OPTIONS:
+        message = f"{SETTING_OPTIONS[key][0]}: {message}"
+    return UsageError(message)
 
 
 def _parse_sets(items: list[str], module) -> dict:
@@ -160,19 +192,12 @@ def _simulate(args: argparse.Namespace) -> int:
     module = _load_model(args.scene)
     t_load = time.perf_counter() - start
     params = _parse_sets(args.set, module)
-    overrides = {"t_end": args.t_end, "rtol": args.rtol, "atol": args.atol, "method": args.method,
-                 "points": args.points, "max_steps": args.max_steps, "max_events": args.max_events}
+    overrides = setting_overrides(args, SETTING_OPTIONS)
     start = time.perf_counter()
     try:
         result = simulate(module, params, **overrides)
     except SimulationInputError as error:
-        message = str(error)
-        key = message.split(" = ", 1)[0]
-        if key in SETTING_OPTIONS and overrides[key] is None:
-            message = f"the scene's [run] setting {message}"
-        elif key in SETTING_OPTIONS:
-            message = f"{SETTING_OPTIONS[key]}: {message}"
-        raise UsageError(message) from None
+        raise setting_error(error, overrides) from None
     except ContractError as error:
         raise UsageError(f"scene {args.scene!r}: {error}") from None
     t_run = time.perf_counter() - start
@@ -213,7 +238,7 @@ def _parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="tswm", description="Derive, generate and simulate wedge mechanisms.")
     sub = parser.add_subparsers(dest="command", required=True)
     derive = sub.add_parser("derive", help="derive a scene's model and write the derivation document")
-    derive.add_argument("scene", help="a shipped scene name (paper, paper-literal, one-sided, asymmetric) or a .toml path")
+    derive.add_argument("scene", help="a shipped scene name (derivation/scenes/*.toml) or a .toml path")
     derive.add_argument("--latex", metavar="FILE.tex", help="write a standalone LaTeX document")
     derive.add_argument("--markdown", metavar="FILE.md", help="write the same document as Markdown with $$ math")
     derive.add_argument("--pdf", nargs="?", const=True, metavar="FILE.pdf",
@@ -236,13 +261,7 @@ def _parser() -> argparse.ArgumentParser:
                           help="a free parameter's value: a plain number in SI units (F2=-5000) or a "
                                "number with a unit of the parameter's quantity (F2='-5 kN', "
                                "m2='200 kg'); repeatable")
-    simulate.add_argument("--t-end", type=float, metavar="T", help="end time [s] (default: the scene's)")
-    simulate.add_argument("--rtol", type=float, metavar="R", help="relative tolerance (default: the scene's)")
-    simulate.add_argument("--atol", type=float, metavar="A", help="absolute tolerance (default: the scene's)")
-    simulate.add_argument("--method", choices=("dopri5", "rosenbrock23"), help="integrator (default: the scene's)")
-    simulate.add_argument("--points", type=int, metavar="N", help="number of output points (default: 1001)")
-    simulate.add_argument("--max-steps", type=int, metavar="N", help="step attempts allowed (default: the scene's)")
-    simulate.add_argument("--max-events", type=int, metavar="N", help="size of the event log (default: 1000)")
+    add_setting_options(simulate, SETTING_OPTIONS)
     simulate.add_argument("-o", "--output", metavar="DIR",
                           help="write DIR/SCENE.csv, SCENE.npz, SCENE-summary.json and SCENE.png")
     simulate.add_argument("--no-plot", action="store_true", help="with -o: do not write the PNG")

@@ -10,13 +10,10 @@ from __future__ import annotations
 import base64
 import json
 import math
-import os
-import platform
 import shutil
 import sys
 import time
 from dataclasses import dataclass
-from importlib import metadata
 from pathlib import Path
 from typing import Callable
 
@@ -27,12 +24,15 @@ from tswm_runtime.contract import load_module
 from tswm_runtime.export import jsonable
 from tswm_runtime.files import write_atomic
 from tswm_runtime.paper_data import F2_LISTED, FIGURE2, M2_LISTED, SOURCE, TABLE3_PRINTED, printed
+from tswm_runtime.paper_gear import cones
+from tswm_runtime.provenance import machine, package_versions
 from tswm_runtime.result import Result
 from tswm_runtime.simulate import simulate
 
 TOLERANCE = 0.05   # a computed value "agrees" with a printed one within 5 % and with the same sign
 NOISE = 1e-6      # a dissipation rate counts as negative below -NOISE * max |input power| of the run
 QUANTITIES = (("S1m", "S1_max", "N"), ("KD1", "KD1", ""), ("S2m", "S2_max", "N"), ("KD2", "KD2", ""))
+VERSIONED = ("tswm", "numpy", "scipy", "numba", "sympy", "jinja2", "matplotlib")
 FILES = {"md": "paper-report.md", "html": "paper-report.html", "json": "paper-report.json"}
 
 
@@ -114,9 +114,7 @@ def statics(module, F2: float) -> dict:
     gamma = float(module.FIXED["gamma"])
     F1_0 = float(module.drive_force(0.0, y, p))
     rho0 = float(module.friction_angle(0.0, y, p))
-    normal = F1_0 * math.sin(gamma) - F2 * math.cos(gamma)
-    tangential = F1_0 * math.cos(gamma) + F2 * math.sin(gamma)
-    margin_hand = math.tan(rho0) * abs(normal) - tangential
+    margin_hand = cones(F1_0, F2, gamma, rho0)[0]
     margin_module = float(module.stick_conditions(0.0, y, p)[0])
     return {"F2": F2, "F1_0": F1_0, "rho0_deg": math.degrees(rho0), "gamma_deg": math.degrees(gamma),
             "breakaway_F1": math.tan(gamma + rho0) * abs(F2), "cone_margin_hand": margin_hand,
@@ -145,22 +143,6 @@ def energy_balance(result: Result, module) -> dict:
 
 
 # ---------------------------------------------------------------- the report
-
-def _versions() -> dict:
-    names = ("tswm", "numpy", "scipy", "numba", "sympy", "jinja2", "matplotlib")
-    versions = {"python": platform.python_version()}
-    for name in names:
-        try:
-            versions[name] = metadata.version(name)
-        except metadata.PackageNotFoundError:
-            versions[name] = "not installed"
-    return versions
-
-
-def _machine() -> dict:
-    return {"platform": platform.platform(), "machine": platform.machine(),
-            "processor": platform.processor() or "unknown", "cpus": os.cpu_count()}
-
 
 def derivation_document(out_dir: Path) -> dict:
     """Write the derivation of scene ``paper`` exactly as ``tswm derive paper`` does (the same
@@ -354,7 +336,7 @@ def build_report(out_dir: str | Path = "tswm-report", cases: list[tuple[float, f
         "source": SOURCE, "tolerance": TOLERANCE, "figure_case": {"m2": fig_case[0], "F2": fig_case[1]},
         "readings": [{"key": r.key, "label": r.label, "scene": r.scene, "title": r.title} for r in READINGS],
         "cases": rows, "checks": checks,
-        "settings": settings, "versions": _versions(), "machine": _machine(),
+        "settings": settings, "versions": package_versions(VERSIONED), "machine": machine(),
         "command": "tswm paper " + " ".join(sys.argv[2:]) if sys.argv[1:2] == ["paper"] else "tswm paper",
         "derivation": doc,
     }

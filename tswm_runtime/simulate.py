@@ -39,18 +39,40 @@ def _finite(field: str, value) -> float:
     return value
 
 
+def unknown_parameter(module: ModuleType, name: str) -> str:
+    """Why ``name`` cannot be set: the free parameters, and whether it is a fixed one."""
+    fixed = f"; {name} is fixed in this scene (make it free in the scene file)" if name in module.FIXED else ""
+    free = ", ".join(module.PARAM_NAMES) or "none"
+    return f"scene {module.SCENE!r} has no such free parameter (free: {free}){fixed}"
+
+
+def with_latches(module: ModuleType, P: np.ndarray) -> np.ndarray:
+    """Rows of free parameters extended by the module's latch slots (inf: not yet latched)."""
+    P = np.atleast_2d(np.asarray(P, dtype=np.float64))
+    latches = np.full((P.shape[0], len(getattr(module, "LATCH_NAMES", ()))), np.inf)
+    return np.ascontiguousarray(np.hstack([P, latches]))
+
+
 def parameter_vector(module: ModuleType, params: dict | None) -> np.ndarray:
     """The free parameters (scene defaults, overridden by ``params``) plus latches (inf)."""
     values = dict(zip(module.PARAM_NAMES, module.PARAM_DEFAULTS))
     for name, value in (params or {}).items():
         if name not in values:
-            fixed = f"; {name} is fixed in this scene (make it free in the scene file)" if name in module.FIXED else ""
-            free = ", ".join(module.PARAM_NAMES) or "none"
-            raise SimulationInputError(f"parameter {name!r}: scene {module.SCENE!r} has no such free "
-                                       f"parameter (free: {free}){fixed}")
+            raise SimulationInputError(f"parameter {name!r}: {unknown_parameter(module, name)}")
         values[name] = _finite(f"parameter {name}", value)
-    latches = getattr(module, "LATCH_NAMES", ())
-    return np.array([*values.values(), *(math.inf for _ in latches)], dtype=np.float64)
+    return with_latches(module, list(values.values()))[0]
+
+
+def initial_state(module: ModuleType, run: dict) -> tuple[np.ndarray, np.ndarray]:
+    """(y0, quad): the states at t = 0, and x1 as the quadrature's start if it is no state."""
+    n = len(module.STATES)
+    y0 = np.array([run["x1"], run["v1"]][2 - n:], dtype=np.float64)
+    return y0, (np.array([run["x1"]]) if n == 1 else np.empty(0))
+
+
+def jacobian(module: ModuleType, method: str):
+    """The model's jac for the Rosenbrock method; DOPRI5 never calls one."""
+    return module.jac if method == "rosenbrock23" else segment.no_jacobian
 
 
 def settings(module: ModuleType, overrides: dict) -> dict:
@@ -81,17 +103,15 @@ def simulate(model: str | ModuleType, params: dict | None = None, **overrides) -
     p = parameter_vector(module, params)
     run = settings(module, overrides)
     n = len(module.STATES)
-    y0 = np.array([run["x1"], run["v1"]][2 - n:], dtype=np.float64)
-    quad = np.array([run["x1"]]) if n == 1 else np.empty(0)
+    y0, quad = initial_state(module, run)
     width = n + quad.size
     t_out = np.linspace(0.0, run["t_end"], run["points"])
     y_out, mode_out = np.full((t_out.size, width), np.nan), np.empty(t_out.size, np.int64)
     cap = run["max_events"]
     ev_t, ev_i, ev_y = np.empty(cap), np.empty((cap, 3), np.int64), np.empty((cap, width))
     mon, counters = np.zeros((len(module.OBSERVABLES), 3)), np.zeros(segment.N_COUNTERS, np.int64)
-    jac = module.jac if run["method"] == "rosenbrock23" else segment.no_jacobian
     status, t_stop, n_ev, last, need, first = hybrid.integrate_hybrid(
-        METHODS[run["method"]], module.rhs, jac, module.guards, module.observe, p, modes.tables(module),
+        METHODS[run["method"]], module.rhs, jacobian(module, run["method"]), module.guards, module.observe, p, modes.tables(module),
         0.0, y0, quad, -1, run["t_end"], run["rtol"], np.full(n, run["atol"]), run["hmax"],
         run["max_steps"], t_out, y_out, mode_out, ev_t, ev_i, ev_y, mon, counters)
     keep = mode_out >= 0

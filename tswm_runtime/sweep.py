@@ -34,11 +34,11 @@ from types import ModuleType
 
 import numpy as np
 
-from tswm_runtime import batch, modes, segment
+from tswm_runtime import batch, modes
 from tswm_runtime.contract import load_module
 from tswm_runtime.files import write_atomic
 from tswm_runtime.result import STATUS_NAMES
-from tswm_runtime.simulate import METHODS, parameter_vector, settings
+from tswm_runtime.simulate import METHODS, initial_state, jacobian, settings, unknown_parameter, with_latches
 
 REGIME_LETTERS = {"tractive": "T", "inverse-tractive": "I", "stick": "S", "backward on flank a": "A",
                   "backward on flank b": "B", "sliding along phi = 0": "F"}
@@ -53,12 +53,8 @@ class SweepInputError(ValueError):
 
 
 def _free(module: ModuleType, name: str, option: str) -> None:
-    if name in module.PARAM_NAMES:
-        return
-    free = ", ".join(module.PARAM_NAMES) or "none"
-    fixed = f"; {name} is fixed in this scene (make it free in the scene file)" if name in module.FIXED else ""
-    raise SweepInputError(f"{option} {name!r}: scene {module.SCENE!r} has no such free parameter "
-                          f"(free: {free}){fixed}")
+    if name not in module.PARAM_NAMES:
+        raise SweepInputError(f"{option} {name!r}: {unknown_parameter(module, name)}")
 
 
 def _number(text: str, what: str) -> float:
@@ -140,30 +136,20 @@ def sample_cases(module: ModuleType, samples: int, ranges: dict, seed: int) -> n
     return P
 
 
-def _full_parameters(module: ModuleType, P: np.ndarray) -> np.ndarray:
-    """Free parameters plus latch slots (inf), as parameter_vector builds them."""
-    latches = len(getattr(module, "LATCH_NAMES", ()))
-    return np.ascontiguousarray(np.hstack([P, np.full((P.shape[0], latches), np.inf)]))
-
-
 def run_cases(module: ModuleType, P: np.ndarray, run: dict):
     """Integrate every row of P (free parameters) in one parallel batch; a DataFrame."""
     import pandas as pd
 
-    if P.size:
-        parameter_vector(module, dict(zip(module.PARAM_NAMES, P[0])))  # validates the names
-    n = len(module.STATES)
-    y0 = np.array([run["x1"], run["v1"]][2 - n:], dtype=np.float64)
-    quad = np.array([run["x1"]]) if n == 1 else np.empty(0)
+    y0, quad = initial_state(module, run)
+    full = with_latches(module, P)
     cases = P.shape[0]
     out_f = np.full((cases, batch.N_F), np.nan)
     out_i = np.zeros((cases, batch.N_I), np.int64)
     seq = np.full((cases, SEQ_LEN), -1, np.int64)
-    jac = module.jac if run["method"] == "rosenbrock23" else segment.no_jacobian
     if cases:
-        batch.run_batch(METHODS[run["method"]], module.rhs, jac, module.guards, module.observe,
-                        _full_parameters(module, P), modes.tables(module), y0, quad, run["t_end"],
-                        run["rtol"], np.full(n, run["atol"]), run["hmax"], run["max_steps"],
+        batch.run_batch(METHODS[run["method"]], module.rhs, jacobian(module, run["method"]), module.guards,
+                        module.observe, full, modes.tables(module), y0, quad, run["t_end"],
+                        run["rtol"], np.full(y0.size, run["atol"]), run["hmax"], run["max_steps"],
                         run["max_events"], len(module.OBSERVABLES), out_f, out_i, seq)
     letters = [REGIME_LETTERS.get(r, "?") for r in module.MODE_REGIME]
     regimes, mode_codes = [], []
@@ -177,8 +163,7 @@ def run_cases(module: ModuleType, P: np.ndarray, run: dict):
     KD2 = np.full(cases, np.nan)
     if module.HAS_LOAD_FACTORS:
         for c in range(cases):
-            KD1[c], KD2[c] = module.load_factors(out_f[c, batch.F_S1M], out_f[c, batch.F_S2M],
-                                                 _full_parameters(module, P[c:c + 1])[0])
+            KD1[c], KD2[c] = module.load_factors(out_f[c, batch.F_S1M], out_f[c, batch.F_S2M], full[c])
     columns = {name: P[:, j] for j, name in enumerate(module.PARAM_NAMES)}
     columns.update({
         "status": [STATUS_NAMES[int(s)] for s in out_i[:, batch.I_STATUS]],

@@ -4,13 +4,16 @@ from __future__ import annotations
 
 import argparse
 
+SWEEP_SETTINGS = ("t_end", "rtol", "atol", "method", "max_steps", "max_events")
+
 
 def _sweep(args: argparse.Namespace) -> int:
-    from tswm_runtime.cli import SETTING_OPTIONS, UsageError, _load_model
+    from tswm_runtime.cli import UsageError, _load_model, setting_error, setting_overrides
     from tswm_runtime.simulate import SimulationInputError
     from tswm_runtime.sweep import SweepInputError, grid_cases, parse_grid, parse_ranges, sample_cases, sweep
 
     module = _load_model(args.scene)
+    overrides = setting_overrides(args, SWEEP_SETTINGS)
     try:
         if args.grid and args.samples is not None:
             raise SweepInputError("give either --grid or --samples with --range, not both")
@@ -22,8 +25,6 @@ def _sweep(args: argparse.Namespace) -> int:
             P = grid_cases(module, parse_grid(args.grid, module))
         else:
             raise SweepInputError("give --grid NAME=START:STOP:COUNT ... or --samples N --range NAME=LO:HI ...")
-        overrides = {"t_end": args.t_end, "rtol": args.rtol, "atol": args.atol, "method": args.method,
-                     "max_steps": args.max_steps, "max_events": args.max_events}
         client = cluster = None
         if args.scheduler:
             from distributed import Client, LocalCluster
@@ -45,11 +46,7 @@ def _sweep(args: argparse.Namespace) -> int:
     except SweepInputError as error:
         raise UsageError(str(error)) from None
     except SimulationInputError as error:
-        message = str(error)
-        key = message.split(" = ", 1)[0]
-        if key in SETTING_OPTIONS:
-            message = f"{SETTING_OPTIONS[key]}: {message}"
-        raise UsageError(message) from None
+        raise setting_error(error, overrides) from None
     table = outcome.table
     n = len(table)
     print(f"scene {module.SCENE}: {n} cases in {outcome.seconds:.3g} s "
@@ -73,6 +70,8 @@ def _bench(args: argparse.Namespace) -> int:
 
 def add_parsers(sub) -> None:
     """Add ``sweep`` and ``bench`` to the ``tswm`` subparsers."""
+    from tswm_runtime.cli import add_setting_options
+
     sweep = sub.add_parser(
         "sweep", help="run a scene over a grid or random samples of its free parameters, in parallel",
         description="Run a scene over a grid (--grid) or seeded random samples (--samples, --range) of "
@@ -94,12 +93,7 @@ def add_parsers(sub) -> None:
     sweep.add_argument("--scheduler", metavar="ADDRESS",
                        help="run the chunks on a dask.distributed scheduler at ADDRESS; 'local' starts a "
                             "LocalCluster in this process")
-    sweep.add_argument("--t-end", type=float, metavar="T", help="end time [s] (default: the scene's)")
-    sweep.add_argument("--rtol", type=float, metavar="R", help="relative tolerance (default: the scene's)")
-    sweep.add_argument("--atol", type=float, metavar="A", help="absolute tolerance (default: the scene's)")
-    sweep.add_argument("--method", choices=("dopri5", "rosenbrock23"), help="integrator (default: the scene's)")
-    sweep.add_argument("--max-steps", type=int, metavar="N", help="step attempts per case (default: the scene's)")
-    sweep.add_argument("--max-events", type=int, metavar="N", help="event log size per case (default: 1000)")
+    add_setting_options(sweep, SWEEP_SETTINGS)
     sweep.add_argument("--no-progress", action="store_true", help="no progress bar")
     sweep.set_defaults(run=_sweep)
     bench = sub.add_parser(

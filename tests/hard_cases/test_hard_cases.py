@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from tests.hard_cases import reference as ref
+from hard_cases import reference as ref
+from tswm_runtime import paper_gear as gear
 from tswm_runtime.simulate import simulate
 
 PAPER = Path(__file__).parents[2] / "derivation" / "scenes" / "paper.toml"
@@ -23,11 +24,11 @@ def test_table3_as_printed_sticks_in_the_consistent_model(m2, F2):
     against every Table 3 load (1445 N for F2 = -5000 N), so the gear never moves: one
     stick phase, S1 = F1(0), S2 = F2 from statics. The paper's dynamic numbers for these
     scenes cannot come from the consistent model; its report says so (issue 5)."""
-    assert ref.kloss(0.0) < ref.breakaway_F1(F2)
+    assert gear.kloss(0.0) < gear.breakaway_F1(F2)
     r = simulate("paper", {"m2": m2, "F2": F2})
     assert r.status == "finished", r.message
     assert [ph.regime for ph in r.phases] == ["stick"] and r.events == []
-    assert r.S1_max == pytest.approx(ref.kloss(0.0), rel=1e-12)
+    assert r.S1_max == pytest.approx(gear.kloss(0.0), rel=1e-12)
     assert r.S2_max == pytest.approx(F2, rel=1e-12)
     assert np.all(r.v1 == 0.0)
 
@@ -44,7 +45,7 @@ def test_run_up_then_load_stays_tractive_and_matches_the_reference(F2):
     t_ref, v_ref, sw2 = ref.run_flanks(v_free[-1], 0.3, 1.0, F2, 200.0, t_eval=[0.5, 1.0])
     assert sw1 == [] and sw2 == []
     assert r.v1[-1] == pytest.approx(v_ref[-1], rel=1e-8)
-    assert r.S2_max == pytest.approx(min(ref.S2(v, 1, F2, 200.0) for v in np.linspace(v_ref[-1], v_free[-1], 2001)),
+    assert r.S2_max == pytest.approx(min(gear.reactions(v, 1, F2, 200.0)[1] for v in np.linspace(v_ref[-1], v_free[-1], 2001)),
                                      rel=1e-5)
 
 
@@ -75,7 +76,7 @@ def test_decelerating_gear_comes_to_rest_and_self_locks(method):
     assert [(e.guard, e.to_mode) for e in r.events] == [("v1", "stick")]
     stop = lambda t, y: y[0]  # noqa: E731
     stop.terminal = True
-    sol = solve_ivp(lambda t, y: [ref.accel(y[0], 1, -15000.0, 200.0)], (0, 1), [2.0], events=stop, **ref.TIGHT)
+    sol = solve_ivp(lambda t, y: [gear.accel(y[0], 1, -15000.0, 200.0)], (0, 1), [2.0], events=stop, **ref.TIGHT)
     accuracy = 1e-9 if method == "dopri5" else 1e-6
     assert r.events[0].t == pytest.approx(sol.t_events[0][0], rel=accuracy)
     assert np.all(r.v1[r.t > r.events[0].t] == 0.0)
@@ -85,11 +86,11 @@ def test_start_exactly_on_phi_zero_picks_the_flank_phi_moves_to():
     """F2 chosen so that phi(v1 = 7 m/s) = 0 at the start: v1 grows, F1 falls, phi turns
     negative, so the gear must start on flank b (inverse-tractive) with no event."""
     v0 = 7.0
-    F2 = 200.0 * ref.kloss(v0) * math.tan(ref.GAMMA) / ref.M1
+    F2 = 200.0 * gear.kloss(v0) * math.tan(gear.GAMMA) / gear.M1
     r = simulate("paper", {"F2": F2}, v1=v0, rtol=1e-10, atol=1e-12)
     assert r.status == "finished", r.message
     assert r.events == [] and r.phases[0].regime == "inverse-tractive"
-    sol = solve_ivp(lambda t, y: [ref.accel(y[0], -1, F2, 200.0)], (0, 1), [v0], **ref.TIGHT)
+    sol = solve_ivp(lambda t, y: [gear.accel(y[0], -1, F2, 200.0)], (0, 1), [v0], **ref.TIGHT)
     assert r.v1[-1] == pytest.approx(sol.y[0, -1], rel=1e-9)
 
 
@@ -98,8 +99,8 @@ def test_over_heavy_driven_body_is_inconsistent_and_says_why():
     gamma, so D = m1 + m2 tan(gamma) tan(gamma - rho) < 0: no contact force fits the
     constraint (Painleve). Status 'inconsistent', naming the mode and the masses."""
     v0, m2, F2 = 0.05, 5000.0, 30000.0
-    assert ref.phi(v0, F2, m2) < 0
-    D = ref.M1 + m2 * math.tan(ref.GAMMA) * math.tan(ref.GAMMA - ref.rho_paper(v0))
+    assert gear.phi(v0, F2, m2) < 0
+    D = gear.M1 + m2 * math.tan(gear.GAMMA) * math.tan(gear.GAMMA - gear.rho(v0))
     assert D < 0
     r = simulate("paper", {"m2": m2, "F2": F2}, v1=v0)
     assert r.status == "inconsistent"
@@ -110,13 +111,13 @@ def test_speed_at_and_above_synchronous_speed():
     """v1 = V0 with F2 = 0 is an equilibrium (F1 = 0 in the safe Kloss form; the textbook
     form divides by zero): no event, v1 stays V0. From 8 m/s the motor brakes as a
     generator (F1 < 0, phi < 0: flank b) and v1 settles to V0 from above, no switch."""
-    r = simulate("paper", {"F2": 0.0}, v1=ref.V0)
+    r = simulate("paper", {"F2": 0.0}, v1=gear.V0)
     assert r.status == "finished" and r.events == []
-    np.testing.assert_allclose(r.v1, ref.V0, rtol=1e-12)
+    np.testing.assert_allclose(r.v1, gear.V0, rtol=1e-12)
     r = simulate("paper", {"F2": 0.0}, v1=8.0)
     assert r.status == "finished" and r.events == [], r.events
     assert r.phases[0].regime == "inverse-tractive"
-    assert r.v1[-1] == pytest.approx(ref.V0, rel=1e-6)
+    assert r.v1[-1] == pytest.approx(gear.V0, rel=1e-6)
 
 
 @pytest.mark.parametrize("method", ["dopri5", "rosenbrock23"])
@@ -124,7 +125,7 @@ def test_breakaway_with_the_non_lipschitz_friction_law(method):
     """From rest against F2 = -1000 N the drive exceeds the static cone at once; rho(v) ~
     |v|^0.535 is not Lipschitz at 0 (d rho/dv unbounded). Both methods must start, and
     agree with the reference started at v1 = 1e-12."""
-    assert ref.kloss(0.0) > ref.breakaway_F1(-1000.0)
+    assert gear.kloss(0.0) > gear.breakaway_F1(-1000.0)
     r = simulate("paper", {"F2": -1000.0}, method=method, rtol=1e-9, atol=1e-12, points=11)
     assert r.status == "finished", r.message
     assert r.phases[0].regime == "tractive" and r.events == []
@@ -166,19 +167,16 @@ def test_torque_switch_seating_overshoots_and_self_locks():
     assert np.all(r.F1[held] == 0.0) and np.all(r.v1[held] == 0.0)
     assert np.all(r.S2[held] == r.F2[held])             # statics: the spring is held
     F2 = r.F2[held][0]
-    mu0 = math.tan(ref.rho_paper(0.0))
-    assert abs(F2 * math.sin(ref.GAMMA)) <= mu0 * abs(F2 * math.cos(ref.GAMMA))   # inside the cone
+    mu0 = math.tan(gear.rho(0.0))
+    assert abs(F2 * math.sin(gear.GAMMA)) <= mu0 * abs(F2 * math.cos(gear.GAMMA))   # inside the cone
 
 
 def _literal_phi(v, F2, m2):
-    """The paper's printed eq. (7), as printed: phi = F1/m1 - F2 tan(gamma)/m2."""
-    return ref.kloss(v) / ref.M1 - F2 * math.tan(ref.GAMMA) / m2
+    return ref.printed_phi(gear.kloss(v), F2, gear.M1, m2, gear.GAMMA)
 
 
 def _literal_accel(v, flank, F2, m2):
-    """The paper's printed eq. (6) with Psi = tan(gamma -/+ rho) on flank a/b, as printed."""
-    psi = math.tan(ref.GAMMA + flank * ref.rho_paper(v))
-    return (ref.kloss(v) - F2 * psi) / (ref.M1 - m2 * math.tan(ref.GAMMA) * psi)
+    return ref.printed(flank, gear.kloss(v), F2, gear.rho(v), gear.M1, m2, gear.GAMMA)[0]
 
 
 LITERAL_SLIDE = {"m2": 10.0, "F2": 9000.0}
