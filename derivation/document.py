@@ -149,6 +149,10 @@ def _laws_section(model: Model) -> Section:
     if model.scene.drive.kind == "kloss":
         s.text("The Kloss curve $2F_{max}/(s/s_{max} + s_{max}/s)$ is singular at synchronous speed ($s = 0$); "
                "brought over a common denominator, as above, it is regular there.")
+    for pieces in model.pieces:
+        s.text(f"The law is piecewise: ${_l(pieces.symbol)}$ is its {pieces.doc}, the number of the events below "
+               "whose function is $\\ge 0$. The runtime latches it at the start and after each of these events, "
+               "so inside a segment the law is one smooth piece and no integration step sees it jump.")
     for e in model.events:
         s.text(f"Event: {e.doc}, where ${_l(e.expr)}$ changes sign.")
     for latch in model.latches:

@@ -87,11 +87,12 @@ class Model:
     symbols: dict[str, sp.Symbol]        # parameter name -> symbol
     states: tuple[sp.Symbol, ...]        # (x1, v1), or (v1,) when no law reads x1
     laws: tuple[Quantity, ...]           # in evaluation order
-    events: tuple[laws.LawEvent, ...]    # where a law jumps
+    events: tuple[laws.LawEvent, ...]    # where a law jumps or kinks: the breakpoints of its pieces
     switching: sp.Expr                   # phi
     modes: tuple[Mode, ...]
     stick: StickConditions | None
-    latches: tuple[Latch, ...] = ()      # p = (free parameters..., latches...)
+    latches: tuple[Latch, ...] = ()      # p = (free parameters..., latches..., pieces...)
+    pieces: tuple[laws.Pieces, ...] = () # latched piece indices of the piecewise laws
 
     @property
     def params(self) -> tuple[Param, ...]:
@@ -125,28 +126,28 @@ def switching_rate(switching: sp.Expr, composed: dict) -> sp.Expr:
     return sp.diff(phi, t) + sp.diff(phi, x1) * v1 + sp.diff(phi, v1) * a1
 
 
-def _drive(scene: Scene) -> tuple[sp.Expr, str, tuple[Latch, ...]]:
-    """F1, its description, and the torque switch's latch: F1 is cut for good at t = t_trip."""
-    law = laws.drive_force(scene.drive, param_symbol)
+def _drive(scene: Scene, x2: sp.Symbol) -> tuple[sp.Expr, str, tuple[Latch, ...], laws.Pieces | None]:
+    """F1, its description, the torque switch's latch (F1 is cut for good at t = t_trip), its pieces."""
+    law, pieces = laws.drive_force(scene.drive, param_symbol, x2)
     if scene.torque_switch is None:
-        return law, f"drive force ({scene.drive.kind})", ()
+        return law, f"drive force ({scene.drive.kind})", (), pieces
     trip = Latch(T_TRIP, "torque_switch", param_symbol(scene.torque_switch) - S1, t < T_TRIP,
                  "the torque switch cuts the motor when S1 reaches S1_trip")
     return (sp.Piecewise((law, t < T_TRIP), (0, True)),
-            f"drive force ({scene.drive.kind}, cut by the torque switch at t = t_trip)", (trip,))
+            f"drive force ({scene.drive.kind}, cut by the torque switch at t = t_trip)", (trip,), pieces)
 
 
-def _laws(scene: Scene, rho_of: dict[str, sp.Symbol]) -> tuple[tuple[Quantity, ...], tuple[laws.LawEvent, ...],
+def _laws(scene: Scene, rho_of: dict[str, sp.Symbol]) -> tuple[tuple[Quantity, ...], tuple[laws.Pieces, ...],
                                                                  tuple[Latch, ...]]:
-    """The laws in evaluation order (x2 first when the load reads it), the load's events, the latches."""
+    """The laws in evaluation order (x2 first when a law reads it), their pieces, the latches."""
     slope = param_symbol(scene.gamma[scene.flanks[0]])
     x2 = sp.Symbol("x2", real=True)
-    load, events = laws.load_force(scene.load, param_symbol, x2)
+    load, load_pieces = laws.load_force(scene.load, param_symbol, x2)
+    drive, doc, latches, drive_pieces = _drive(scene, x2)
     quantities = []
-    if x2 in load.free_symbols:
+    if x2 in load.free_symbols | drive.free_symbols:
         x2_expr = mechanics.kinematics().x2_of_x1.subs(mechanics.gamma, slope)
         quantities.append(Quantity(x2, x2_expr, "position of body 2 (kinematic constraint)"))
-    drive, doc, latches = _drive(scene)
     quantities.append(Quantity(F1, drive, doc))
     quantities.append(Quantity(F2, load, f"load force ({scene.load.kind})"))
     done = set()
@@ -155,7 +156,7 @@ def _laws(scene: Scene, rho_of: dict[str, sp.Symbol]) -> tuple[tuple[Quantity, .
             done.add(rho_of[f])
             expr = laws.friction_angle(scene.friction[f], param_symbol, param_symbol(scene.gamma[f]))
             quantities.append(Quantity(rho_of[f], expr, f"friction angle ({scene.friction[f].kind})"))
-    return tuple(quantities), events, latches
+    return tuple(quantities), tuple(p for p in (drive_pieces, load_pieces) if p is not None), latches
 
 
 def _specialise(scene: Scene, flank: str, rho_of: dict[str, sp.Symbol]) -> dict:
@@ -232,7 +233,7 @@ def _slide_mode(scene: Scene, switching: sp.Expr, composed: dict, fwd_a: Mode, f
 def build_model(scene: Scene) -> Model:
     """Specialise the mechanics to ``scene``."""
     rho_of = _friction_symbols(scene)
-    quantities, events, latches = _laws(scene, rho_of)
+    quantities, pieces, latches = _laws(scene, rho_of)
     stick = None
     if scene.equations == "literal":
         modes, switching = _literal_modes(scene, rho_of)
@@ -248,5 +249,5 @@ def build_model(scene: Scene) -> Model:
     for q in quantities:     # a parameter may carry a law's name only if it is that law (constant F1, F2)
         assert str(q.symbol) not in symbols or q.expr == q.symbol, f"parameter {q.symbol} shadows the law {q.doc}"
     return Model(scene=scene, symbols=symbols, states=(x1, v1) if reads_x1 else (v1,),
-                 laws=quantities, events=events, switching=switching, modes=tuple(modes), stick=stick,
-                 latches=latches)
+                 laws=quantities, events=tuple(e for p in pieces for e in p.events), switching=switching,
+                 modes=tuple(modes), stick=stick, latches=latches, pieces=pieces)

@@ -9,7 +9,7 @@ import math
 import os
 import re
 import tomllib
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import NoReturn
 
@@ -43,9 +43,19 @@ class Param:
 
 @dataclass(frozen=True)
 class Law:
-    """A drive, load or friction law and its parameters, keyed by the law's own key names."""
+    """A drive, load or friction law and its parameters, keyed by the law's own key names.
+
+    A schedule (``kind == "schedule"``) has no keyed parameters but ``breakpoints`` and
+    ``values``, and ``options`` {"variable": "t" | "x2", "shape": "steps" | "linear"}.
+    """
     kind: str
     params: dict[str, Param]
+    options: dict[str, str] = field(default_factory=dict)
+    breakpoints: tuple[Param, ...] = ()
+    values: tuple[Param, ...] = ()
+
+    def all_params(self) -> tuple[Param, ...]:
+        return (*self.params.values(), *self.breakpoints, *self.values)
 
 
 @dataclass(frozen=True)
@@ -79,14 +89,15 @@ class Scene:
     source: str
     digest: str
     torque_switch: Param | None = None   # trip threshold S1_trip on S1 ([drive.torque_switch])
+    checks: tuple[tuple, ...] = ()       # the rules of every model parameter, as data (see Checks)
 
     def params(self) -> tuple[Param, ...]:
         """Every distinct model parameter once: wedge, friction, drive, torque switch, load, reference."""
         return tuple(dict.fromkeys((
             *self.gamma.values(), self.m1, self.m2,
-            *(p for law in self.friction.values() for p in law.params.values()),
-            *self.drive.params.values(), *([self.torque_switch] if self.torque_switch else []),
-            *self.load.params.values(), *self.reference.values(),
+            *(p for law in self.friction.values() for p in law.all_params()),
+            *self.drive.all_params(), *([self.torque_switch] if self.torque_switch else []),
+            *self.load.all_params(), *self.reference.values(),
         )))
 
     def free_params(self) -> tuple[Param, ...]:
@@ -113,11 +124,16 @@ FRICTION_LAWS = {
     "velocity": {"a": Rule("dimensionless", 0.0, lo_in=True),
                  "b": Rule("dimensionless", 0.0), "c": Rule("dimensionless", 0.0)},
 }
+SCHEDULE = {}  # "schedule" laws have the keys variable, shape, at, values (_Reader.schedule)
+SCHEDULE_VARIABLES = {"t": "time", "x2": "length"}
+SCHEDULE_SHAPES = ("steps", "linear")
+MAX_BREAKPOINTS = 1000
 DRIVE_LAWS = {
     "kloss": {"Fmax": Rule("force", 0.0), "V0": Rule("velocity", 0.0),
               "Vmax": Rule("velocity", 0.0, "V0")},
     "constant": {"F1": Rule("force")},
     "linear": {"F0": Rule("force"), "V0": Rule("velocity", 0.0)},
+    "schedule": SCHEDULE,
 }
 LOAD_LAWS = {
     "constant": {"F2": Rule("force")},
@@ -125,6 +141,7 @@ LOAD_LAWS = {
              "t_step": Rule("time", 0.0, lo_in=True)},
     "spring": {"k": Rule("stiffness", 0.0), "x2_contact": Rule("length"),
                "preload": Rule("force", 0.0, lo_in=True)},
+    "schedule": SCHEDULE,
 }
 TORQUE_SWITCH = Rule("force", 0.0)
 REFERENCE = {"Ft1": Rule("force", 0.0), "Ft2": Rule("force", 0.0)}
@@ -141,6 +158,11 @@ MAX_RHO = {
     "constant": ("rho", "friction angle rho", lambda p: p["rho"].value),
     "velocity": ("c", "rho(0) = 1/c deg", lambda p: DEG / p["c"].value),
 }
+
+
+def max_friction_angle(kind: str, value: float) -> float:
+    """The largest friction angle [rad] of a law from its MAX_RHO key's value (jam check)."""
+    return value if kind == "constant" else DEG / value
 
 
 def shipped_scenes() -> tuple[str, ...]:
@@ -225,6 +247,16 @@ class _Reader:
 
     def __init__(self, source: str):
         self.source = source
+        self.checks: list[tuple] = []   # Checks, as data: what a free value must satisfy at run time
+
+    def rule(self, param: Param, rule: Rule, siblings: dict[str, Param] | None) -> None:
+        """Record a parameter's rule as data: its range, and the sibling it must stay below."""
+        hi = rule.hi if not isinstance(rule.hi, str) else None
+        self.checks.append(("range", param.name, param.key, rule.lo, hi, rule.lo_in, rule.hi_in,
+                            _range(rule, hi, None)))
+        if isinstance(rule.hi, str):
+            other = siblings[rule.hi]
+            self.checks.append(("less", param.name, param.key, other.name, f"below {other.key}"))
 
     def fail(self, key: str, problem: str, value: str | None = None) -> NoReturn:
         where = key if value is None else f"{key} = {value}"
@@ -331,14 +363,65 @@ class _Reader:
             value, free = self.number(table, key, path, rule, siblings=out)
             out[key] = Param(prefix + key, value, units.si_unit(rule.quantity), free,
                              _join(path, key))
+            self.rule(out[key], rule, out)
         return out
 
     def law(self, table: dict, path: str, laws: dict[str, dict[str, Rule]],
             prefix: str = "", tables: tuple[str, ...] = ()) -> Law:
         """The law's kind and parameters; ``tables`` are sub-tables allowed beside its keys."""
         kind = self.text(table, "law", path, tuple(laws))
+        if laws[kind] is SCHEDULE:
+            self.keys(table, path, ("law", "variable", "shape", "at", "values", *tables))
+            return self.schedule(table, path)
         self.keys(table, path, ("law", *laws[kind], *tables))
         return Law(kind, self.params(table, path, laws[kind], prefix))
+
+    def array(self, table: dict, key: str, path: str, lo: int, hi: int) -> list:
+        """A list of lo..hi entries."""
+        dotted = _join(path, key)
+        count = f"{lo}" if lo == hi else f"{lo} to {hi}"
+        if key not in table:
+            self.fail(dotted, f"missing required key; expected a list of {count} values")
+        raw = table[key]
+        if not isinstance(raw, list) or not lo <= len(raw) <= hi:
+            size = f" ({len(raw)} entries)" if isinstance(raw, list) else ""
+            self.fail(dotted, f"must be a list of {count} values{size}", _toml(raw)[:200])
+        return raw
+
+    def schedule(self, table: dict, path: str) -> Law:
+        """A schedule in t or x2: breakpoints ``at`` (increasing) and ``values`` (forces)."""
+        owner = path                      # "load" or "drive"
+        force = {"load": "F2", "drive": "F1"}[owner]
+        variable = self.text(table, "variable", path, tuple(SCHEDULE_VARIABLES))
+        shape = self.text(table, "shape", path, SCHEDULE_SHAPES)
+        at_raw = self.array(table, "at", path, 1, MAX_BREAKPOINTS)
+        count = len(at_raw) + (1 if shape == "steps" else 0)
+        why = "one more than at (the value before the first breakpoint first)" if shape == "steps" else "one per breakpoint"
+        if not isinstance(table.get("values"), list) or len(table["values"]) != count:
+            self.array(table, "values", path, count, count)  # fails with the count
+        at_rule = Rule(SCHEDULE_VARIABLES[variable], 0.0 if variable == "t" else None, lo_in=True)
+        breakpoints: list[Param] = []
+        for i, raw in enumerate(at_raw):
+            key = f"at[{i}]"
+            value, free = self.number({key: raw}, key, path, at_rule)
+            param = Param(f"{owner}_at{i + 1}", value, units.si_unit(at_rule.quantity), free, f"{path}.{key}")
+            if breakpoints and not value > breakpoints[-1].value:
+                self.fail(param.key, f"breakpoints must increase strictly (after {breakpoints[-1].key} = "
+                                     f"{units.show(breakpoints[-1].value, at_rule.quantity)}; values: {why})",
+                          units.show(value, at_rule.quantity))
+            if at_rule.lo is not None:
+                self.rule(param, at_rule, None)
+            if breakpoints:
+                self.checks.append(("less", breakpoints[-1].name, breakpoints[-1].key, param.name,
+                                    f"below {param.key} (breakpoints increase)"))
+            breakpoints.append(param)
+        first = 0 if shape == "steps" else 1
+        values = []
+        for i, raw in enumerate(table["values"]):
+            key = f"values[{i}]"
+            value, free = self.number({key: raw}, key, path, Rule("force"))
+            values.append(Param(f"{force}_{first + i}", value, "N", free, f"{path}.{key}"))
+        return Law("schedule", {}, {"variable": variable, "shape": shape}, tuple(breakpoints), tuple(values))
 
     def only_modelled(self, table: dict, path: str, flank_of: dict[str, str],
                       flanks: tuple[str, ...]) -> None:
@@ -398,6 +481,8 @@ class _Reader:
         for flank, law in friction.items():
             key, label, max_rho = MAX_RHO[law.kind]
             slope, rho = gamma[flank].value, max_rho(law.params)
+            self.checks.append(("jam", gamma[flank].name, gamma[flank].key, law.params[key].name, law.kind,
+                                f"{gamma[flank].key} + {label} < 90 deg (else the wedge jams)"))
             if slope + rho >= 90 * DEG:
                 p = law.params[key]
                 self.fail(p.key, f"{gamma[flank].key} + {label} = "
@@ -413,7 +498,9 @@ class _Reader:
             return None
         self.keys(table, "drive.torque_switch", ("S1",))
         value, free = self.number(table, "S1", "drive.torque_switch", TORQUE_SWITCH)
-        return Param("S1_trip", value, units.si_unit("force"), free, "drive.torque_switch.S1")
+        param = Param("S1_trip", value, units.si_unit("force"), free, "drive.torque_switch.S1")
+        self.rule(param, TORQUE_SWITCH, None)
+        return param
 
     def modes(self, doc: dict, equations: str) -> tuple[str, ...]:
         table = self.table(doc, "modes", required=False) or {}
@@ -462,7 +549,7 @@ class _Reader:
                       "model switches between both flanks)", _toml(list(flanks)))
         scene = Scene(name, description, equations, flanks, gamma, masses["m1"], masses["m2"],
                       friction, drive, load, reference or {}, modes, self.run(doc),
-                      self.source, digest, torque_switch)
+                      self.source, digest, torque_switch, tuple(dict.fromkeys(self.checks)))
         names = [p.name for p in scene.params()]
         assert len(set(names)) == len(names) and all(n.isidentifier() for n in names), names
         return scene

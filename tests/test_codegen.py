@@ -119,13 +119,15 @@ def test_asymmetric_module_all_modes_equal_hand_formulas():
     for v in (-2.0, -0.3, 0.4, 5.0):
         y = np.array([v])
         for t, F2 in ((0.1, 0.0), (0.5, 3000.0)):
-            assert m.load_force(t, y, np.array([])) == F2
+            # The step load reads its latched piece (p's only slot): 0 before t_step = 0.3 s, 1 after.
+            p = np.array([1.0 if t >= 0.3 else 0.0])
+            assert m.LATCH_NAMES == ("load_piece",) and m.load_force(t, y, p) == F2
             for mode, name in enumerate(m.MODES[:4]):
                 f, s = m.MODE_FLANK[mode], m.MODE_DIRECTION[mode]
                 rho = rho_paper(v) if f == 1 else rho_b
                 a, S1, S2 = hand_sliding(f, s, kloss(v), F2, rho, M1, 100.0, G)
-                assert m.accel(mode, t, y, np.array([])) == pytest.approx(a, rel=1e-9, abs=1e-9), name
-                assert m.reactions(mode, t, y, np.array([])) == pytest.approx((S1, S2), rel=1e-9, abs=1e-6)
+                assert m.accel(mode, t, y, p) == pytest.approx(a, rel=1e-9, abs=1e-9), name
+                assert m.reactions(mode, t, y, p) == pytest.approx((S1, S2), rel=1e-9, abs=1e-6)
 
 
 def finite_difference_jacobian(m, mode, t, y, p, h=1e-6):
@@ -140,9 +142,22 @@ def finite_difference_jacobian(m, mode, t, y, p, h=1e-6):
     return J, (f(t + dt, y) - f(t - dt, y)) / (2 * dt)
 
 
-def parameters(m, *latches):
-    """p = free parameters at their defaults, then the latches (+inf: not fired)."""
-    latches = latches or (math.inf,) * len(m.LATCH_NAMES)
+def parameters(m, t=0.2, y=(0.0,), t_trip=math.inf):
+    """p at (t, y): free parameters at their defaults, then the latches by hand: the trip
+    time, and a piecewise load's piece (its breakpoints passed, from the scene's values)."""
+    values = {**m.FIXED, **dict(zip(m.PARAM_NAMES, m.PARAM_DEFAULTS))}
+    x2 = y[0] * math.tan(values["gamma"]) if len(m.STATES) == 2 else None
+    latches = []
+    for name in m.LATCH_NAMES:
+        if name == "t_trip":
+            latches.append(t_trip)
+        elif "t_step" in values:
+            latches.append(float(t >= values["t_step"]))
+        elif "x2_contact" in values:
+            latches.append(float(x2 >= values["x2_contact"]))
+        else:  # a schedule: in x2 when x1 is a state (a law reads it), else in t
+            at = [values[k] for k in sorted(values) if k.startswith("load_at")]
+            latches.append(float(sum((x2 if x2 is not None else t) >= a for a in at)))
     return np.array([*m.PARAM_DEFAULTS, *latches], dtype=float)
 
 
@@ -154,9 +169,9 @@ def parameters(m, *latches):
                                                  ("seating", [[1.16, 7.0], [1.2, 0.5]], (0.1,))])
 def test_jacobian_matches_finite_differences(name, states, latches):
     m = load_module(name)
-    p = parameters(m, *latches)
-    assert len(p) == len(m.PARAM_NAMES) + len(m.LATCH_NAMES)
     for y in map(np.array, states):
+        p = parameters(m, 0.2, y, *latches)
+        assert len(p) == len(m.PARAM_NAMES) + len(m.LATCH_NAMES)
         for mode in range(len(m.MODES)):
             if m.MODE_DIRECTION[mode] and np.sign(y[-1]) != m.MODE_DIRECTION[mode]:
                 continue
@@ -200,9 +215,10 @@ def test_new_scene_file_generates_compiles_and_evaluates(tmp_path):
     assert m.MODES == ("fwd_a", "fwd_b", "bwd_a", "bwd_b", "stick") and m.STATES == ("x1", "v1")
     gamma, rho = math.radians(80), math.radians(9.9)       # gamma + rho = 89.9 deg
     x1, v = 0.01, 0.5
-    y, p = np.array([x1, v]), np.array([gamma])
-    F1 = 100 * (1 - v / 2)
     x2 = x1 * math.tan(gamma)
+    assert m.LATCH_NAMES == ("load_piece",) and x2 > 0.01  # the spring is pressed: piece 1
+    y, p = np.array([x1, v]), np.array([gamma, 1.0])
+    F1 = 100 * (1 - v / 2)
     F2 = -(5 + 1000 * (x2 - 0.01))
     for mode in range(4):
         a, S1, S2 = hand_sliding(m.MODE_FLANK[mode], m.MODE_DIRECTION[mode], F1, F2, rho, 0.5, 2.0, gamma)
@@ -275,7 +291,7 @@ def test_literal_slide_mode_equals_filippov_by_hand(tmp_path):
     assert m.MODES == ("fwd_a", "fwd_b", "slide_fwd") and m.MODE_DECLARED == (True, True, True)
     assert m.GUARDS == ("phi", "v1", "D", "load_contact", "slide_exit_a", "slide_exit_b")
     assert [row[-2:] for row in m.GUARD_DIRECTIONS] == [(-1, -1)] * 3
-    p, t, m2 = np.array([200.0]), 0.1, 200.0
+    p, t, m2 = np.array([200.0, 1.0]), 0.1, 200.0   # m2, then the spring's piece: pressed at every x1 below
     for x1, v in ((0.05, 3.0), (0.3, 6.9), (0.02, 0.4)):
         y = np.array([x1, v])
         F1, F2 = kloss(v), -(100 + 2e5 * (x1 * math.tan(G) - 1e-3))
@@ -317,7 +333,7 @@ def test_literal_slide_mode_equals_filippov_by_hand(tmp_path):
 
 def test_seating_torque_switch_equals_hand_formulas():
     m = load_module("seating")
-    assert m.LATCH_NAMES == ("t_trip",) and m.PARAM_NAMES == () and m.MODE_DECLARED == (True,) * 5
+    assert m.LATCH_NAMES == ("t_trip", "load_piece") and m.PARAM_NAMES == () and m.MODE_DECLARED == (True,) * 5
     assert m.GUARDS[-1] == "torque_switch" and all(row[-1] == -1 for row in m.GUARD_DIRECTIONS)
     trip = m.GUARDS.index("torque_switch")
     k, x2c, m2 = 5e5, 0.095, 200.0
@@ -325,7 +341,7 @@ def test_seating_torque_switch_equals_hand_formulas():
         y = np.array([x1, v])
         F2 = -k * max(0.0, x1 * math.tan(G) - x2c)
         for t_trip, t, F1 in ((math.inf, 0.1, kloss(v)), (0.15, 0.1, kloss(v)), (0.05, 0.1, 0.0)):
-            p = np.array([t_trip])
+            p = np.array([t_trip, float(x1 * math.tan(G) >= x2c)])  # latches: trip time, spring piece
             assert m.drive_force(t, y, p) == pytest.approx(F1, rel=1e-12, abs=1e-12)
             g = np.zeros(len(m.GUARDS))
             for mode in range(len(m.MODES)):
@@ -335,7 +351,7 @@ def test_seating_torque_switch_equals_hand_formulas():
                 m.guards(mode, t, y, p, g)
                 assert g[trip] == (pytest.approx(1500.0 - S1, rel=1e-9, abs=1e-6) if t < t_trip else 1.0)
     # After the trip, stopped in the seat, the gear self-locks: both stick cones hold.
-    y, p = np.array([1.18, 0.0]), np.array([0.2])
+    y, p = np.array([1.18, 0.0]), np.array([0.2, 1.0])
     F2 = -k * (1.18 * math.tan(G) - x2c)
     normal, tangential = -F2 * math.cos(G), F2 * math.sin(G)
     rho0 = rho_paper(0.0)

@@ -320,9 +320,10 @@ def test_dopri5_steps_like_scipy_rk45(first_step):
         r = run(seg.DOPRI5, OSC, [1.0, 0.0], 100.0, rtol=rtol, atol=atol,
                 h0=first_step or 0.0, max_steps=k)
         assert r.status == seg.MAX_STEPS and r.steps == k and r.rejected == 0
-        # Equal up to rounding, amplified by the cancellation in the error estimate.
-        assert r.t == pytest.approx(ref.t, rel=1e-11)
-        np.testing.assert_allclose(r.y, ref.y, rtol=1e-11, atol=1e-12)
+        # Equal up to rounding, amplified by the cancellation in the error estimate (and by
+        # LLVM's fused multiply-adds where the CPU has them: 4e-11 in t seen on one machine).
+        assert r.t == pytest.approx(ref.t, rel=1e-9)
+        np.testing.assert_allclose(r.y, ref.y, rtol=1e-9, atol=1e-10)
 
 
 # --- events ---------------------------------------------------------------------------

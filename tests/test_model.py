@@ -93,7 +93,8 @@ def test_literal_model_is_the_printed_equations():
 def test_kloss_safe_form_equals_textbook_and_is_regular_at_synchronous_speed():
     scene = load_scene("paper")
     from derivation.model import param_symbol
-    safe = laws.drive_force(scene.drive, param_symbol)
+    safe, pieces = laws.drive_force(scene.drive, param_symbol, sp.Symbol("x2", real=True))
+    assert pieces is None
     Fmax, V0, Vmax = (param_symbol(scene.drive.params[k]) for k in ("Fmax", "V0", "Vmax"))
     textbook = laws.kloss_textbook(Fmax, V0 - M.v1, V0 - Vmax)
     assert sp.simplify(safe - textbook) == 0
@@ -117,13 +118,15 @@ def test_velocity_friction_law_in_degrees():
     assert math.degrees(float(rho.subs(values).subs(M.v1, -v))) == pytest.approx(expected)
 
 
-def test_step_load_is_piecewise_with_time_event():
+def test_step_load_is_piecewise_in_its_latched_piece_with_a_time_event():
     model = build_model(load_scene("asymmetric"))
     F2 = {q.symbol: q.expr for q in model.laws}[M.F2]
-    t_step = sp.Symbol("t_step", real=True)
-    assert F2.subs({M.t: 0.0, t_step: 0.3}) == sp.Symbol("F2_before", real=True)
-    assert F2.subs({M.t: 0.5, t_step: 0.3}) == sp.Symbol("F2_after", real=True)
-    assert [e.name for e in model.events] == ["load_step"]
+    t_step, piece = sp.Symbol("t_step", real=True), sp.Symbol("load_piece", real=True)
+    assert M.t not in F2.free_symbols   # no jump in t inside a segment: the piece is latched
+    assert F2.subs(piece, 0) == sp.Symbol("F2_before", real=True)
+    assert F2.subs(piece, 1) == sp.Symbol("F2_after", real=True)
+    assert [p.symbol for p in model.pieces] == [piece]
+    assert [(e.name, e.expr) for e in model.events] == [("load_step", M.t - t_step)]
     assert paper.PSI_TRACTIVE == sp.tan(M.gamma + M.rho)
 
 
@@ -160,7 +163,8 @@ def test_literal_slide_mode_keeps_phi_and_combines_the_flanks():
     # phi = F1/m1 - F2 tan(gamma)/m2 with F1 = F0 (1 - v1/V0), F2 = -(preload + k (x1 tan(gamma) - x2_contact))
     g, m1, m2, k, F0, V0 = 6 * math.pi / 180, 3.0, 40.0, 1e5, 400.0, 2.0
     point = {M.x1: 0.05, M.v1: 0.7}
-    values = {**point, **{sp.Symbol(p.name, real=True): p.value for p in model.params}}
+    values = {**point, **{sp.Symbol(p.name, real=True): p.value for p in model.params},
+              model.pieces[0].symbol: 1.0}   # x2 = 0.05 tan(6 deg) = 5.3 mm: the spring is pressed
     a_a, a_b, a_s = (float(model.mode(n).accel.subs(composed).subs(values)) for n in ("fwd_a", "fwd_b", "slide_fwd"))
     rate_a, rate_b = (-F0 / V0 / m1 * a + k * math.tan(g) ** 2 / m2 * 0.7 for a in (a_a, a_b))
     assert [float(r.subs(values)) for r in _rates(model)] == pytest.approx([rate_a, rate_b], rel=1e-12)

@@ -55,6 +55,7 @@ def run_batch(method, rhs, jac, guards, observe, P, tables, y0, quad, t_end, rto
         t_out = np.full(1, t_end)  # one output point: the state at t_end
         y_out = np.full((1, width), np.nan)
         mode_out = np.empty(1, np.int64)
+        p_out = np.empty((1, p.size))
         ev_t = np.empty(max_events)
         ev_i = np.empty((max_events, 3), np.int64)
         ev_y = np.empty((max_events, width))
@@ -62,7 +63,7 @@ def run_batch(method, rhs, jac, guards, observe, P, tables, y0, quad, t_end, rto
         counters = np.zeros(segment.N_COUNTERS, np.int64)
         status, t_stop, n_ev, last, need, first = hybrid.integrate_hybrid(
             method, rhs, jac, guards, observe, p, tables, 0.0, y0, quad, -1, t_end, rtol, atol,
-            hmax, max_steps, t_out, y_out, mode_out, ev_t, ev_i, ev_y, mon, counters)
+            hmax, max_steps, t_out, y_out, mode_out, p_out, ev_t, ev_i, ev_y, mon, counters)
         out_f[c, F_T_STOP] = t_stop
         # The state at t_stop: the output point at t_end, else the last event's state
         # if the run stopped at it, else unknown (NaN).

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 from pathlib import Path
 
@@ -173,10 +174,11 @@ def _print_summary(result, module, origin: str, t_load: float, t_run: float) -> 
         print("\n".join(_table(rows)))
         if len(result.events) > len(shown):
             print(f"    ... {len(result.events) - len(shown)} more (all in the -o summary JSON)")
-    print(f"  S1 max = {result.S1_max:.6g} N at t = {result.t_S1_max:.6g} s")
-    print(f"  S2 max = {result.S2_max:.6g} N at t = {result.t_S2_max:.6g} s")
+    for name, value, t in (("S1", result.S1_max, result.t_S1_max), ("S2", result.S2_max, result.t_S2_max)):
+        shown = f"{value:.6g} N" if math.isfinite(value) else f"unbounded ({'+' if value > 0 else '-'}inf)"
+        print(f"  {name} max = {shown} at t = {t:.6g} s")
     if result.KD1 is not None or result.KD2 is not None:
-        print(f"  KD1 = {result.KD1:.6g}, KD2 = {result.KD2:.6g}")
+        print(f"  KD1 = {result.KD1:.6g}, KD2 = {result.KD2:.6g}".replace("inf", "unbounded"))
     print(f"  steps {result.n_steps} (rejected {result.n_rejected}), rhs calls {result.nfev}, "
           f"jacobian calls {result.njev}")
     print(f"  wall time {t_load + t_run:.3g} s (runtime and module load {t_load:.3g} s, simulation {t_run:.3g} s)")
@@ -195,7 +197,11 @@ def _simulate(args: argparse.Namespace) -> int:
     overrides = setting_overrides(args, SETTING_OPTIONS)
     start = time.perf_counter()
     try:
-        result = simulate(module, params, **overrides)
+        result = simulate(module, params, interruptible=True, **overrides)
+    except KeyboardInterrupt:
+        print(f"tswm simulate {args.scene}: interrupted (Ctrl-C) after {time.perf_counter() - start:.3g} s; "
+              "nothing written", file=sys.stderr)
+        return 130
     except SimulationInputError as error:
         raise setting_error(error, overrides) from None
     except ContractError as error:

@@ -29,7 +29,7 @@ stops the run with status CHATTERING instead of looping.
 import numpy as np
 from numba import njit, types
 
-from tswm_runtime import cache_guard, segment
+from tswm_runtime import cache_guard, painleve, segment
 from tswm_runtime.signatures import MATRIX, VECTOR, GuardsFunction, JacFunction, RhsFunction
 
 # Guard kinds (modes.GUARD_KINDS maps the generated GUARDS names to these).
@@ -56,7 +56,7 @@ MAX_SAME_TIME = 8  # Events allowed at one instant before CHATTERING.
 SAME_TIME_ULPS = 64.0  # "One instant": within 64 ulp(t).
 
 TABLES = types.Tuple((types.int64[::1], types.int64[::1], types.int64[::1], types.int64[::1],
-                      types.int64[:, ::1], types.int64[::1]))
+                      types.int64[:, ::1], types.int64[::1], types.int64[::1]))
 
 
 @njit(cache=True, error_model="numpy")
@@ -207,6 +207,35 @@ def _consistent(mode, guards, t, y, p, tables, g):
 
 
 @njit(cache=True, error_model="numpy")
+def _latch_pieces(guards, t, y, p, tables, g):
+    """Set every piecewise law's latched piece in p: the number of its breakpoint guards
+    that are >= 0 at (t, y). A located event lies strictly past its breakpoint, so the
+    piece is the one the state has entered (the right limit)."""
+    guard_kind, guard_latch = tables[5], tables[6]
+    for k in range(guard_kind.size):
+        if guard_kind[k] == G_LAW:
+            p[guard_latch[k]] = 0.0
+    guards(0, t, y, p, g)
+    for k in range(guard_kind.size):
+        if guard_kind[k] == G_LAW and g[k] >= 0.0:
+            p[guard_latch[k]] += 1.0
+
+
+@njit(cache=True, error_model="numpy")
+def _unbounded(observe, guards, mode, t, y, p, k_d, mon, obs, g):
+    """Mark the observables' maxima unbounded at time t: +-inf with the sign they take as
+    D -> 0+ in ``mode``, i.e. the sign of S D (continuous through D = 0, so a state just
+    past the zero gives it too)."""
+    observe(mode, t, y, p, obs)
+    d = 1.0
+    if k_d >= 0:
+        guards(mode, t, y, p, g)
+        d = g[k_d] if g[k_d] != 0.0 else 1.0
+    for k in range(mon.shape[0]):
+        mon[k, 0], mon[k, 1], mon[k, 2] = np.inf, np.inf if obs[k] * d >= 0.0 else -np.inf, t
+
+
+@njit(cache=True, error_model="numpy")
 def _log(ev_t, ev_i, ev_y, n_ev, t, k, mode_from, mode_to, y, quad):
     """Append an event (time, guard, from, to, state) to the log."""
     n = y.size
@@ -224,30 +253,37 @@ HYBRID_SIG = types.Tuple((types.int64, types.float64, types.int64, types.int64, 
     VECTOR, TABLES,  # p (written: latched trip time), mode tables
     types.float64, VECTOR, VECTOR, types.int64, types.float64,  # t0, y0, quad, mode0, t_end
     types.float64, VECTOR, types.float64, types.int64,  # rtol, atol, hmax, max_steps
-    VECTOR, MATRIX, types.int64[::1],  # t_out, y_out, mode_out
+    VECTOR, MATRIX, types.int64[::1], MATRIX,  # t_out, y_out, mode_out, p_out
     VECTOR, types.int64[:, ::1], MATRIX,  # ev_t, ev_i, ev_y
     MATRIX, types.int64[::1],  # mon, counters
 )
 
 
-@cache_guard.compile_cached(HYBRID_SIG, error_model="numpy")
+@cache_guard.compile_cached(HYBRID_SIG, error_model="numpy", nogil=True)
 def integrate_hybrid(method, rhs, jac, guards, observe, p, tables, t0, y0, quad, mode0, t_end,
-                     rtol, atol, hmax, max_steps, t_out, y_out, mode_out, ev_t, ev_i, ev_y, mon,
-                     counters):
+                     rtol, atol, hmax, max_steps, t_out, y_out, mode_out, p_out, ev_t, ev_i, ev_y,
+                     mon, counters):
     """Integrate the model from (t0, y0) to t_end through its mode changes.
 
     tables: (mode_kind, mode_flank, mode_direction, mode_declared, guard_directions,
-        guard_kind), from ``modes.tables``. p: parameters; a torque switch writes its
-        trip time into p[trip index] (the guard's latch), so pass a copy.
+        guard_kind, guard_latch), from ``modes.tables``. p: parameters and latches;
+        the runtime writes the latches (a torque switch's trip time, the piece of
+        each piecewise law, set at the start and at every law event), so pass a copy.
     quad: the integral of the states at t0 (x1 when v1 is the only state), carried
         in columns n: of y_out and ev_y; size 0 for none. mode0: the initial mode,
         or -1 to select it from y0 (at v1 = 0 from the friction cones).
-    t_out, y_out, mode_out: output times (sorted, >= t0) and the rows filled there;
+    t_out, y_out, mode_out, p_out: output times (sorted, >= t0) and the rows filled
+        there: state, mode and the parameter vector with the latches in force (a row
+        at an event time belongs to the segment that ends there: its left limit);
         rows after a stop keep their contents, mode_out -1.
     ev_t, ev_i, ev_y: the event log (time; guard, from-mode, to-mode (-1: stop);
         state), its capacity is ev_t.size. mon: (K, 3) running max |observable k|
         as (|value|, value, t), K = number of observables; pass zeros.
     counters: int64[4] as in segment (steps, rejected, rhs calls, jac calls).
+
+    Where D heads for 0 in a sliding mode, the segment hands over to
+    ``painleve.approach``, which locates D = 0 (status INCONSISTENT, event guard D);
+    for INCONSISTENT the maxima in mon are +-inf (no finite reaction exists).
 
     Returns (status, t_stop, number of events, last mode (for INCONSISTENT the mode
     found inconsistent), need, initial mode).
@@ -256,11 +292,15 @@ def integrate_hybrid(method, rhs, jac, guards, observe, p, tables, t0, y0, quad,
     n_guards = tables[4].shape[1]
     if not (n >= 1 and t_end > t0 and rtol > 0.0 and (quad.size == 0 or quad.size == n)
             and y_out.shape[1] == n + quad.size and mode_out.size == t_out.size
+            and p_out.shape[0] == t_out.size and p_out.shape[1] == p.size
             and ev_y.shape[1] == n + quad.size and tables[4].shape[0] == tables[0].size):
         return INVALID_INPUT, t0, 0, -1, NEED_NOTHING, -1
     y, q = y0.copy(), quad.copy()
     g, y_tmp, f = np.empty(n_guards), np.empty(n), np.empty(n)
+    obs = np.empty(mon.shape[0])
     mode_out[:] = -1
+    k_d = _guard(G_D, tables[5])
+    _latch_pieces(guards, t0, y, p, tables, g)
     mode, need, status = mode0, NEED_NOTHING, FINISHED
     if mode < 0:
         v = y[n - 1]
@@ -272,17 +312,42 @@ def integrate_hybrid(method, rhs, jac, guards, observe, p, tables, t0, y0, quad,
     if mode < 0:
         return UNDECLARED, t0, 0, -1, need, -1
     if not _consistent(mode, guards, t0, y, p, tables, g):
+        _unbounded(observe, guards, mode, t0, y, p, -1, mon, obs, g)
         return INCONSISTENT, t0, 0, mode, NEED_NOTHING, mode
     first = mode
     t, i, n_ev, same, h = t0, 0, 0, 0, 0.0
+    singular = True  # hand over to the Painleve approach when D heads for 0
     while True:
         steps = counters[segment.N_STEPS] + counters[segment.N_REJECTED]
         i0 = i
+        k_singular = k_d if singular and k_d >= 0 and tables[4][mode, k_d] != 0 else -1
         seg_status, t_new, k, i, h = segment._run(
             method, rhs, jac, guards, observe, mode, p, t, t_end, rtol, atol, h, 0.0, hmax,
             max(max_steps - steps, 0), tables[4][mode], 0.0, True, 0.0, t_out, i, y_out, y, q,
-            mon, counters)
+            mon, counters, k_singular)
+        singular = True
+        stalled = seg_status == segment.STEP_TOO_SMALL or seg_status == segment.NOT_FINITE
+        if k_singular >= 0 and stalled and counters[segment.N_STEPS] > 0:
+            seg_status = segment.APPROACH  # steps in t shrank to nothing: try Sundman's time
+        if seg_status == segment.APPROACH:
+            outcome, t_new, i, d_last = painleve.approach(
+                rhs, guards, observe, mode, p, k_d, tables[4][mode], t_new, y, q, t_end, h, rtol,
+                atol, max(max_steps - counters[segment.N_STEPS] - counters[segment.N_REJECTED], 0),
+                t_out, i, y_out, mon, counters)
+            if outcome == painleve.ZERO:
+                seg_status, k = segment.EVENT, k_d
+            elif outcome == painleve.END:
+                seg_status = segment.REACHED_END
+            elif outcome == painleve.OTHER or outcome == painleve.CLEAR:
+                singular = outcome == painleve.CLEAR  # OTHER: locate that guard in t first
+                mode_out[i0:i] = mode
+                p_out[i0:i] = p
+                t = t_new
+                continue
+            else:
+                seg_status = outcome
         mode_out[i0:i] = mode
+        p_out[i0:i] = p
         same = same + 1 if t_new - t <= SAME_TIME_ULPS * (np.nextafter(t, np.inf) - t) else 0
         t = t_new
         if seg_status != segment.EVENT:
@@ -295,12 +360,22 @@ def integrate_hybrid(method, rhs, jac, guards, observe, p, tables, t0, y0, quad,
             status = TOO_MANY_EVENTS
             break
         kind = tables[5][k]
+        if kind == G_D or kind == G_JAM:  # D or the jam factor of this mode reached 0
+            if mon.shape[0] > 0 and mon[0, 0] != np.inf:  # (the approach marked them already)
+                _unbounded(observe, guards, mode, t, y, p, k_d, mon, obs, g)
+            n_ev = _log(ev_t, ev_i, ev_y, n_ev, t, k, mode, -1, y, q)
+            status = INCONSISTENT
+            break
+        p_left = p.copy()  # the laws in force up to the event: its left limit
         if kind == G_TRIP:
-            p[p.size - 1] = t
+            p[tables[6][k]] = t
+        elif kind == G_LAW:
+            _latch_pieces(guards, t, y, p, tables, g)
         new, status, need = _select(mode, kind, rhs, guards, t, y, p, atol, rtol, tables, g,
                                     y_tmp, f)
         if status == FINISHED and not _consistent(new, guards, t, y, p, tables, g):
             status = INCONSISTENT
+            _unbounded(observe, guards, mode, t, y, p_left, -1, mon, obs, g)
         if status == FINISHED and new == mode and kind == G_PHI:
             continue  # phi crossed within its noise (the probe keeps the flank): no event
         n_ev = _log(ev_t, ev_i, ev_y, n_ev, t, k, mode, new if status == FINISHED else -1, y, q)

@@ -7,6 +7,7 @@ turns the names into the integer kinds of ``hybrid`` once, in Python.
 """
 from __future__ import annotations
 
+import re
 from types import ModuleType
 
 import numpy as np
@@ -28,6 +29,20 @@ GUARD_EVENT_NAMES = {
     "slide_exit_a": "leaves phi = 0 to flank a", "slide_exit_b": "leaves phi = 0 to flank b",
     "torque_switch": "torque switch trips",
 }
+SCHEDULE_GUARD = re.compile(r"(load|drive)_at([0-9]+)")
+
+
+def guard_kind(name: str) -> int | None:
+    """hybrid.G_* of a guard name; a schedule's breakpoints (load_at1, ...) are law events."""
+    return hybrid.G_LAW if SCHEDULE_GUARD.fullmatch(name) else GUARD_KINDS.get(name)
+
+
+def event_name(guard: str) -> str:
+    """What an event of ``guard`` is, in words."""
+    match = SCHEDULE_GUARD.fullmatch(guard)
+    if match:
+        return f"{match[1]} schedule breakpoint {match[2]}"
+    return GUARD_EVENT_NAMES[guard]
 
 
 def mode_kind(name: str) -> int:
@@ -40,8 +55,9 @@ def mode_kind(name: str) -> int:
 
 
 def tables(module: ModuleType) -> tuple[np.ndarray, ...]:
-    """(mode_kind, mode_flank, mode_direction, mode_declared, guard_directions, guard_kind)."""
-    unknown = [g for g in module.GUARDS if g not in GUARD_KINDS]
+    """(mode_kind, mode_flank, mode_direction, mode_declared, guard_directions, guard_kind,
+    guard_latch)."""
+    unknown = [g for g in module.GUARDS if guard_kind(g) is None]
     if unknown:
         raise ContractError(f"{module.__name__}: guards {unknown} are unknown to this runtime "
                             f"(known: {', '.join(GUARD_KINDS)}); regenerate the module")
@@ -50,4 +66,4 @@ def tables(module: ModuleType) -> tuple[np.ndarray, ...]:
     return (as_int([mode_kind(m) for m in module.MODES]), as_int(module.MODE_FLANK),
             as_int(module.MODE_DIRECTION), as_int([bool(d) for d in declared]),
             as_int(module.GUARD_DIRECTIONS).reshape(len(module.MODES), len(module.GUARDS)),
-            as_int([GUARD_KINDS[g] for g in module.GUARDS]))
+            as_int([guard_kind(g) for g in module.GUARDS]), as_int(module.GUARD_LATCH))

@@ -8,7 +8,7 @@ from types import ModuleType
 import numpy as np
 
 from tswm_runtime import hybrid
-from tswm_runtime.modes import GUARD_EVENT_NAMES
+from tswm_runtime.modes import event_name
 
 STATUS_NAMES = {
     hybrid.FINISHED: "finished", hybrid.SLIDING: "sliding", hybrid.INCONSISTENT: "inconsistent",
@@ -34,7 +34,7 @@ class Event:
 
     @property
     def kind(self) -> str:
-        return GUARD_EVENT_NAMES[self.guard]
+        return event_name(self.guard)
 
 
 @dataclass(frozen=True)
@@ -68,7 +68,8 @@ class Result:
     mode_names: tuple[str, ...]
     events: list[Event]
     phases: list[Phase]
-    S1_max: float                 # the value of S1 where |S1| is largest, and its time
+    S1_max: float                 # the value of S1 where |S1| is largest, and its time (+-inf: unbounded,
+                                  # status inconsistent: no finite reaction exists there)
     t_S1_max: float
     S2_max: float
     t_S2_max: float
@@ -93,16 +94,18 @@ class Result:
         return " -> ".join(f"{ph.regime} [{ph.t_start:.6g}, {ph.t_end:.6g}]" for ph in self.phases)
 
     @classmethod
-    def build(cls, module: ModuleType, p: np.ndarray, run: dict, t, x1, v1, mode, events, mon,
-              counters, *, hybrid_status: int, t_stop: float, first_mode: int, message: str) -> Result:
-        """Evaluate the laws and reactions at the output points and assemble the result."""
+    def build(cls, module: ModuleType, p: np.ndarray, p_rows: np.ndarray, run: dict, t, x1, v1, mode,
+              events, mon, counters, *, hybrid_status: int, t_stop: float, first_mode: int,
+              message: str) -> Result:
+        """Evaluate the laws and reactions at the output points, each with the mode and
+        the latched laws in force there (``p_rows``), and assemble the result."""
         n = len(module.STATES)
         a1, S1, S2, F1, F2 = (np.empty(t.size) for _ in range(5))
         for r in range(t.size):
-            y = np.array([x1[r], v1[r]][2 - n:])
-            a1[r] = module.accel(mode[r], t[r], y, p)
-            S1[r], S2[r] = module.reactions(mode[r], t[r], y, p)
-            F1[r], F2[r] = module.drive_force(t[r], y, p), module.load_force(t[r], y, p)
+            y, pr = np.array([x1[r], v1[r]][2 - n:]), p_rows[r]
+            a1[r] = module.accel(mode[r], t[r], y, pr)
+            S1[r], S2[r] = module.reactions(mode[r], t[r], y, pr)
+            F1[r], F2[r] = module.drive_force(t[r], y, pr), module.load_force(t[r], y, pr)
         slope = math.tan(_value(module, p, "gamma"))
         KD1 = KD2 = None
         if module.HAS_LOAD_FACTORS:
@@ -117,7 +120,7 @@ class Result:
             message=message, t_stop=float(t_stop), n_steps=int(counters[0]), n_rejected=int(counters[1]),
             nfev=int(counters[2]), njev=int(counters[3]),
             extras={name: float(v) for name, v in zip(getattr(module, "LATCH_NAMES", ()),
-                                                      p[len(module.PARAM_NAMES):])})
+                                                      p[len(module.PARAM_NAMES):]) if not name.endswith("_piece")})
 
 
 def _value(module: ModuleType, p: np.ndarray, name: str) -> float:
@@ -137,6 +140,25 @@ def _phases(module: ModuleType, first: int, events: list[Event], t_stop: float) 
     ends = [s for s, _ in starts[1:]] + [t_stop]
     regime = dict(zip(module.MODES, module.MODE_REGIME))
     return [Phase(m, regime[m], s, e) for (s, m), e in zip(starts, ends)]
+
+
+def _inconsistent(module: ModuleType, t_stop: float, y_stop: np.ndarray, last: int, events: list[Event],
+                  p: np.ndarray) -> str:
+    """Where and why no finite contact force exists: the mode, D's formula and value."""
+    name = module.MODES[last]
+    g = np.empty(len(module.GUARDS))
+    module.guards(last, t_stop, np.ascontiguousarray(y_stop, dtype=np.float64), p, g)
+    value = {k: g[module.GUARDS.index(k)] for k in ("D", "jam") if k in module.GUARDS}
+    formula = module.MODE_D[last] or "(none: the mode has no contact denominator)"
+    reached = events and events[-1].guard in ("D", "jam") and events[-1].to_mode is None
+    how = ("D fell to 0 in finite time (a1 -> -inf like the square root of the time left)" if reached
+           else "the mode the state needs has D <= 0")
+    jam = f" and the jam factor cos(gamma + f s rho) = {value['jam']:.6g}" if "jam" in value else ""
+    masses = ", ".join(f"{k} = {_value(module, p, k):.6g}" for k in ("m1", "m2", "gamma"))
+    return (f"inconsistent at t = {t_stop:.9g} s in mode {name}: {how}; D = {formula} = "
+            f"{value.get('D', math.nan):.6g}{jam}, so no finite contact force satisfies the constraint "
+            f"(a Painleve-type case): the reactions are unbounded there; with {masses} (SI) "
+            f"lower m2 or the friction, or raise m1")
 
 
 def status_message(module: ModuleType, status: int, t_stop: float, y_stop: np.ndarray, last: int,
@@ -163,14 +185,7 @@ def status_message(module: ModuleType, status: int, t_stop: float, y_stop: np.nd
                 f"equations jump across phi = 0); the scene excludes it: add 'sliding' to [modes] "
                 f"include to follow the sliding motion")
     if status == hybrid.INCONSISTENT:
-        name = module.MODES[last]
-        D, jam = getattr(module, f"consistency_{name}")(t_stop, y_stop, p)
-        formula = getattr(module, f"consistency_{name}").__doc__.split("D = ", 1)[1].split("\n\n")[0]
-        values = ", ".join(f"{k} = {_value(module, p, k):.6g}" for k in ("m1", "m2", "gamma"))
-        return (f"inconsistent at {at} in mode {name}: D = {' '.join(formula.split())} = {D:.6g} "
-                f"and the jam factor cos(gamma + f s rho) = {jam:.6g}; one of them is <= 0, so no "
-                f"contact force satisfies the constraint (a Painleve-type case); with {values} (SI) "
-                f"lower m2 or the friction, or raise m1")
+        return _inconsistent(module, t_stop, y_stop, last, events, p)
     if status == hybrid.CHATTERING:
         return f"{hybrid.MAX_SAME_TIME} mode changes at {at} without time advancing (chattering); stopped"
     if status == hybrid.TOO_MANY_EVENTS:

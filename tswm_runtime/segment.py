@@ -25,7 +25,7 @@ step loop ``_run`` with all three.
 import numpy as np
 from numba import njit, types
 
-from tswm_runtime import cache_guard, dopri5, events, rosenbrock
+from tswm_runtime import cache_guard, dopri5, events, painleve, rosenbrock
 from tswm_runtime.signatures import (JAC_SIG, MATRIX, VECTOR, GuardsFunction,
                                      JacFunction, RhsFunction)
 
@@ -36,6 +36,7 @@ ROSENBROCK23 = 1  # Shampine-Reichelt ode23s Rosenbrock 2(3), stiff, uses jac (r
 # Status codes returned by integrate_segment.
 REACHED_END = 0  # Integrated up to t_end exactly.
 EVENT = 1  # Stopped at the first event; t and y_stop are the event's.
+APPROACH = 2  # The singular guard (D) heads for zero: hand over to painleve.approach at t.
 STEP_TOO_SMALL = -1  # Rejected step sizes fell below max(hmin, 10 ulp(t)).
 MAX_STEPS = -2  # max_steps step attempts (accepted + rejected) were made.
 NOT_FINITE = -3  # Non-finite state, derivative, Jacobian or guard at an accepted point.
@@ -289,11 +290,14 @@ def _valid(method, t0, y0, t_end, rtol, atol, hmax, max_steps, directions, t_out
 
 @njit(cache=True, error_model="numpy")
 def _run(method, rhs, jac, guards, observe, mode, p, t0, t_end, rtol, atol, h0, hmin, hmax,
-         max_steps, directions, gtol, band, ttol, t_out, i, y_out, y, quad, mon, counters):
+         max_steps, directions, gtol, band, ttol, t_out, i, y_out, y, quad, mon, counters,
+         k_singular):
     """The step loop of integrate_segment; y is the current state (updated in place).
 
     observe and mon: observables tracked for their maxima (mon.shape[0] of them,
     none if 0); quad: the integral of y, carried along if quad.size == y.size.
+    k_singular: a guard (D) whose zero the model cannot be integrated to in t; the
+    loop stops with APPROACH after a step that takes it towards 0 fast (-1: none).
     Returns (status, t, event index, next output index, proposed next step).
     """
     n = y.size
@@ -357,6 +361,16 @@ def _run(method, rhs, jac, guards, observe, mode, p, t0, t_end, rtol, atol, h0, 
                 status = STEP_TOO_SMALL
                 break
             continue
+        if k_singular >= 0:  # no step in t may change D by more than a factor 2: it could jump its zero
+            _eval_guards(guards, mode, t_new, y_b, p, g_b)
+            if painleve.too_steep(G[0, k_singular], g_b[k_singular]):
+                counters[N_REJECTED] += 1
+                rejected = True
+                h_prop = 0.5 * h
+                if h_prop < max(hmin, MIN_STEP_ULPS * (np.nextafter(t, np.inf) - t)):
+                    status = STEP_TOO_SMALL
+                    break
+                continue
         counters[N_STEPS] += 1
         if rejected:
             factor = min(1.0, factor)
@@ -393,6 +407,10 @@ def _run(method, rhs, jac, guards, observe, mode, p, t0, t_end, rtol, atol, h0, 
         y[:] = y_b
         if k >= 0:
             status = EVENT
+            break
+        if (k_singular >= 0 and t < t_end
+                and painleve.heading_for_zero(G[0, k_singular], g_b[k_singular])):
+            status = APPROACH
             break
         f_a[:] = f_b
         G[0, :] = g_b
@@ -461,5 +479,5 @@ def integrate_segment(method, rhs, jac, guards, mode, p, t0, y0, t_end, rtol, at
     status, t, k, i, h_next = _run(method, rhs, jac, guards, guards, mode, p, t0, t_end, rtol,
                                    atol, h0, hmin, hmax, max_steps, directions, gtol, False, ttol,
                                    t_out, i, y_out, y_stop, np.empty(0), np.empty((0, 3)),
-                                   counters)
+                                   counters, -1)
     return status, t, k, i - i_out, h_next

@@ -11,7 +11,7 @@ from types import ModuleType
 
 import numpy as np
 
-from tswm_runtime import hybrid, modes, segment
+from tswm_runtime import checks, hybrid, modes, segment
 from tswm_runtime.contract import load_module
 from tswm_runtime.result import Event, Result, status_message
 
@@ -54,12 +54,16 @@ def with_latches(module: ModuleType, P: np.ndarray) -> np.ndarray:
 
 
 def parameter_vector(module: ModuleType, params: dict | None) -> np.ndarray:
-    """The free parameters (scene defaults, overridden by ``params``) plus latches (inf)."""
+    """The free parameters (scene defaults, overridden by ``params``) plus latches (inf),
+    checked against the scene file's rules for them."""
     values = dict(zip(module.PARAM_NAMES, module.PARAM_DEFAULTS))
     for name, value in (params or {}).items():
         if name not in values:
             raise SimulationInputError(f"parameter {name!r}: {unknown_parameter(module, name)}")
         values[name] = _finite(f"parameter {name}", value)
+    problem = checks.violations(module, [list(values.values())])[0]
+    if problem:
+        raise SimulationInputError(problem)
     return with_latches(module, list(values.values()))[0]
 
 
@@ -95,10 +99,38 @@ def settings(module: ModuleType, overrides: dict) -> dict:
     return run
 
 
-def simulate(model: str | ModuleType, params: dict | None = None, **overrides) -> Result:
+PROGRESS_EVERY = 2.0  # seconds between progress lines of an interruptible run
+
+
+def _run_kernel(args: tuple, counters: np.ndarray, interruptible: bool):
+    """integrate_hybrid(*args); interruptible: in a worker thread (the kernel releases the
+    GIL), so that Ctrl-C reaches Python at once (KeyboardInterrupt; the abandoned worker
+    is a daemon thread) and a long run prints its step count every PROGRESS_EVERY s."""
+    if not interruptible:
+        return hybrid.integrate_hybrid(*args)
+    import sys
+    import threading
+    import time
+
+    box = {}
+    worker = threading.Thread(target=lambda: box.setdefault("out", hybrid.integrate_hybrid(*args)), daemon=True)
+    start = next_report = time.monotonic() + PROGRESS_EVERY
+    worker.start()
+    while worker.is_alive():
+        worker.join(0.05)
+        if time.monotonic() >= next_report:
+            next_report += PROGRESS_EVERY
+            print(f"  ... running: {int(counters[segment.N_STEPS]):,} steps after "
+                  f"{time.monotonic() - start + PROGRESS_EVERY:.0f} s (Ctrl-C stops)", file=sys.stderr, flush=True)
+    return box["out"]
+
+
+def simulate(model: str | ModuleType, params: dict | None = None, *, interruptible: bool = False,
+             **overrides) -> Result:
     """Run a scene. ``model``: a shipped scene name, a path to a generated module, or the
     module; ``params``: free parameters by name; ``overrides``: run settings (t_end,
-    x1, v1, rtol, atol, method, max_steps, points, max_events, hmax)."""
+    x1, v1, rtol, atol, method, max_steps, points, max_events, hmax). ``interruptible``:
+    run the kernel in a thread so that Ctrl-C stops a long run at once (the CLI does)."""
     module = model if isinstance(model, ModuleType) else load_module(model)
     p = parameter_vector(module, params)
     run = settings(module, overrides)
@@ -107,13 +139,14 @@ def simulate(model: str | ModuleType, params: dict | None = None, **overrides) -
     width = n + quad.size
     t_out = np.linspace(0.0, run["t_end"], run["points"])
     y_out, mode_out = np.full((t_out.size, width), np.nan), np.empty(t_out.size, np.int64)
+    p_out = np.empty((t_out.size, p.size))
     cap = run["max_events"]
     ev_t, ev_i, ev_y = np.empty(cap), np.empty((cap, 3), np.int64), np.empty((cap, width))
     mon, counters = np.zeros((len(module.OBSERVABLES), 3)), np.zeros(segment.N_COUNTERS, np.int64)
-    status, t_stop, n_ev, last, need, first = hybrid.integrate_hybrid(
-        METHODS[run["method"]], module.rhs, jacobian(module, run["method"]), module.guards, module.observe, p, modes.tables(module),
-        0.0, y0, quad, -1, run["t_end"], run["rtol"], np.full(n, run["atol"]), run["hmax"],
-        run["max_steps"], t_out, y_out, mode_out, ev_t, ev_i, ev_y, mon, counters)
+    status, t_stop, n_ev, last, need, first = _run_kernel((
+        METHODS[run["method"]], module.rhs, jacobian(module, run["method"]), module.guards, module.observe, p,
+        modes.tables(module), 0.0, y0, quad, -1, run["t_end"], run["rtol"], np.full(n, run["atol"]), run["hmax"],
+        run["max_steps"], t_out, y_out, mode_out, p_out, ev_t, ev_i, ev_y, mon, counters), counters, interruptible)
     keep = mode_out >= 0
     y_stop = ev_y[n_ev - 1, :n].copy() if n_ev else y0
     x1 = y_out[keep, n] if n == 1 else y_out[keep, 0]
@@ -121,7 +154,7 @@ def simulate(model: str | ModuleType, params: dict | None = None, **overrides) -
                     module.MODES[ev_i[e, 2]] if ev_i[e, 2] >= 0 else None,
                     float(ev_y[e, n] if n == 1 else ev_y[e, 0]), float(ev_y[e, n - 1]))
               for e in range(n_ev)]
-    return Result.build(module, p, run, t_out[keep], x1, y_out[keep, n - 1], mode_out[keep], events,
+    return Result.build(module, p, p_out[keep], run, t_out[keep], x1, y_out[keep, n - 1], mode_out[keep], events,
                         mon, counters, hybrid_status=status, t_stop=t_stop,
                         first_mode=first, message=status_message(module, status, t_stop, y_stop, last,
                                                                  need, events, p))

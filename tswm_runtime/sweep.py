@@ -10,7 +10,9 @@ exists under the expected name, so an interrupted sweep resumes without recomput
 
 One row per case: the free parameters, then
 
-    status    'finished' or why the run stopped (result.STATUS_NAMES)
+    status    'finished' or why the run stopped (result.STATUS_NAMES); 'invalid-parameter'
+              for a row that breaks the scene file's rules for its parameters (not run)
+    problem   '' or, for an invalid row, which rule it breaks
     t_stop    where the run ended [s]
     S1m, tS1m, S2m, tS2m   the value of S1 (S2) where |S1| (|S2|) is largest, and its time
     KD1, KD2  eq. (10) from S1m, S2m when the scene gives Ft1, Ft2 (else NaN)
@@ -34,7 +36,7 @@ from types import ModuleType
 
 import numpy as np
 
-from tswm_runtime import batch, modes
+from tswm_runtime import batch, checks, modes
 from tswm_runtime.contract import load_module
 from tswm_runtime.files import write_atomic
 from tswm_runtime.result import STATUS_NAMES
@@ -44,7 +46,8 @@ REGIME_LETTERS = {"tractive": "T", "inverse-tractive": "I", "stick": "S", "backw
                   "backward on flank b": "B", "sliding along phi = 0": "F"}
 SEQ_LEN = 32  # modes kept per case; longer sequences end in '…'
 DEFAULT_CHUNK = 512
-RESULT_COLUMNS = ("status", "t_stop", "S1m", "tS1m", "S2m", "tS2m", "KD1", "KD2", "x1", "v1",
+INVALID = "invalid-parameter"
+RESULT_COLUMNS = ("status", "problem", "t_stop", "S1m", "tS1m", "S2m", "tS2m", "KD1", "KD2", "x1", "v1",
                   "regimes", "modes", "n_events", "steps", "rejected", "nfev", "njev")
 
 
@@ -137,20 +140,25 @@ def sample_cases(module: ModuleType, samples: int, ranges: dict, seed: int) -> n
 
 
 def run_cases(module: ModuleType, P: np.ndarray, run: dict):
-    """Integrate every row of P (free parameters) in one parallel batch; a DataFrame."""
+    """Integrate every row of P (free parameters) in one parallel batch; a DataFrame.
+    Rows that break the scene's parameter rules are not run: status 'invalid-parameter'."""
     import pandas as pd
 
     y0, quad = initial_state(module, run)
     full = with_latches(module, P)
     cases = P.shape[0]
+    problems = checks.violations(module, P) if cases else []
+    valid = np.array([not reason for reason in problems], dtype=bool)
     out_f = np.full((cases, batch.N_F), np.nan)
     out_i = np.zeros((cases, batch.N_I), np.int64)
     seq = np.full((cases, SEQ_LEN), -1, np.int64)
-    if cases:
+    if valid.any():
+        f, i, sq = out_f[valid], out_i[valid], seq[valid]
         batch.run_batch(METHODS[run["method"]], module.rhs, jacobian(module, run["method"]), module.guards,
-                        module.observe, full, modes.tables(module), y0, quad, run["t_end"],
-                        run["rtol"], np.full(y0.size, run["atol"]), run["hmax"], run["max_steps"],
-                        run["max_events"], len(module.OBSERVABLES), out_f, out_i, seq)
+                        module.observe, np.ascontiguousarray(full[valid]), modes.tables(module), y0, quad,
+                        run["t_end"], run["rtol"], np.full(y0.size, run["atol"]), run["hmax"], run["max_steps"],
+                        run["max_events"], len(module.OBSERVABLES), f, i, sq)
+        out_f[valid], out_i[valid], seq[valid] = f, i, sq
     letters = [REGIME_LETTERS.get(r, "?") for r in module.MODE_REGIME]
     regimes, mode_codes = [], []
     for c in range(cases):
@@ -162,11 +170,12 @@ def run_cases(module: ModuleType, P: np.ndarray, run: dict):
     KD1 = np.full(cases, np.nan)
     KD2 = np.full(cases, np.nan)
     if module.HAS_LOAD_FACTORS:
-        for c in range(cases):
+        for c in np.flatnonzero(valid):
             KD1[c], KD2[c] = module.load_factors(out_f[c, batch.F_S1M], out_f[c, batch.F_S2M], full[c])
     columns = {name: P[:, j] for j, name in enumerate(module.PARAM_NAMES)}
     columns.update({
-        "status": [STATUS_NAMES[int(s)] for s in out_i[:, batch.I_STATUS]],
+        "status": [STATUS_NAMES[int(s)] if ok else INVALID for s, ok in zip(out_i[:, batch.I_STATUS], valid)],
+        "problem": problems,
         "t_stop": out_f[:, batch.F_T_STOP], "S1m": out_f[:, batch.F_S1M], "tS1m": out_f[:, batch.F_TS1M],
         "S2m": out_f[:, batch.F_S2M], "tS2m": out_f[:, batch.F_TS2M], "KD1": KD1, "KD2": KD2,
         "x1": out_f[:, batch.F_X1], "v1": out_f[:, batch.F_V1], "regimes": regimes, "modes": mode_codes,

@@ -1,0 +1,78 @@
+"""The scene file's rules for parameter values, applied to free values at run time.
+
+The scene reader records every model parameter's rule; a generated module carries
+those that involve a free parameter as plain data (``PARAM_CHECKS``), so a value set
+with ``--set``, ``simulate(params=...)`` or a sweep is held to the same rules as the
+scene file's, without SymPy or the scene reader. A check is one of
+
+    ("range", name, key, lo, hi, lo_inclusive, hi_inclusive, allowed)
+    ("less", name, key, other, allowed)          value(name) < value(other)
+    ("jam", gamma, key, rho_key, law, allowed)   gamma + largest friction angle < 90 deg
+
+``allowed`` is the rule as the scene reader words it, in display units.
+"""
+from __future__ import annotations
+
+import math
+from types import ModuleType
+
+import numpy as np
+
+DEG = math.pi / 180
+
+
+def _largest_friction_angle(law: str, value):
+    """rho at v = 0 [rad] from the key that sets it: rho itself, or c (rho(0) = 1/c deg)."""
+    return value if law == "constant" else DEG / value
+
+
+def _holds(check: tuple, value) -> np.ndarray:
+    """Where ``check`` holds, for arrays of parameter values (``value(name)``)."""
+    kind = check[0]
+    with np.errstate(all="ignore"):
+        if kind == "range":
+            _, name, _, lo, hi, lo_in, hi_in, _ = check
+            x = value(name)
+            ok = np.isfinite(x)
+            if lo is not None:
+                ok &= (x >= lo) if lo_in else (x > lo)
+            if hi is not None:
+                ok &= (x <= hi) if hi_in else (x < hi)
+            return ok
+        if kind == "less":
+            return value(check[1]) < value(check[3])
+        if kind == "jam":
+            _, gamma, _, rho_key, law, _ = check
+            return value(gamma) + _largest_friction_angle(law, value(rho_key)) < 90 * DEG
+    raise ValueError(f"unknown parameter check {kind!r}")
+
+
+def _message(module: ModuleType, check: tuple, value) -> str:
+    units = dict(zip(module.PARAM_NAMES, module.PARAM_UNITS))
+
+    def show(name: str) -> str:
+        return f"{name} = {float(value(name)):.9g} {units.get(name, '')}".rstrip()
+
+    kind = check[0]
+    if kind == "range":
+        return f"parameter {show(check[1])}: must be {check[7]} ({check[2]} in the scene file)"
+    if kind == "less":
+        return f"parameter {show(check[1])}: must be {check[4]} ({show(check[3])})"
+    return f"parameters {show(check[1])} and {show(check[3])}: must keep {check[5]}"
+
+
+def violations(module: ModuleType, P: np.ndarray) -> list[str]:
+    """Per row of free parameters P (PARAM_NAMES order), '' or why the row breaks a rule."""
+    P = np.atleast_2d(np.asarray(P, dtype=np.float64))
+    free = {name: P[:, j] for j, name in enumerate(module.PARAM_NAMES)}
+
+    def value(name: str):
+        return free[name] if name in free else module.FIXED[name]
+
+    reasons = [""] * P.shape[0]
+    for check in getattr(module, "PARAM_CHECKS", ()):
+        bad = ~np.broadcast_to(_holds(check, value), (P.shape[0],))
+        for row in np.flatnonzero(bad):
+            if not reasons[row]:
+                reasons[row] = _message(module, check, lambda n: np.broadcast_to(value(n), (P.shape[0],))[row])
+    return reasons
