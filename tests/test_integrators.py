@@ -15,6 +15,7 @@ from tswm_runtime import events as ev
 from tswm_runtime import rosenbrock as ros
 from tswm_runtime import segment as seg
 from tswm_runtime.signatures import GUARDS_SIG, JAC_SIG, RHS_SIG
+from tswm_runtime.structures import EventSettings, Tolerances
 
 METHODS = [seg.DOPRI5, seg.ROSENBROCK23]
 METHOD_IDS = ["dopri5", "rosenbrock23"]
@@ -162,8 +163,8 @@ def run(method, model, y0, t_end, t0=0.0, rtol=1e-8, atol=None, h0=0.0, hmin=0.0
     counters = np.zeros(seg.N_COUNTERS, np.int64)
     status, t, k, n_out, h = seg.integrate_segment(
         method, model.rhs, model.jac, model.guards, mode, np.array(p, dtype=np.float64),
-        t0, y0, t_end, rtol, atol, h0, hmin, hmax, max_steps,
-        np.array(directions, dtype=np.int64), gtol, ttol, t_out, 0, y_out, y, counters)
+        t0, y0, t_end, Tolerances(rtol, atol, hmin, hmax), max_steps, h0,
+        EventSettings(np.array(directions, dtype=np.int64), gtol, ttol, False, -1), t_out, 0, y_out, y, counters)
     return SimpleNamespace(status=status, t=t, k=k, n_out=n_out, h=h, y=y, y_out=y_out,
                            steps=counters[seg.N_STEPS], rejected=counters[seg.N_REJECTED],
                            nrhs=counters[seg.N_RHS], njac=counters[seg.N_JAC])
@@ -418,8 +419,8 @@ def test_output_samples_stop_at_event_and_continue():
     y_out = np.full((13, 2), np.nan)
     y, counters = np.empty(2), np.zeros(seg.N_COUNTERS, np.int64)
     t, i_out = 0.0, 0
-    kw = dict(rtol=1e-10, atol=np.full(2, 1e-12), hmin=0.0, hmax=np.inf, max_steps=10**5,
-              directions=np.zeros(1, np.int64), gtol=0.0, ttol=0.0, t_out=t_out, y_out=y_out,
+    kw = dict(tol=Tolerances(1e-10, np.full(2, 1e-12), 0.0, np.inf), max_steps=10**5,
+              ev=EventSettings(np.zeros(1, np.int64), 0.0, 0.0, False, -1), t_out=t_out, y_out=y_out,
               y_stop=y, counters=counters)
     events = []
     status, h = seg.EVENT, 0.0
@@ -491,10 +492,10 @@ def test_non_finite_initial_state():
 
 def test_invalid_input():
     y0 = np.zeros(2)
-    status = seg.integrate_segment(
-        seg.DOPRI5, osc_rhs, seg.no_jacobian, osc_guards, 0, np.zeros(1), 0.0, y0, 1.0, 1e-6,
-        np.zeros(3), 0.0, 0.0, np.inf, 100, np.zeros(0, np.int64), 0.0, 0.0, np.zeros(0), 0,
-        np.zeros((0, 2)), np.zeros(2), np.zeros(4, np.int64))[0]
+    status = seg.integrate_segment(  # atol has 3 entries for 2 states
+        seg.DOPRI5, osc_rhs, seg.no_jacobian, osc_guards, 0, np.zeros(1), 0.0, y0, 1.0,
+        Tolerances(1e-6, np.zeros(3), 0.0, np.inf), 100, 0.0, EventSettings(np.zeros(0, np.int64), 0.0, 0.0, False, -1),
+        np.zeros(0), 0, np.zeros((0, 2)), np.zeros(2), np.zeros(4, np.int64))[0]
     assert status == seg.INVALID_INPUT
 
 

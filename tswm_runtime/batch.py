@@ -26,6 +26,7 @@ from numba import prange, types
 
 from tswm_runtime import cache_guard, hybrid, segment
 from tswm_runtime.signatures import MATRIX, VECTOR, GuardsFunction, JacFunction, RhsFunction
+from tswm_runtime.structures import MODE_TABLES, TOLERANCES, EventLog, Outputs
 
 F_T_STOP, F_S1M, F_TS1M, F_S2M, F_TS2M, F_X1, F_V1 = range(7)
 N_F = 7
@@ -35,43 +36,39 @@ N_I = 8
 BATCH_SIG = types.none(
     types.int64,  # method
     RhsFunction, JacFunction, GuardsFunction, GuardsFunction,  # rhs, jac, guards, observe
-    MATRIX, hybrid.TABLES,  # P (cases x parameters, latches included), mode tables
+    MATRIX, MODE_TABLES,  # P (cases x parameters, latches included), mode tables
     VECTOR, VECTOR, types.float64,  # y0, quad, t_end
-    types.float64, VECTOR, types.float64, types.int64, types.int64,  # rtol, atol, hmax, max_steps, max_events
+    TOLERANCES, types.int64, types.int64,  # tol, max_steps, max_events
     types.int64,  # number of observables
     MATRIX, types.int64[:, ::1], types.int64[:, ::1],  # out_f, out_i, seq
 )
 
 
 @cache_guard.compile_cached(BATCH_SIG, parallel=True, error_model="numpy")
-def run_batch(method, rhs, jac, guards, observe, P, tables, y0, quad, t_end, rtol, atol, hmax,
-              max_steps, max_events, n_obs, out_f, out_i, seq):
+def run_batch(method, rhs, jac, guards, observe, P, tables, y0, quad, t_end, tol, max_steps, max_events,
+              n_obs, out_f, out_i, seq):
     """Integrate every row of P from (0, y0) to t_end; results into out_f, out_i, seq."""
     n = y0.size
     width = n + quad.size
     n_seq = seq.shape[1]
     for c in prange(P.shape[0]):
         p = P[c].copy()
-        t_out = np.full(1, t_end)  # one output point: the state at t_end
-        y_out = np.full((1, width), np.nan)
-        mode_out = np.empty(1, np.int64)
-        p_out = np.empty((1, p.size))
-        ev_t = np.empty(max_events)
-        ev_i = np.empty((max_events, 3), np.int64)
-        ev_y = np.empty((max_events, width))
+        out = Outputs(np.full(1, t_end), np.full((1, width), np.nan), np.empty(1, np.int64),
+                      np.empty((1, p.size)))  # one output point: the state at t_end
+        log = EventLog(np.empty(max_events), np.empty((max_events, 3), np.int64), np.empty((max_events, width)))
         mon = np.zeros((n_obs, 3))
         counters = np.zeros(segment.N_COUNTERS, np.int64)
         status, t_stop, n_ev, last, need, first = hybrid.integrate_hybrid(
-            method, rhs, jac, guards, observe, p, tables, 0.0, y0, quad, -1, t_end, rtol, atol,
-            hmax, max_steps, t_out, y_out, mode_out, p_out, ev_t, ev_i, ev_y, mon, counters)
+            method, rhs, jac, guards, observe, p, tables, 0.0, y0, quad, -1, t_end, tol, max_steps, out, log,
+            mon, counters)
         out_f[c, F_T_STOP] = t_stop
         # The state at t_stop: the output point at t_end, else the last event's state
         # if the run stopped at it, else unknown (NaN).
-        ys = y_out[0]
-        if mode_out[0] < 0:
+        ys = out.y[0]
+        if out.mode[0] < 0:
             ys = np.full(width, np.nan)
-            if n_ev > 0 and ev_t[n_ev - 1] == t_stop:
-                ys = ev_y[n_ev - 1].copy()
+            if n_ev > 0 and log.t[n_ev - 1] == t_stop:
+                ys = log.state[n_ev - 1].copy()
         out_f[c, F_X1] = ys[n] if n == 1 else ys[0]
         out_f[c, F_V1] = ys[n - 1]
         if n_obs > 0:
@@ -93,7 +90,7 @@ def run_batch(method, rhs, jac, guards, observe, P, tables, y0, quad, t_end, rto
                 seq[c, 0] = first
             n_modes, prev = 1, first
         for e in range(n_ev):
-            to = ev_i[e, 2]
+            to = log.index[e, 2]
             if to >= 0 and to != prev:
                 if n_modes < n_seq:
                     seq[c, n_modes] = to

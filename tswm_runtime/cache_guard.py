@@ -15,7 +15,8 @@ from numba import njit
 
 from tswm_runtime.files import write_atomic
 
-KERNEL_SOURCES = ("dopri5.py", "rosenbrock.py", "events.py", "segment.py", "painleve.py", "hybrid.py",
+KERNEL_SOURCES = ("structures.py", "control.py", "dopri5.py", "rosenbrock.py", "events.py", "segment.py", "painleve.py",
+                  "hybrid.py",
                   "batch.py")
 
 

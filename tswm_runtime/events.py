@@ -3,7 +3,7 @@
 Both methods describe an accepted step [t_a, t_b = t_a + h] by its dense output
 y(t_a + theta h) = y_a + h sum_j Q[:, j] theta^(j+1), j = 0..3 (``dense_eval``).
 
-Rules (see docs/architecture.md, "Lessons from the peers' trackers"):
+Rules (lessons from the peers' issue trackers: scipy 9228, 17066, 18039):
 
 * Guard k fires when it changes sign in its direction d_k: +1 rising (- to +),
   -1 falling (+ to -), 0 both. Values with |g| <= gtol count as zero and carry
@@ -171,8 +171,8 @@ def _drop_noise(guards, mode, p, t, y, g, atol, rtol, cand, y_tmp, g_tmp):
 
 
 @njit(cache=True, error_model="numpy")
-def _root_on_dense(guards, mode, p, k, t_a, y_a, h, t_b, Q, G, j, tol, y_tmp, g_tmp):
-    """Crossing time of guard k, which has its new sign at sample j.
+def _root_on_dense(guards, mode, p, k, step, G, j, tol, y_tmp, g_tmp):
+    """Crossing time of guard k, which has its new sign at sample j of ``step``.
 
     The bracket starts at the last sample before j that is not yet on the new
     side; if the guard already had the new sign at t_a (it crossed inside the
@@ -183,12 +183,12 @@ def _root_on_dense(guards, mode, p, k, t_a, y_a, h, t_b, Q, G, j, tol, y_tmp, g_
     while i >= 0 and G[i, k] * post > 0.0:
         i -= 1
     if i < 0:
-        return t_a
-    t_lo, t_hi = sample_time(t_a, t_b, i), sample_time(t_a, t_b, i + 1)
+        return step.t_a
+    t_lo, t_hi = sample_time(step.t_a, step.t_b, i), sample_time(step.t_a, step.t_b, i + 1)
     state = bracket_start(t_lo, G[i, k], t_hi, G[i + 1, k])
     while not bracket_done(state, tol):
         c = bracket_next(state, tol)
-        dense_eval(y_a, h, Q, (c - t_a) / h, y_tmp)
+        dense_eval(step.y_a, step.h, step.Q, (c - step.t_a) / step.h, y_tmp)
         guards(mode, c, y_tmp, p, g_tmp)
         state = bracket_update(state, c, g_tmp[k])
     return state[2]
@@ -206,14 +206,14 @@ def _zero_at_end(G, directions, gtol, sgn, ignore):
 
 
 @njit(cache=True, error_model="numpy")
-def _earliest_root(guards, mode, p, t_a, y_a, h, t_b, Q, G, j, ttol, cand, y_tmp, g_tmp):
+def _earliest_root(guards, mode, p, step, G, j, ttol, cand, y_tmp, g_tmp):
     """Locate every candidate's crossing before sample j; the earliest wins (ties: lowest k)."""
-    tol = time_tolerance(t_b, ttol)
+    tol = time_tolerance(step.t_b, ttol)
     k_best = -1
-    t_best = t_b
+    t_best = step.t_b
     for k in range(cand.size):
         if cand[k]:
-            t_k = _root_on_dense(guards, mode, p, k, t_a, y_a, h, t_b, Q, G, j, tol, y_tmp, g_tmp)
+            t_k = _root_on_dense(guards, mode, p, k, step, G, j, tol, y_tmp, g_tmp)
             if k_best < 0 or t_k < t_best:
                 k_best = k
                 t_best = t_k
@@ -221,33 +221,33 @@ def _earliest_root(guards, mode, p, t_a, y_a, h, t_b, Q, G, j, ttol, cand, y_tmp
 
 
 @njit(cache=True, error_model="numpy")
-def find_event(guards, mode, p, t_a, y_a, h, t_b, y_b, Q, G, directions, gtol, band, atol,
-               rtol, ttol, sgn, at_end, cand, y_tmp, g_tmp, y_pert, j_start, ignore):
-    """Earliest event in the accepted step [t_a, t_b]; returns (k, t_event, j).
+def find_event(guards, mode, p, step, G, ev, tol, sgn, at_end, cand, y_tmp, g_tmp, y_pert,
+               j_start, ignore):
+    """Earliest event in the accepted ``step`` (structures.Step); returns (k, t_event, j).
 
     G[0] (guards at t_a) and G[-1] (at t_b, from the step's own y_b) are given; the
-    interior rows are filled here from the dense output. sgn carries each guard's
-    last sign across steps. k = -1: no event. j is the sample at which guard k was
-    seen on its new side (the far end of the bracket). at_end: t_b is the segment
-    end, where a guard that reaches zero counts as an event. band: apply the noise
-    band (module docstring) with atol, rtol. The scan starts at sample j_start and
-    skips the guards in ``ignore`` (crossings already found false in this step).
+    interior rows are filled here from the dense output. ev: the EventSettings
+    (directions, gtol, ttol, noise_band: apply the noise band of the module docstring
+    with tol's atol, rtol). sgn carries each guard's last sign across steps. k = -1: no
+    event. j is the sample at which guard k was seen on its new side (the far end of
+    the bracket). at_end: t_b is the segment end, where a guard that reaches zero
+    counts as an event. The scan starts at sample j_start and skips the guards in
+    ``ignore`` (crossings already found false in this step).
     """
     cand[:] = False
     for j in range(j_start, GUARD_SUBINTERVALS + 1):
-        t_j = sample_time(t_a, t_b, j)
+        t_j = sample_time(step.t_a, step.t_b, j)
         if j < GUARD_SUBINTERVALS:
-            dense_eval(y_a, h, Q, (t_j - t_a) / h, y_tmp)
+            dense_eval(step.y_a, step.h, step.Q, (t_j - step.t_a) / step.h, y_tmp)
             guards(mode, t_j, y_tmp, p, G[j])
         else:
-            y_tmp[:] = y_b
-        if _sign_changes(G, j, directions, gtol, sgn, cand, ignore) and (not band or _drop_noise(
-                guards, mode, p, t_j, y_tmp, G[j], atol, rtol, cand, y_pert, g_tmp)):
-            return _earliest_root(guards, mode, p, t_a, y_a, h, t_b, Q, G, j, ttol, cand,
-                                  y_tmp, g_tmp)
+            y_tmp[:] = step.y_b
+        if _sign_changes(G, j, ev.directions, ev.gtol, sgn, cand, ignore) and (not ev.noise_band or _drop_noise(
+                guards, mode, p, t_j, y_tmp, G[j], tol.atol, tol.rtol, cand, y_pert, g_tmp)):
+            return _earliest_root(guards, mode, p, step, G, j, ev.ttol, cand, y_tmp, g_tmp)
     if at_end:
-        return _zero_at_end(G, directions, gtol, sgn, ignore), t_b, GUARD_SUBINTERVALS
-    return -1, t_b, GUARD_SUBINTERVALS
+        return _zero_at_end(G, ev.directions, ev.gtol, sgn, ignore), step.t_b, GUARD_SUBINTERVALS
+    return -1, step.t_b, GUARD_SUBINTERVALS
 
 
 @njit(cache=True, error_model="numpy")

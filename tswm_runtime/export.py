@@ -16,11 +16,7 @@ from types import ModuleType
 import numpy as np
 
 from tswm_runtime.files import write_atomic
-from tswm_runtime.result import Result
-
-# (column, SI unit) of the per-point float arrays of a Result, in CSV and npz order.
-SERIES = (("t", "s"), ("x1", "m"), ("v1", "m/s"), ("a1", "m/s^2"), ("x2", "m"), ("v2", "m/s"),
-          ("S1", "N"), ("S2", "N"), ("F1", "N"), ("F2", "N"))
+from tswm_runtime.result import SERIES, Result
 SCALARS = ("S1_max", "t_S1_max", "S2_max", "t_S2_max", "t_stop", "n_steps", "n_rejected", "nfev", "njev")
 
 
@@ -111,35 +107,17 @@ def jsonable(value):
     return value
 
 
-def summary(result: Result, module: ModuleType, wall_time: float | None = None) -> dict:
-    """The run's scalars as a dict: status, message, params (SI, with units), settings,
-    maxima, KD, phases, events, counts."""
-    data = {
-        "scene": result.scene, "equations": module.EQUATIONS, "status": result.status,
-        "success": result.success, "message": result.message, "t_stop": result.t_stop,
-        "params": dict(result.params), "param_units": dict(zip(module.PARAM_NAMES, module.PARAM_UNITS)),
-        "fixed_params": dict(module.FIXED), "settings": dict(result.settings),
-        "maxima": {"S1": {"value": result.S1_max, "t": result.t_S1_max, "unit": "N"},
-                   "S2": {"value": result.S2_max, "t": result.t_S2_max, "unit": "N"}},
-        "KD1": result.KD1, "KD2": result.KD2,
-        "regime_sequence": result.regime_sequence,
-        "phases": [{"mode": ph.mode, "regime": ph.regime, "t_start": ph.t_start, "t_end": ph.t_end}
-                   for ph in result.phases],
-        "events": [{"t": e.t, "guard": e.guard, "kind": e.kind, "from_mode": e.from_mode,
-                    "to_mode": e.to_mode, "x1": e.x1, "v1": e.v1} for e in result.events],
-        "counts": {"n_steps": result.n_steps, "n_rejected": result.n_rejected, "nfev": result.nfev,
-                   "njev": result.njev, "n_events": len(result.events), "n_points": int(result.t.size)},
-        "extras": dict(result.extras),
-        "units": dict(SERIES),
-    }
+def summary(result: Result, wall_time: float | None = None) -> dict:
+    """``Result.to_dict`` made strict-JSON ready (inf as 'inf'), with the wall time if given."""
+    data = result.to_dict()
     if wall_time is not None:
         data["wall_time_s"] = wall_time
     return jsonable(data)
 
 
-def summary_json(result: Result, module: ModuleType, wall_time: float | None = None) -> str:
+def summary_json(result: Result, wall_time: float | None = None) -> str:
     """``summary`` as strict JSON text (no NaN/Infinity literals)."""
-    return json.dumps(summary(result, module, wall_time), indent=2, allow_nan=False) + "\n"
+    return json.dumps(summary(result, wall_time), indent=2, allow_nan=False) + "\n"
 
 
 def output_paths(out_dir: str | Path, scene: str) -> dict[str, Path]:
@@ -155,7 +133,7 @@ def write_outputs(result: Result, module: ModuleType, out_dir: str | Path, *, pl
     paths = output_paths(out_dir, result.scene)
     written = [write_atomic(paths["csv"], csv_text(result, module.MODE_REGIME)),
                write_atomic(paths["npz"], npz_bytes(result, module)),
-               write_atomic(paths["json"], summary_json(result, module, wall_time))]
+               write_atomic(paths["json"], summary_json(result, wall_time))]
     if plot:
         from tswm_runtime.plot import png_bytes
 

@@ -31,6 +31,8 @@ from numba import njit, types
 
 from tswm_runtime import cache_guard, painleve, segment
 from tswm_runtime.signatures import MATRIX, VECTOR, GuardsFunction, JacFunction, RhsFunction
+from tswm_runtime.structures import (EVENT_LOG, MODE_TABLES, OUTPUTS, TOLERANCES, EventLog, EventSettings,
+                                     Outputs, Tolerances)
 
 # Guard kinds (modes.GUARD_KINDS maps the generated GUARDS names to these).
 G_PHI, G_V1, G_D, G_JAM, G_CONE_F, G_CONE_B, G_FLANK_N, G_LAW, G_SLIDE_A, G_SLIDE_B, G_TRIP = range(11)
@@ -55,9 +57,6 @@ NEED_NOTHING, NEED_STICK, NEED_FORWARD, NEED_BACKWARD, NEED_FLANK = 0, 1, 2, 3, 
 MAX_SAME_TIME = 8  # Events allowed at one instant before CHATTERING.
 SAME_TIME_ULPS = 64.0  # "One instant": within 64 ulp(t).
 
-TABLES = types.Tuple((types.int64[::1], types.int64[::1], types.int64[::1], types.int64[::1],
-                      types.int64[:, ::1], types.int64[::1], types.int64[::1]))
-
 
 @njit(cache=True, error_model="numpy")
 def _guard(kind, guard_kind):
@@ -71,7 +70,7 @@ def _guard(kind, guard_kind):
 @njit(cache=True, error_model="numpy")
 def _mode(kind, flank, direction, tables):
     """Index of the mode of ``kind`` (sliding: on ``flank`` in ``direction``; flank 0 = any)."""
-    mode_kind, mode_flank, mode_dir = tables[0], tables[1], tables[2]
+    mode_kind, mode_flank, mode_dir = tables.kind, tables.flank, tables.direction
     for m in range(mode_kind.size):
         if mode_kind[m] != kind:
             continue
@@ -81,14 +80,14 @@ def _mode(kind, flank, direction, tables):
 
 
 @njit(cache=True, error_model="numpy")
-def _phi_sign(rhs, guards, mode, t, y, p, atol, rtol, k_phi, g, y_tmp, f):
+def _phi_sign(rhs, guards, mode, t, y, p, tol, k_phi, g, y_tmp, f):
     """Sign of phi at (t, y) for entering a sliding mode. If phi is zero within its
     noise (its change under a v1 error at the tolerance), the sign phi takes after
     a probe step along ``mode`` that moves v1 by that tolerance."""
     n = y.size
-    tol = atol[n - 1] + rtol * abs(y[n - 1])
+    dv = tol.atol[n - 1] + tol.rtol * abs(y[n - 1])
     y_tmp[:] = y
-    y_tmp[n - 1] += tol
+    y_tmp[n - 1] += dv
     guards(mode, t, y_tmp, p, g)
     phi_moved = g[k_phi]
     guards(mode, t, y, p, g)
@@ -98,7 +97,7 @@ def _phi_sign(rhs, guards, mode, t, y, p, atol, rtol, k_phi, g, y_tmp, f):
     rhs(mode, t, y, p, f)
     if f[n - 1] == 0.0:
         return 1 if phi >= 0.0 else -1
-    dt = tol / abs(f[n - 1])
+    dt = dv / abs(f[n - 1])
     for i in range(n):
         y_tmp[i] = y[i] + dt * f[i]
     guards(mode, t + dt, y_tmp, p, g)
@@ -106,15 +105,15 @@ def _phi_sign(rhs, guards, mode, t, y, p, atol, rtol, k_phi, g, y_tmp, f):
 
 
 @njit(cache=True, error_model="numpy")
-def _sliding(direction, rhs, guards, t, y, p, atol, rtol, tables, g, y_tmp, f):
+def _sliding(direction, rhs, guards, t, y, p, tol, tables, g, y_tmp, f):
     """(mode, need) for sliding in ``direction`` from (t, y): the flank from the sign of phi."""
     m = _mode(M_SLIDING, 0, direction, tables)
     if m < 0:
         return -1, (NEED_FORWARD if direction > 0 else NEED_BACKWARD)
-    k_phi = _guard(G_PHI, tables[5])
+    k_phi = _guard(G_PHI, tables.guard_kind)
     if k_phi < 0:
         return m, NEED_NOTHING
-    flank = _phi_sign(rhs, guards, m, t, y, p, atol, rtol, k_phi, g, y_tmp, f)
+    flank = _phi_sign(rhs, guards, m, t, y, p, tol, k_phi, g, y_tmp, f)
     m = _mode(M_SLIDING, flank, direction, tables)
     if m < 0:  # one-sided: the contact force on the only flank vanishes (lift-off)
         return -1, NEED_FLANK
@@ -122,7 +121,7 @@ def _sliding(direction, rhs, guards, t, y, p, atol, rtol, tables, g, y_tmp, f):
 
 
 @njit(cache=True, error_model="numpy")
-def _at_rest(rhs, guards, t, y, p, atol, rtol, tables, g, y_tmp, f, start):
+def _at_rest(rhs, guards, t, y, p, tol, tables, g, y_tmp, f, start):
     """(mode, need) at v1 = 0: stick inside both friction cones, else sliding off in the
     direction whose cone is violated. Without a stick mode only a start can go on: in
     the direction its sliding acceleration points to."""
@@ -131,36 +130,36 @@ def _at_rest(rhs, guards, t, y, p, atol, rtol, tables, g, y_tmp, f, start):
         if not start:
             return -1, NEED_STICK
         for direction in (1, -1):
-            m, need = _sliding(direction, rhs, guards, t, y, p, atol, rtol, tables, g, y_tmp, f)
+            m, need = _sliding(direction, rhs, guards, t, y, p, tol, tables, g, y_tmp, f)
             if m >= 0:
                 rhs(m, t, y, p, f)
                 if f[y.size - 1] * direction > 0.0:
                     return m, NEED_NOTHING
         return -1, NEED_STICK
     guards(ms, t, y, p, g)
-    cone_f, cone_b = g[_guard(G_CONE_F, tables[5])], g[_guard(G_CONE_B, tables[5])]
+    cone_f, cone_b = g[_guard(G_CONE_F, tables.guard_kind)], g[_guard(G_CONE_B, tables.guard_kind)]
     if cone_f < 0.0:
-        return _sliding(1, rhs, guards, t, y, p, atol, rtol, tables, g, y_tmp, f)
+        return _sliding(1, rhs, guards, t, y, p, tol, tables, g, y_tmp, f)
     if cone_b < 0.0:
-        return _sliding(-1, rhs, guards, t, y, p, atol, rtol, tables, g, y_tmp, f)
+        return _sliding(-1, rhs, guards, t, y, p, tol, tables, g, y_tmp, f)
     return ms, NEED_NOTHING
 
 
 @njit(cache=True, error_model="numpy")
 def _filippov(mode, guards, t, y, p, tables, g):
     """The slide mode if phi = 0 attracts from both sides at (t, y), else -1."""
-    ms = _mode(M_FILIPPOV, 0, tables[2][mode], tables)
+    ms = _mode(M_FILIPPOV, 0, tables.direction[mode], tables)
     if ms < 0:
         return -1
     guards(ms, t, y, p, g)
-    exit_a, exit_b = g[_guard(G_SLIDE_A, tables[5])], g[_guard(G_SLIDE_B, tables[5])]
+    exit_a, exit_b = g[_guard(G_SLIDE_A, tables.guard_kind)], g[_guard(G_SLIDE_B, tables.guard_kind)]
     return ms if exit_a > 0.0 and exit_b > 0.0 else -1
 
 
 @njit(cache=True, error_model="numpy")
-def _select(mode, kind, rhs, guards, t, y, p, atol, rtol, tables, g, y_tmp, f):
+def _select(mode, kind, rhs, guards, t, y, p, tol, tables, g, y_tmp, f):
     """(next mode, status, need) after guard ``kind`` fired in ``mode`` at (t, y)."""
-    mode_kind, mode_dir, declared = tables[0], tables[2], tables[3]
+    mode_kind, mode_dir, declared = tables.kind, tables.direction, tables.declared
     n = y.size
     direction = mode_dir[mode]
     if kind == G_D or kind == G_JAM:
@@ -169,22 +168,22 @@ def _select(mode, kind, rhs, guards, t, y, p, atol, rtol, tables, g, y_tmp, f):
         m = _mode(M_SLIDING, 1 if kind == G_SLIDE_A else -1, direction, tables)
         return m, FINISHED, NEED_NOTHING
     if kind == G_CONE_F or kind == G_CONE_B:  # breakaway from stick
-        m, need = _sliding(1 if kind == G_CONE_F else -1, rhs, guards, t, y, p, atol, rtol,
+        m, need = _sliding(1 if kind == G_CONE_F else -1, rhs, guards, t, y, p, tol,
                            tables, g, y_tmp, f)
     elif kind == G_FLANK_N:  # the pressed flank changes while sticking
         m, need = mode, NEED_NOTHING
     elif kind == G_V1 or mode_kind[mode] == M_STICK:  # came to rest, or a law event in stick
         y[n - 1] = 0.0
-        m, need = _at_rest(rhs, guards, t, y, p, atol, rtol, tables, g, y_tmp, f, False)
+        m, need = _at_rest(rhs, guards, t, y, p, tol, tables, g, y_tmp, f, False)
     elif mode_kind[mode] == M_FILIPPOV:  # a law event while sliding along phi = 0
         guards(mode, t, y, p, g)
         m, need = mode, NEED_NOTHING
-        if g[_guard(G_SLIDE_A, tables[5])] <= 0.0:
+        if g[_guard(G_SLIDE_A, tables.guard_kind)] <= 0.0:
             m = _mode(M_SLIDING, 1, direction, tables)
-        elif g[_guard(G_SLIDE_B, tables[5])] <= 0.0:
+        elif g[_guard(G_SLIDE_B, tables.guard_kind)] <= 0.0:
             m = _mode(M_SLIDING, -1, direction, tables)
     else:  # phi, or a law event while sliding: the flank from the sign of phi
-        m, need = _sliding(direction, rhs, guards, t, y, p, atol, rtol, tables, g, y_tmp, f)
+        m, need = _sliding(direction, rhs, guards, t, y, p, tol, tables, g, y_tmp, f)
         ms = _filippov(mode, guards, t, y, p, tables, g) if kind == G_PHI else -1
         if ms >= 0:
             if declared[ms] == 0:
@@ -200,7 +199,7 @@ def _consistent(mode, guards, t, y, p, tables, g):
     """False if D or the jam factor of ``mode`` is <= 0 at (t, y)."""
     guards(mode, t, y, p, g)
     for kind in (G_D, G_JAM):
-        k = _guard(kind, tables[5])
+        k = _guard(kind, tables.guard_kind)
         if k >= 0 and g[k] <= 0.0:
             return False
     return True
@@ -211,7 +210,7 @@ def _latch_pieces(guards, t, y, p, tables, g):
     """Set every piecewise law's latched piece in p: the number of its breakpoint guards
     that are >= 0 at (t, y). A located event lies strictly past its breakpoint, so the
     piece is the one the state has entered (the right limit)."""
-    guard_kind, guard_latch = tables[5], tables[6]
+    guard_kind, guard_latch = tables.guard_kind, tables.guard_latch
     for k in range(guard_kind.size):
         if guard_kind[k] == G_LAW:
             p[guard_latch[k]] = 0.0
@@ -236,13 +235,13 @@ def _unbounded(observe, guards, mode, t, y, p, k_d, mon, obs, g):
 
 
 @njit(cache=True, error_model="numpy")
-def _log(ev_t, ev_i, ev_y, n_ev, t, k, mode_from, mode_to, y, quad):
-    """Append an event (time, guard, from, to, state) to the log."""
+def _log(log, n_ev, t, k, mode_from, mode_to, y, quad):
+    """Append an event (time, guard, from, to, state) to the EventLog."""
     n = y.size
-    ev_t[n_ev] = t
-    ev_i[n_ev, 0], ev_i[n_ev, 1], ev_i[n_ev, 2] = k, mode_from, mode_to
-    ev_y[n_ev, :n] = y
-    ev_y[n_ev, n:] = quad
+    log.t[n_ev] = t
+    log.index[n_ev, 0], log.index[n_ev, 1], log.index[n_ev, 2] = k, mode_from, mode_to
+    log.state[n_ev, :n] = y
+    log.state[n_ev, n:] = quad
     return n_ev + 1
 
 
@@ -250,34 +249,32 @@ HYBRID_SIG = types.Tuple((types.int64, types.float64, types.int64, types.int64, 
                           types.int64))(
     types.int64,  # method
     RhsFunction, JacFunction, GuardsFunction, GuardsFunction,  # rhs, jac, guards, observe
-    VECTOR, TABLES,  # p (written: latched trip time), mode tables
+    VECTOR, MODE_TABLES,  # p (its latches are written), tables
     types.float64, VECTOR, VECTOR, types.int64, types.float64,  # t0, y0, quad, mode0, t_end
-    types.float64, VECTOR, types.float64, types.int64,  # rtol, atol, hmax, max_steps
-    VECTOR, MATRIX, types.int64[::1], MATRIX,  # t_out, y_out, mode_out, p_out
-    VECTOR, types.int64[:, ::1], MATRIX,  # ev_t, ev_i, ev_y
+    TOLERANCES, types.int64,  # tol, max_steps
+    OUTPUTS, EVENT_LOG,  # out, log
     MATRIX, types.int64[::1],  # mon, counters
 )
 
 
 @cache_guard.compile_cached(HYBRID_SIG, error_model="numpy", nogil=True)
-def integrate_hybrid(method, rhs, jac, guards, observe, p, tables, t0, y0, quad, mode0, t_end,
-                     rtol, atol, hmax, max_steps, t_out, y_out, mode_out, p_out, ev_t, ev_i, ev_y,
-                     mon, counters):
+def integrate_hybrid(method, rhs, jac, guards, observe, p, tables, t0, y0, quad, mode0, t_end, tol, max_steps,
+                     out, log, mon, counters):
     """Integrate the model from (t0, y0) to t_end through its mode changes.
 
-    tables: (mode_kind, mode_flank, mode_direction, mode_declared, guard_directions,
-        guard_kind, guard_latch), from ``modes.tables``. p: parameters and latches;
+    tables: the ModeTables from ``modes.tables``. p: parameters and latches;
         the runtime writes the latches (a torque switch's trip time, the piece of
         each piecewise law, set at the start and at every law event), so pass a copy.
     quad: the integral of the states at t0 (x1 when v1 is the only state), carried
         in columns n: of y_out and ev_y; size 0 for none. mode0: the initial mode,
         or -1 to select it from y0 (at v1 = 0 from the friction cones).
-    t_out, y_out, mode_out, p_out: output times (sorted, >= t0) and the rows filled
-        there: state, mode and the parameter vector with the latches in force (a row
-        at an event time belongs to the segment that ends there: its left limit);
-        rows after a stop keep their contents, mode_out -1.
-    ev_t, ev_i, ev_y: the event log (time; guard, from-mode, to-mode (-1: stop);
-        state), its capacity is ev_t.size. mon: (K, 3) running max |observable k|
+    tol: Tolerances (rtol, atol per state, hmin, hmax); max_steps bounds step attempts.
+    out: Outputs: times (sorted, >= t0) and the rows filled there: state, mode and the
+        parameter vector with the latches in force (a row at an event time belongs to
+        the segment that ends there: its left limit); rows after a stop keep their
+        contents, mode -1.
+    log: the EventLog (time; guard, from-mode, to-mode (-1: stop); state), its
+        capacity is log.t.size. mon: (K, 3) running max |observable k|
         as (|value|, value, t), K = number of observables; pass zeros.
     counters: int64[4] as in segment (steps, rejected, rhs calls, jac calls).
 
@@ -289,25 +286,25 @@ def integrate_hybrid(method, rhs, jac, guards, observe, p, tables, t0, y0, quad,
     found inconsistent), need, initial mode).
     """
     n = y0.size
-    n_guards = tables[4].shape[1]
-    if not (n >= 1 and t_end > t0 and rtol > 0.0 and (quad.size == 0 or quad.size == n)
-            and y_out.shape[1] == n + quad.size and mode_out.size == t_out.size
-            and p_out.shape[0] == t_out.size and p_out.shape[1] == p.size
-            and ev_y.shape[1] == n + quad.size and tables[4].shape[0] == tables[0].size):
+    n_guards = tables.guard_direction.shape[1]
+    if not (n >= 1 and t_end > t0 and tol.rtol > 0.0 and (quad.size == 0 or quad.size == n)
+            and out.y.shape[1] == n + quad.size and out.mode.size == out.t.size
+            and out.p.shape[0] == out.t.size and out.p.shape[1] == p.size
+            and log.state.shape[1] == n + quad.size and tables.guard_direction.shape[0] == tables.kind.size):
         return INVALID_INPUT, t0, 0, -1, NEED_NOTHING, -1
     y, q = y0.copy(), quad.copy()
     g, y_tmp, f = np.empty(n_guards), np.empty(n), np.empty(n)
     obs = np.empty(mon.shape[0])
-    mode_out[:] = -1
-    k_d = _guard(G_D, tables[5])
+    out.mode[:] = -1
+    k_d = _guard(G_D, tables.guard_kind)
     _latch_pieces(guards, t0, y, p, tables, g)
     mode, need, status = mode0, NEED_NOTHING, FINISHED
     if mode < 0:
         v = y[n - 1]
         if v == 0.0:
-            mode, need = _at_rest(rhs, guards, t0, y, p, atol, rtol, tables, g, y_tmp, f, True)
+            mode, need = _at_rest(rhs, guards, t0, y, p, tol, tables, g, y_tmp, f, True)
         else:
-            mode, need = _sliding(1 if v > 0.0 else -1, rhs, guards, t0, y, p, atol, rtol, tables,
+            mode, need = _sliding(1 if v > 0.0 else -1, rhs, guards, t0, y, p, tol, tables,
                                   g, y_tmp, f)
     if mode < 0:
         return UNDECLARED, t0, 0, -1, need, -1
@@ -320,34 +317,33 @@ def integrate_hybrid(method, rhs, jac, guards, observe, p, tables, t0, y0, quad,
     while True:
         steps = counters[segment.N_STEPS] + counters[segment.N_REJECTED]
         i0 = i
-        k_singular = k_d if singular and k_d >= 0 and tables[4][mode, k_d] != 0 else -1
-        seg_status, t_new, k, i, h = segment._run(
-            method, rhs, jac, guards, observe, mode, p, t, t_end, rtol, atol, h, 0.0, hmax,
-            max(max_steps - steps, 0), tables[4][mode], 0.0, True, 0.0, t_out, i, y_out, y, q,
-            mon, counters, k_singular)
+        k_singular = k_d if singular and k_d >= 0 and tables.guard_direction[mode, k_d] != 0 else -1
+        ev = EventSettings(tables.guard_direction[mode], 0.0, 0.0, True, k_singular)
+        seg_status, t_new, k, i, h = segment.run(method, rhs, jac, guards, observe, mode, p, t, t_end, tol,
+                                                 max(max_steps - steps, 0), h, ev, out, i, y, q, mon, counters)
         singular = True
         stalled = seg_status == segment.STEP_TOO_SMALL or seg_status == segment.NOT_FINITE
         if k_singular >= 0 and stalled and counters[segment.N_STEPS] > 0:
             seg_status = segment.APPROACH  # steps in t shrank to nothing: try Sundman's time
         if seg_status == segment.APPROACH:
-            outcome, t_new, i, d_last = painleve.approach(
-                rhs, guards, observe, mode, p, k_d, tables[4][mode], t_new, y, q, t_end, h, rtol,
-                atol, max(max_steps - counters[segment.N_STEPS] - counters[segment.N_REJECTED], 0),
-                t_out, i, y_out, mon, counters)
+            ev = EventSettings(tables.guard_direction[mode], 0.0, 0.0, True, k_d)
+            left = max(max_steps - counters[segment.N_STEPS] - counters[segment.N_REJECTED], 0)
+            outcome, t_new, i, _ = painleve.approach(rhs, guards, observe, mode, p, ev, t_new, y, q, t_end, h,
+                                                          tol, left, out, i, mon, counters)
             if outcome == painleve.ZERO:
                 seg_status, k = segment.EVENT, k_d
             elif outcome == painleve.END:
                 seg_status = segment.REACHED_END
             elif outcome == painleve.OTHER or outcome == painleve.CLEAR:
                 singular = outcome == painleve.CLEAR  # OTHER: locate that guard in t first
-                mode_out[i0:i] = mode
-                p_out[i0:i] = p
+                out.mode[i0:i] = mode
+                out.p[i0:i] = p
                 t = t_new
                 continue
             else:
                 seg_status = outcome
-        mode_out[i0:i] = mode
-        p_out[i0:i] = p
+        out.mode[i0:i] = mode
+        out.p[i0:i] = p
         same = same + 1 if t_new - t <= SAME_TIME_ULPS * (np.nextafter(t, np.inf) - t) else 0
         t = t_new
         if seg_status != segment.EVENT:
@@ -356,29 +352,29 @@ def integrate_hybrid(method, rhs, jac, guards, observe, p, tables, t0, y0, quad,
         if same >= MAX_SAME_TIME:
             status = CHATTERING
             break
-        if n_ev == ev_t.size:
+        if n_ev == log.t.size:
             status = TOO_MANY_EVENTS
             break
-        kind = tables[5][k]
+        kind = tables.guard_kind[k]
         if kind == G_D or kind == G_JAM:  # D or the jam factor of this mode reached 0
             if mon.shape[0] > 0 and mon[0, 0] != np.inf:  # (the approach marked them already)
                 _unbounded(observe, guards, mode, t, y, p, k_d, mon, obs, g)
-            n_ev = _log(ev_t, ev_i, ev_y, n_ev, t, k, mode, -1, y, q)
+            n_ev = _log(log, n_ev, t, k, mode, -1, y, q)
             status = INCONSISTENT
             break
         p_left = p.copy()  # the laws in force up to the event: its left limit
         if kind == G_TRIP:
-            p[tables[6][k]] = t
+            p[tables.guard_latch[k]] = t
         elif kind == G_LAW:
             _latch_pieces(guards, t, y, p, tables, g)
-        new, status, need = _select(mode, kind, rhs, guards, t, y, p, atol, rtol, tables, g,
+        new, status, need = _select(mode, kind, rhs, guards, t, y, p, tol, tables, g,
                                     y_tmp, f)
         if status == FINISHED and not _consistent(new, guards, t, y, p, tables, g):
             status = INCONSISTENT
             _unbounded(observe, guards, mode, t, y, p_left, -1, mon, obs, g)
         if status == FINISHED and new == mode and kind == G_PHI:
             continue  # phi crossed within its noise (the probe keeps the flank): no event
-        n_ev = _log(ev_t, ev_i, ev_y, n_ev, t, k, mode, new if status == FINISHED else -1, y, q)
+        n_ev = _log(log, n_ev, t, k, mode, new if status == FINISHED else -1, y, q)
         if status != FINISHED:
             mode = new if status == INCONSISTENT else mode
             break
@@ -386,3 +382,30 @@ def integrate_hybrid(method, rhs, jac, guards, observe, p, tables, t0, y0, quad,
         if t == t_end:
             break
     return status, t, n_ev, mode, need, first
+
+
+def _call(kernel, args, counters):
+    return kernel(*args)
+
+
+def integrate(method, model, p, tables, y0, t_end, *, rtol, atol, t_out, max_events, quad=None, t0=0.0,
+              mode0=-1, hmin=0.0, hmax=np.inf, max_steps=100_000, call=_call):
+    """integrate_hybrid with keyword arguments: builds the structures and work arrays from
+    plain values and returns (status, t_stop, n_events, last mode, need, first mode,
+    Outputs, EventLog, mon, counters). model: the generated module; p is written (latches).
+    call(kernel, args, counters) runs the kernel (e.g. in a thread, watching counters)."""
+    y0 = np.ascontiguousarray(y0, dtype=np.float64)
+    quad = np.empty(0) if quad is None else np.ascontiguousarray(quad, dtype=np.float64)
+    width = y0.size + quad.size
+    t_out = np.ascontiguousarray(t_out, dtype=np.float64)
+    out = Outputs(t_out, np.full((t_out.size, width), np.nan), np.empty(t_out.size, np.int64),
+                  np.empty((t_out.size, p.size)))
+    log = EventLog(np.empty(max_events), np.empty((max_events, 3), np.int64), np.empty((max_events, width)))
+    mon, counters = np.zeros((len(model.OBSERVABLES), 3)), np.zeros(segment.N_COUNTERS, np.int64)
+    tol = Tolerances(float(rtol), np.array(np.broadcast_to(np.asarray(atol, np.float64), y0.shape)),
+                     float(hmin), float(hmax))
+    jac = model.jac if method == segment.ROSENBROCK23 else segment.no_jacobian
+    args = (method, model.rhs, jac, model.guards, model.observe, p, tables, float(t0), y0, quad, int(mode0),
+            float(t_end), tol, int(max_steps), out, log, mon, counters)
+    result = call(integrate_hybrid, args, counters)
+    return (*result, out, log, mon, counters)

@@ -8,19 +8,37 @@ turns the names into the integer kinds of ``hybrid`` once, in Python.
 from __future__ import annotations
 
 import re
+from enum import IntEnum
 from types import ModuleType
 
 import numpy as np
 
 from tswm_runtime import hybrid
 from tswm_runtime.contract import ContractError
+from tswm_runtime.structures import ModeTables
+
+class GuardKind(IntEnum):
+    """The mode machine's guard kinds (hybrid.G_PHI, ...), for Python."""
+
+    PHI = hybrid.G_PHI
+    V1 = hybrid.G_V1
+    D = hybrid.G_D
+    JAM = hybrid.G_JAM
+    CONE_FORWARD = hybrid.G_CONE_F
+    CONE_BACKWARD = hybrid.G_CONE_B
+    FLANK_NORMAL = hybrid.G_FLANK_N
+    LAW = hybrid.G_LAW
+    SLIDE_EXIT_A = hybrid.G_SLIDE_A
+    SLIDE_EXIT_B = hybrid.G_SLIDE_B
+    TRIP = hybrid.G_TRIP
+
 
 GUARD_KINDS = {
-    "phi": hybrid.G_PHI, "v1": hybrid.G_V1, "D": hybrid.G_D, "jam": hybrid.G_JAM,
-    "cone_forward": hybrid.G_CONE_F, "cone_backward": hybrid.G_CONE_B,
-    "flank_normal": hybrid.G_FLANK_N, "load_step": hybrid.G_LAW, "load_contact": hybrid.G_LAW,
-    "slide_exit_a": hybrid.G_SLIDE_A, "slide_exit_b": hybrid.G_SLIDE_B,
-    "torque_switch": hybrid.G_TRIP,
+    "phi": GuardKind.PHI, "v1": GuardKind.V1, "D": GuardKind.D, "jam": GuardKind.JAM,
+    "cone_forward": GuardKind.CONE_FORWARD, "cone_backward": GuardKind.CONE_BACKWARD,
+    "flank_normal": GuardKind.FLANK_NORMAL, "load_step": GuardKind.LAW, "load_contact": GuardKind.LAW,
+    "slide_exit_a": GuardKind.SLIDE_EXIT_A, "slide_exit_b": GuardKind.SLIDE_EXIT_B,
+    "torque_switch": GuardKind.TRIP,
 }
 GUARD_EVENT_NAMES = {
     "phi": "flank switch (phi = 0)", "v1": "v1 = 0", "D": "D = 0", "jam": "jam factor = 0",
@@ -34,7 +52,7 @@ SCHEDULE_GUARD = re.compile(r"(load|drive)_at([0-9]+)")
 
 def guard_kind(name: str) -> int | None:
     """hybrid.G_* of a guard name; a schedule's breakpoints (load_at1, ...) are law events."""
-    return hybrid.G_LAW if SCHEDULE_GUARD.fullmatch(name) else GUARD_KINDS.get(name)
+    return GuardKind.LAW if SCHEDULE_GUARD.fullmatch(name) else GUARD_KINDS.get(name)
 
 
 def event_name(guard: str) -> str:
@@ -54,16 +72,15 @@ def mode_kind(name: str) -> int:
     return hybrid.M_SLIDING
 
 
-def tables(module: ModuleType) -> tuple[np.ndarray, ...]:
-    """(mode_kind, mode_flank, mode_direction, mode_declared, guard_directions, guard_kind,
-    guard_latch)."""
+def tables(module: ModuleType) -> ModeTables:
+    """The module's modes and guards as the integer ModeTables of the mode machine."""
     unknown = [g for g in module.GUARDS if guard_kind(g) is None]
     if unknown:
         raise ContractError(f"{module.__name__}: guards {unknown} are unknown to this runtime "
                             f"(known: {', '.join(GUARD_KINDS)}); regenerate the module")
     declared = getattr(module, "MODE_DECLARED", (True,) * len(module.MODES))
     as_int = lambda values: np.ascontiguousarray(values, dtype=np.int64)  # noqa: E731
-    return (as_int([mode_kind(m) for m in module.MODES]), as_int(module.MODE_FLANK),
+    return ModeTables(as_int([mode_kind(m) for m in module.MODES]), as_int(module.MODE_FLANK),
             as_int(module.MODE_DIRECTION), as_int([bool(d) for d in declared]),
             as_int(module.GUARD_DIRECTIONS).reshape(len(module.MODES), len(module.GUARDS)),
             as_int([guard_kind(g) for g in module.GUARDS]), as_int(module.GUARD_LATCH))

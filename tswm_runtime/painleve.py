@@ -26,7 +26,7 @@ re-taken steps; the observables' running maxima are updated at step ends.
 import numpy as np
 from numba import njit
 
-from tswm_runtime import dopri5, events
+from tswm_runtime import control, dopri5, events
 
 ZERO, END, OTHER, CLEAR = 0, 1, 2, 3  # outcomes besides the integrator's failure codes
 TRIGGER_STEPS = 4.0  # The segment loop hands over when D would reach 0 within this many steps,
@@ -114,15 +114,18 @@ def _root(rhs, guards, mode, p, k_d, n, z, K0, h, K, z_out, g, y, f, which, targ
 
 
 @njit(cache=True, error_model="numpy")
-def approach(rhs, guards, observe, mode, p, k_d, directions, t, y_io, q_io, t_end, h_t, rtol,
-             atol, max_steps, t_out, i, y_out, mon, counters):
+def approach(rhs, guards, observe, mode, p, ev, t, y_io, q_io, t_end, h_t, tol, max_steps, out, i,
+             mon, counters):
     """Follow the mode from (t, y_io, q_io) in Sundman time; see the module docstring.
 
-    y_io, q_io are updated to the returned state. Returns (outcome, t, next output
-    row, d_last): outcome ZERO, END, OTHER, CLEAR or a segment failure code given by
-    the caller's constants (-1 step too small, -2 max steps, -3 not finite); d_last
-    is D at the last state with D > 0 (the left limit at a Painleve point).
+    ev: the segment's EventSettings (ev.singular is D's guard); tol: Tolerances; h_t:
+    the last step in t; out: Outputs, rows from i on. y_io, q_io are updated to the
+    returned state. Returns (outcome, t, next output row, d_last): outcome ZERO, END,
+    OTHER, CLEAR or -1 (step too small), -2 (max steps) as the segment's codes;
+    d_last is D at the last state with D > 0 (the left limit at a Painleve point).
     """
+    k_d, directions, rtol, atol = ev.singular, ev.directions, tol.rtol, tol.atol
+    t_out, y_out = out.t, out.y
     n, nq = y_io.size, q_io.size
     m = 1 + n + nq
     z, z_new, z_tmp, err = np.empty(m), np.empty(m), np.empty(m), np.empty(m)
@@ -150,9 +153,9 @@ def approach(rhs, guards, observe, mode, p, k_d, directions, t, y_io, q_io, t_en
         d_new = _step(rhs, guards, mode, p, k_d, n, z, h, K, z_new, g_new, y, f)
         counters[2] += dopri5.N_STAGES
         dopri5.error_estimate(h, K, err)
-        e = dopri5.error_norm(err, z, z_new, scale_atol, rtol)
-        factor = dopri5.step_factor(e, dopri5.ERROR_ORDER, dopri5.SAFETY, dopri5.MIN_FACTOR,
-                                    dopri5.MAX_FACTOR)
+        e = control.error_norm(err, z, z_new, scale_atol, rtol)
+        factor = control.step_factor(e, dopri5.ERROR_ORDER, dopri5.SAFETY, dopri5.MIN_FACTOR,
+                                     dopri5.MAX_FACTOR)
         if not (e < 1.0 and np.isfinite(e)):
             counters[1] += 1
             K[0, :] = K_row

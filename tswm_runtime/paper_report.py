@@ -288,7 +288,7 @@ def build_report(out_dir: str | Path = "tswm-report", cases: list[tuple[float, f
                 "regimes": regime_text(result), "drive": drive_word(result),
                 "phases": [{"regime": ph.regime, "mode": ph.mode, "t_start": ph.t_start, "t_end": ph.t_end}
                            for ph in result.phases],
-                "events": [{"t": e.t, "guard": e.guard, "from": e.from_mode, "to": e.to_mode} for e in result.events],
+                "events": [e.to_dict() for e in result.events],
                 "v1_end": float(result.v1[-1]),
             }
             bar.update()

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from enum import IntEnum
 from types import ModuleType
 
 import numpy as np
@@ -10,13 +11,30 @@ import numpy as np
 from tswm_runtime import hybrid
 from tswm_runtime.modes import event_name
 
-STATUS_NAMES = {
-    hybrid.FINISHED: "finished", hybrid.SLIDING: "sliding", hybrid.INCONSISTENT: "inconsistent",
-    hybrid.UNDECLARED: "undeclared-mode", hybrid.CHATTERING: "chattering",
-    hybrid.TOO_MANY_EVENTS: "too-many-events", hybrid.STEP_TOO_SMALL: "step-too-small",
-    hybrid.MAX_STEPS: "max-steps", hybrid.NOT_FINITE: "not-finite",
-    hybrid.INVALID_INPUT: "invalid-input",
-}
+class Status(IntEnum):
+    """The mode machine's status codes (hybrid.FINISHED, ...), for Python."""
+
+    FINISHED = hybrid.FINISHED
+    SLIDING = hybrid.SLIDING
+    INCONSISTENT = hybrid.INCONSISTENT
+    UNDECLARED_MODE = hybrid.UNDECLARED
+    CHATTERING = hybrid.CHATTERING
+    TOO_MANY_EVENTS = hybrid.TOO_MANY_EVENTS
+    STEP_TOO_SMALL = hybrid.STEP_TOO_SMALL
+    MAX_STEPS = hybrid.MAX_STEPS
+    NOT_FINITE = hybrid.NOT_FINITE
+    INVALID_INPUT = hybrid.INVALID_INPUT
+
+    @property
+    def label(self) -> str:
+        """The status as results and tables name it: 'step-too-small', ..."""
+        return self.name.lower().replace("_", "-")
+
+
+STATUS_NAMES = {int(status): status.label for status in Status}
+# (name, SI unit) of the per-point series of a Result, in table order.
+SERIES = (("t", "s"), ("x1", "m"), ("v1", "m/s"), ("a1", "m/s^2"), ("x2", "m"), ("v2", "m/s"),
+          ("S1", "N"), ("S2", "N"), ("F1", "N"), ("F2", "N"))
 NEEDED_MODE = {hybrid.NEED_STICK: "stick", hybrid.NEED_FORWARD: "forward",
                hybrid.NEED_BACKWARD: "backward"}
 
@@ -35,6 +53,11 @@ class Event:
     @property
     def kind(self) -> str:
         return event_name(self.guard)
+
+    def to_dict(self) -> dict:
+        """t, guard, kind, from_mode, to_mode (None: the run stopped there), x1, v1."""
+        return {"t": self.t, "guard": self.guard, "kind": self.kind, "from_mode": self.from_mode,
+                "to_mode": self.to_mode, "x1": self.x1, "v1": self.v1}
 
 
 @dataclass(frozen=True)
@@ -82,6 +105,8 @@ class Result:
     n_rejected: int
     nfev: int
     njev: int
+    model: dict = field(default_factory=dict)    # equations, param_units, fixed_params, mode_regime
+    event_a1: np.ndarray = field(default_factory=lambda: np.empty(0))  # a1 just after each event (NaN: stop)
     extras: dict = field(default_factory=dict)
 
     @property
@@ -92,6 +117,66 @@ class Result:
     def regime_sequence(self) -> str:
         """The phases as text: 'stick [0, 0.1) -> tractive [0.1, 1]'."""
         return " -> ".join(f"{ph.regime} [{ph.t_start:.6g}, {ph.t_end:.6g}]" for ph in self.phases)
+
+    def to_dict(self) -> dict:
+        """The run's scalars: scene, status, message, parameters (SI, with units), settings,
+        maxima, KD, phases, events, counts (plain Python values; +-inf stays a float)."""
+        return {
+            "scene": self.scene, "equations": self.model.get("equations"), "status": self.status,
+            "success": self.success, "message": self.message, "t_stop": self.t_stop,
+            "params": dict(self.params), "param_units": dict(self.model.get("param_units", {})),
+            "fixed_params": dict(self.model.get("fixed_params", {})), "settings": dict(self.settings),
+            "maxima": {"S1": {"value": self.S1_max, "t": self.t_S1_max, "unit": "N"},
+                       "S2": {"value": self.S2_max, "t": self.t_S2_max, "unit": "N"}},
+            "KD1": self.KD1, "KD2": self.KD2, "regime_sequence": self.regime_sequence,
+            "phases": [{"mode": ph.mode, "regime": ph.regime, "t_start": ph.t_start, "t_end": ph.t_end}
+                       for ph in self.phases],
+            "events": [e.to_dict() for e in self.events],
+            "counts": {"n_steps": self.n_steps, "n_rejected": self.n_rejected, "nfev": self.nfev,
+                       "njev": self.njev, "n_events": len(self.events), "n_points": int(self.t.size)},
+            "extras": dict(self.extras), "units": dict(SERIES),
+        }
+
+    def to_dataframe(self):
+        """The output points as a pandas DataFrame: one column per series (SI; units in
+        ``df.attrs["units"]``), mode and regime names; the scalars in ``df.attrs``."""
+        import pandas as pd
+
+        regime = self.model.get("mode_regime", self.mode_names)
+        df = pd.DataFrame({name: getattr(self, name) for name, _ in SERIES})
+        df["mode"] = [self.mode_names[m] for m in self.mode]
+        df["regime"] = [regime[m] for m in self.mode]
+        df.attrs.update(self.to_dict())
+        return df
+
+    def sol(self, t) -> np.ndarray:
+        """(x1, v1) at times t (shape (2, len(t)), like solve_ivp's ``sol``): piecewise cubic
+        Hermite interpolation of the output points with their derivatives (v1, a1), split at
+        every event, so no piece spans a kink or a jump of a1. Accurate to O(dt^4) in the
+        spacing dt of the output points (more points, better ``sol``); NaN outside [0, t_stop]."""
+        from scipy.interpolate import CubicHermiteSpline
+
+        t = np.atleast_1d(np.asarray(t, dtype=np.float64))
+        out = np.full((2, t.size), np.nan)
+        cuts = [0.0, *sorted({e.t for e in self.events}), self.t_stop]
+        starts = {e.t: (e.x1, e.v1, a) for e, a in zip(self.events, self.event_a1) if np.isfinite(a)}
+        for lo, hi in zip(cuts[:-1], cuts[1:]):
+            rows = (self.t >= lo) & (self.t <= hi)
+            if lo > 0.0:
+                rows &= self.t > lo          # a row at an event time belongs to the piece before
+            want = (t >= lo) & (t <= hi)
+            knots = [(tr, x, v, a) for tr, x, v, a in zip(self.t[rows], self.x1[rows], self.v1[rows], self.a1[rows])]
+            if lo in starts:                 # the event's state with a1 of the mode entered there
+                knots.insert(0, (lo, *starts[lo]))
+            if not want.any() or not knots:
+                continue
+            tk, xk, vk, ak = (np.array(c) for c in zip(*knots))
+            if tk.size == 1:
+                out[:, want] = [[xk[0]], [vk[0]]]
+                continue
+            out[0, want] = CubicHermiteSpline(tk, xk, vk)(t[want])
+            out[1, want] = CubicHermiteSpline(tk, vk, ak)(t[want])
+        return out
 
     @classmethod
     def build(cls, module: ModuleType, p: np.ndarray, p_rows: np.ndarray, run: dict, t, x1, v1, mode,
@@ -106,6 +191,13 @@ class Result:
             a1[r] = module.accel(mode[r], t[r], y, pr)
             S1[r], S2[r] = module.reactions(mode[r], t[r], y, pr)
             F1[r], F2[r] = module.drive_force(t[r], y, pr), module.load_force(t[r], y, pr)
+        event_a1 = np.full(len(events), np.nan)
+        for e, event in enumerate(events):
+            if event.to_mode is not None:
+                after = np.searchsorted(t, event.t, side="right")
+                pr = p_rows[after] if after < t.size else p
+                y = np.array([event.x1, event.v1][2 - n:])
+                event_a1[e] = module.accel(module.MODES.index(event.to_mode), event.t, y, pr)
         slope = math.tan(_value(module, p, "gamma"))
         KD1 = KD2 = None
         if module.HAS_LOAD_FACTORS:
@@ -119,6 +211,9 @@ class Result:
             t_S2_max=float(mon[1, 2]), KD1=KD1, KD2=KD2, status=STATUS_NAMES[hybrid_status],
             message=message, t_stop=float(t_stop), n_steps=int(counters[0]), n_rejected=int(counters[1]),
             nfev=int(counters[2]), njev=int(counters[3]),
+            model={"equations": module.EQUATIONS, "param_units": dict(zip(module.PARAM_NAMES, module.PARAM_UNITS)),
+                   "fixed_params": dict(module.FIXED), "mode_regime": tuple(module.MODE_REGIME)},
+            event_a1=event_a1,
             extras={name: float(v) for name, v in zip(getattr(module, "LATCH_NAMES", ()),
                                                       p[len(module.PARAM_NAMES):]) if not name.endswith("_piece")})
 

@@ -102,18 +102,16 @@ def settings(module: ModuleType, overrides: dict) -> dict:
 PROGRESS_EVERY = 2.0  # seconds between progress lines of an interruptible run
 
 
-def _run_kernel(args: tuple, counters: np.ndarray, interruptible: bool):
-    """integrate_hybrid(*args); interruptible: in a worker thread (the kernel releases the
-    GIL), so that Ctrl-C reaches Python at once (KeyboardInterrupt; the abandoned worker
-    is a daemon thread) and a long run prints its step count every PROGRESS_EVERY s."""
-    if not interruptible:
-        return hybrid.integrate_hybrid(*args)
+def _in_a_thread(kernel, args: tuple, counters: np.ndarray):
+    """kernel(*args) in a worker thread (the kernel releases the GIL), so that Ctrl-C
+    reaches Python at once (KeyboardInterrupt; the abandoned worker is a daemon thread),
+    and a long run prints its step count (read live from counters) every PROGRESS_EVERY s."""
     import sys
     import threading
     import time
 
     box = {}
-    worker = threading.Thread(target=lambda: box.setdefault("out", hybrid.integrate_hybrid(*args)), daemon=True)
+    worker = threading.Thread(target=lambda: box.setdefault("out", kernel(*args)), daemon=True)
     start = next_report = time.monotonic() + PROGRESS_EVERY
     worker.start()
     while worker.is_alive():
@@ -136,25 +134,19 @@ def simulate(model: str | ModuleType, params: dict | None = None, *, interruptib
     run = settings(module, overrides)
     n = len(module.STATES)
     y0, quad = initial_state(module, run)
-    width = n + quad.size
     t_out = np.linspace(0.0, run["t_end"], run["points"])
-    y_out, mode_out = np.full((t_out.size, width), np.nan), np.empty(t_out.size, np.int64)
-    p_out = np.empty((t_out.size, p.size))
-    cap = run["max_events"]
-    ev_t, ev_i, ev_y = np.empty(cap), np.empty((cap, 3), np.int64), np.empty((cap, width))
-    mon, counters = np.zeros((len(module.OBSERVABLES), 3)), np.zeros(segment.N_COUNTERS, np.int64)
-    status, t_stop, n_ev, last, need, first = _run_kernel((
-        METHODS[run["method"]], module.rhs, jacobian(module, run["method"]), module.guards, module.observe, p,
-        modes.tables(module), 0.0, y0, quad, -1, run["t_end"], run["rtol"], np.full(n, run["atol"]), run["hmax"],
-        run["max_steps"], t_out, y_out, mode_out, p_out, ev_t, ev_i, ev_y, mon, counters), counters, interruptible)
-    keep = mode_out >= 0
-    y_stop = ev_y[n_ev - 1, :n].copy() if n_ev else y0
-    x1 = y_out[keep, n] if n == 1 else y_out[keep, 0]
-    events = [Event(float(ev_t[e]), module.GUARDS[ev_i[e, 0]], module.MODES[ev_i[e, 1]],
-                    module.MODES[ev_i[e, 2]] if ev_i[e, 2] >= 0 else None,
-                    float(ev_y[e, n] if n == 1 else ev_y[e, 0]), float(ev_y[e, n - 1]))
+    status, t_stop, n_ev, last, need, first, out, log, mon, counters = hybrid.integrate(
+        METHODS[run["method"]], module, p, modes.tables(module), y0, run["t_end"], rtol=run["rtol"],
+        atol=run["atol"], t_out=t_out, max_events=run["max_events"], quad=quad, hmax=run["hmax"],
+        max_steps=run["max_steps"], call=_in_a_thread if interruptible else hybrid._call)
+    keep = out.mode >= 0
+    y_stop = log.state[n_ev - 1, :n].copy() if n_ev else y0
+    x1 = out.y[keep, n] if n == 1 else out.y[keep, 0]
+    events = [Event(float(log.t[e]), module.GUARDS[log.index[e, 0]], module.MODES[log.index[e, 1]],
+                    module.MODES[log.index[e, 2]] if log.index[e, 2] >= 0 else None,
+                    float(log.state[e, n] if n == 1 else log.state[e, 0]), float(log.state[e, n - 1]))
               for e in range(n_ev)]
-    return Result.build(module, p, p_out[keep], run, t_out[keep], x1, y_out[keep, n - 1], mode_out[keep], events,
+    return Result.build(module, p, out.p[keep], run, t_out[keep], x1, out.y[keep, n - 1], out.mode[keep], events,
                         mon, counters, hybrid_status=status, t_stop=t_stop,
                         first_mode=first, message=status_message(module, status, t_stop, y_stop, last,
                                                                  need, events, p))

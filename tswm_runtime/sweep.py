@@ -40,6 +40,7 @@ from tswm_runtime import batch, checks, modes
 from tswm_runtime.contract import load_module
 from tswm_runtime.files import write_atomic
 from tswm_runtime.result import STATUS_NAMES
+from tswm_runtime.structures import Tolerances
 from tswm_runtime.simulate import METHODS, initial_state, jacobian, settings, unknown_parameter, with_latches
 
 REGIME_LETTERS = {"tractive": "T", "inverse-tractive": "I", "stick": "S", "backward on flank a": "A",
@@ -156,8 +157,8 @@ def run_cases(module: ModuleType, P: np.ndarray, run: dict):
         f, i, sq = out_f[valid], out_i[valid], seq[valid]
         batch.run_batch(METHODS[run["method"]], module.rhs, jacobian(module, run["method"]), module.guards,
                         module.observe, np.ascontiguousarray(full[valid]), modes.tables(module), y0, quad,
-                        run["t_end"], run["rtol"], np.full(y0.size, run["atol"]), run["hmax"], run["max_steps"],
-                        run["max_events"], len(module.OBSERVABLES), f, i, sq)
+                        run["t_end"], Tolerances(run["rtol"], np.full(y0.size, run["atol"]), 0.0, run["hmax"]),
+                        run["max_steps"], run["max_events"], len(module.OBSERVABLES), f, i, sq)
         out_f[valid], out_i[valid], seq[valid] = f, i, sq
     letters = [REGIME_LETTERS.get(r, "?") for r in module.MODE_REGIME]
     regimes, mode_codes = [], []

@@ -243,3 +243,32 @@ def test_every_status_message_builds_for_every_mode():
                         continue  # UNDECLARED always says what it needs
                     text = status_message(m, status, 0.1, y, last, need, events, p)
                     assert isinstance(text, str) and text, (scene, status, last, need)
+
+
+# --- the Result's dense solution and tables --------------------------------------------------
+
+def test_result_sol_follows_the_reference_across_a_load_step():
+    """result.sol(t): cubic Hermite between output points, split at events, against the
+    quadrature reference at off-grid times, including just before and after the step."""
+    ref = reference(200.0, [(0.0, 0.0), (0.3, -15000.0)], 1.0)
+    r = simulate("paper-runup", {"F2_after": -15000.0}, rtol=1e-10, atol=1e-13, points=2001)
+    t = np.array([0.0123456, 0.1, 0.29977, 0.3 - 1e-6, 0.3 + 1e-6, 0.30041, 0.777, 0.99999])
+    v = r.sol(t)[1]
+    v_ref = np.array([float(ref.v_at(x)) for x in t])
+    np.testing.assert_allclose(v, v_ref, rtol=2e-7)
+    x_ref = np.array([float(ref.x_at(x)) for x in t])
+    np.testing.assert_allclose(r.sol(t)[0], x_ref, rtol=1e-8)
+    assert np.isnan(r.sol([1.5])).all()
+
+
+def test_result_dataframe_and_dict():
+    r = simulate("paper-runup", {"F2_after": -15000.0})
+    df = r.to_dataframe()
+    assert list(df.columns[:3]) == ["t", "x1", "v1"] and df.attrs["units"]["S1"] == "N"
+    # the load law by hand: 0 N before the step at 0.3 s, -15 kN from the first row after it
+    assert (df.loc[df.t <= 0.3, "F2"] == 0.0).all() and (df.loc[df.t > 0.3, "F2"] == -15000.0).all()
+    assert set(df.regime) == {"tractive"}
+    d = r.to_dict()
+    assert d["events"][0] == {"t": r.events[0].t, "guard": "load_step", "kind": "load step", "from_mode": "fwd_a",
+                              "to_mode": "fwd_a", "x1": r.events[0].x1, "v1": r.events[0].v1}
+    assert d["param_units"] == {"m2": "kg", "F2_after": "N", "t_step": "s"}
