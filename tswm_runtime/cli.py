@@ -75,12 +75,17 @@ def _shipped_modules() -> list[str]:
 
 
 def _load_model(scene: str):
-    """The generated module of a shipped scene name or a .py path; UsageError otherwise."""
+    """The generated module of a shipped scene name, a scene file (.toml: generated into the
+    user cache on first use, see derivation.model_cache) or a module's .py path."""
     from tswm_runtime.contract import ContractError, load_module
 
-    if Path(scene).suffix != ".py" and ("/" in scene or "\\" in scene or Path(scene).suffix):
-        raise UsageError(f"scene {scene!r}: simulate takes a shipped scene name or a generated module "
-                         f"(.py); for a scene file run `tswm generate {scene}` and pass the module it writes")
+    if Path(scene).suffix == ".toml":
+        from derivation.model_cache import module_for_scene
+
+        scene = str(module_for_scene(scene))
+    elif Path(scene).suffix != ".py" and ("/" in scene or "\\" in scene or Path(scene).suffix):
+        raise UsageError(f"scene {scene!r}: expected a shipped scene name, a scene file (.toml) or a "
+                         "generated module (.py)")
     try:
         return load_module(scene)
     except ModuleNotFoundError as error:

@@ -3,6 +3,7 @@ imported when a command runs)."""
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 
 SWEEP_SETTINGS = ("t_end", "rtol", "atol", "method", "max_steps", "max_events")
 
@@ -37,7 +38,8 @@ def _sweep(args: argparse.Namespace) -> int:
                 client = Client(args.scheduler)
         try:
             outcome = sweep(module, P, overrides, output=args.output, chunk_size=args.chunk_size,
-                            client=client, progress=not args.no_progress, scene_spec=args.scene)
+                            client=client, progress=not args.no_progress,
+                            scene_spec=module.__file__ if Path(args.scene).suffix else args.scene)
         finally:
             if client is not None:
                 client.close()

@@ -1,0 +1,35 @@
+"""Generated modules of scene files, kept in a user cache: a scene file runs as it is.
+
+``module_for_scene(path)`` derives and generates the module of a scene file into
+``$TSWM_CACHE`` (default ``$XDG_CACHE_HOME/tswm`` or ``~/.cache/tswm``), under a name
+keyed by the scene file's and the generator's sha256, and reuses it while both are
+unchanged. generated/ (the shipped scenes) is never touched.
+"""
+from __future__ import annotations
+
+import hashlib
+import os
+from pathlib import Path
+
+from derivation.codegen import body_is_intact, generator_digest, module_name, write_module
+from derivation.model import build_model
+from derivation.scene import load_scene
+
+
+def cache_dir() -> Path:
+    """Where generated modules of scene files live."""
+    if os.environ.get("TSWM_CACHE"):
+        return Path(os.environ["TSWM_CACHE"]) / "models"
+    base = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache")
+    return base / "tswm" / "models"
+
+
+def module_for_scene(path: str | os.PathLike) -> Path:
+    """The generated module (.py) of the scene file at ``path``: from the cache, or made now."""
+    scene = load_scene(Path(path))
+    key = hashlib.sha256(f"{scene.digest} {generator_digest()}".encode()).hexdigest()[:16]
+    directory = cache_dir() / f"{module_name(scene.name)}_{key}"
+    target = directory / f"{module_name(scene.name)}.py"
+    if target.exists() and body_is_intact(target.read_text()):
+        return target
+    return write_module(build_model(scene), directory, force=True)
