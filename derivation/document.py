@@ -34,8 +34,34 @@ class Section:
         self.blocks.append(("table", spec, header, rows))
 
 
+_SHORT_NAME = re.compile(r"([A-Za-z]|alpha|beta|gamma|delta|epsilon|mu|phi|psi|rho|tau|omega)(\d*)")
+
+
+def symbol_latex(name: str) -> str | None:
+    """LaTeX for a parameter name with underscores that SymPy would typeset badly, else None.
+
+    A name led by one letter or a Greek letter gets a subscript: ``F2_after`` ->
+    F_{2,after}, ``gamma_a`` -> gamma_{a}. A name led by a word (``friction_rho``,
+    ``load_piece``) is set as the identifier itself, as in the parameter table."""
+    if "_" not in name:
+        return None
+    head, *rest = name.split("_")
+    short = _SHORT_NAME.fullmatch(head)
+    if short and all(rest):
+        letter = f"\\{short[1]}" if len(short[1]) > 1 else short[1]
+        parts = [short[2]] if short[2] else []
+        parts += [p if p.isdigit() or len(p) == 1 else f"\\mathrm{{{p}}}" for p in rest]
+        return f"{letter}_{{{','.join(parts)}}}"
+    return "\\mathtt{" + name.replace("_", "\\_") + "}"
+
+
 def _l(expr) -> str:
-    return sp.latex(expr)
+    names = {}
+    for symbol in getattr(expr, "free_symbols", ()):
+        text = symbol_latex(symbol.name) if isinstance(symbol, sp.Symbol) else None
+        if text is not None:
+            names[symbol] = text
+    return sp.latex(expr, symbol_names=names)
 
 
 def _eq(lhs, rhs) -> str:
@@ -143,7 +169,13 @@ def _stick_section() -> Section:
 
 def _laws_section(model: Model) -> Section:
     s = Section(f"Laws of scene `{model.scene.name}`")
+    params = {p.name: p for p in model.scene.params()}
     for q in model.laws:
+        if q.expr == q.symbol and q.symbol.name in params:   # a constant law: the parameter itself
+            p = params[q.symbol.name]
+            kind = f"free, default {p.value:g} {p.unit}" if p.free else f"fixed, {p.value:g} {p.unit}"
+            s.text(f"{q.doc}: ${_l(q.symbol)}$ is the scene parameter `{p.name}` ({kind.rstrip()}).")
+            continue
         s.text(q.doc + ":")
         s.math(_eq(q.symbol, q.expr))
     if model.scene.drive.kind == "kloss":

@@ -81,7 +81,7 @@ def _split(raw: str, quantity: str) -> tuple[float, str]:
         if not unit:
             problem = "missing unit"
         elif owner:
-            problem = f"'{unit}' is a {owner} unit"
+            problem = f"'{unit}' is {article(owner)} {owner} unit"
         else:
             problem = f"unknown unit '{unit}'"
         raise UnitError(f"{problem}; expected {_expected(quantity)}")
@@ -93,4 +93,10 @@ def _expected(quantity: str) -> str:
     if quantity == "dimensionless":
         return "a plain number (dimensionless)"
     names = ", ".join(UNITS[quantity])
-    return f"a {quantity}: a plain number in {si_unit(quantity)} or '<number> <unit>' with unit {names}"
+    return (f"{article(quantity)} {quantity}: a plain number in {si_unit(quantity)} or '<number> <unit>' "
+            f"with unit {names}")
+
+
+def article(word: str) -> str:
+    """'an' before a vowel sound, else 'a' (the quantity names here have no silent letters)."""
+    return "an" if word[:1].lower() in "aeiou" else "a"

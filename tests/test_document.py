@@ -71,7 +71,29 @@ def test_literal_document_shows_the_slide_mode_and_seating_the_latch():
     assert "a_1 = \\lambda a_{1,a} + (1 - \\lambda) a_{1,b} = 0" in md
     assert "slide_fwd" not in render(build_document(build_model(load_scene("paper"))), "markdown")
     md = render(build_document(build_model(load_scene("seating"))), "markdown")
-    assert "Latch $t_{trip}$" in md and "guard $- S_{1} + S_{1 trip}$" in md
+    assert "Latch $t_{\\mathrm{trip}}$" in md and "guard $- S_{1} + S_{1,\\mathrm{trip}}$" in md
+
+
+def test_laws_read_well(tmp_path):
+    """A constant law is stated in words, not as F_1 = F_1; parameter names with underscores are
+    typeset as subscripts or as the identifier, never as SymPy's friction_{rho}."""
+    shipped = (resources.files("derivation") / "scenes" / "one-sided.toml").read_text()
+    assert 'law = "linear"' in shipped
+    drive = shipped[shipped.index("[drive]"):shipped.index("[load]")]
+    constant_drive = shipped.replace(drive, '[drive]\nlaw = "constant"\nF1 = "800 N"\n\n')
+    assert constant_drive != shipped
+    path = tmp_path / "constant-drive.toml"
+    path.write_text(constant_drive)
+    md = render(build_document(build_model(load_scene(str(path)))), "markdown")
+    assert "F_{1} = F_{1}" not in md and "friction_{\\rho}" not in md
+    assert "drive force (constant): $F_{1}$ is the scene parameter `F1` (fixed, 800 N)." in md
+    assert "\\rho = \\mathtt{friction\\_rho}" in md and "x_{2,\\mathrm{contact}}" in md
+    md = render(build_document(build_model(load_scene("paper"))), "markdown")
+    assert "F_{2} = F_{2}" not in md
+    assert "load force (constant): $F_{2}$ is the scene parameter `F2` (free, default -15000 N)." in md
+    assert "\\mathtt{friction\\_a}" in md and "friction_{a}" not in md
+    md = render(build_document(build_model(load_scene("load-schedule"))), "markdown")
+    assert "F_{2,0}" in md and "F_{2 0}" not in md
 
 
 def test_cli_derive_writes_documents(tmp_path, capsys):

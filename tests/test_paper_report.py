@@ -11,7 +11,7 @@ import sys
 import pytest
 
 from tswm_runtime import paper_report as pr
-from tswm_runtime.paper_data import TABLE3_PRINTED, printed
+from tswm_runtime.paper_data import FIGURE2, printed
 from tswm_runtime.simulate import simulate
 
 NEED_CHROMIUM = os.environ.get("CI") == "true"   # CI installs chromium and must render the report
@@ -108,7 +108,15 @@ def test_figures_are_print_resolution(report):
         assert png[:8] == b"\x89PNG\r\n\x1a\n"
         width, height = struct.unpack(">II", png[16:24])
         assert width >= 1600 and height >= 1600        # 8 in at >= 200 dpi
-    assert len(TABLE3_PRINTED) == 6
+        chunk = png.index(b"pHYs")                     # pixels per metre, as the PNG records them
+        assert struct.unpack(">IIB", png[chunk + 4:chunk + 13]) == (7874, 7874, 1)   # 200 dpi
+    # the figures show the paper's Figure 2 case (CASES lists another case after it) and the
+    # report links each of them
+    assert result["data"]["figure_case"] == FIGURE2 != dict(zip(("m2", "F2"), CASES[-1]))
+    md = (out / "paper-report.md").read_text()
+    for key, label, scene in (("consistent", "(a)", "paper"), ("literal", "(b)", "paper-literal"),
+                              ("runup", "(c)", "paper-runup")):
+        assert f"![{label} {scene}](figure2-{key}.png)" in md
 
 
 def test_cli_paper_does_not_load_sympy_without_the_derivation(tmp_path):
@@ -117,8 +125,62 @@ def test_cli_paper_does_not_load_sympy_without_the_derivation(tmp_path):
             "'--no-progress']); assert rc == 0; assert 'sympy' not in sys.modules, 'sympy loaded'")
     run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert run.returncode == 0, run.stderr
-    assert re.search(r"wall time \d+\.\d+ s", run.stdout)
     assert (tmp_path / "paper-report.html").exists() and not (tmp_path / "paper-derivation.md").exists()
+    # the CLI and the report state the same wall time, from the command's start, start-up included
+    said = re.search(r"wall time (\d+\.\d\d) s from the start of `tswm paper` to the report "
+                     r"\(start-up: imports and numba's compiled code (\d+\.\d\d) s; runs, checks, figures and "
+                     r"derivation (\d+\.\d\d) s\)", run.stdout)
+    assert said, run.stdout
+    timing = json.loads((tmp_path / "paper-report.json").read_text())["timing"]
+    assert [f"{timing[k]:.2f}" for k in ("wall_s", "startup_s", "work_s")] == list(said.groups())
+    assert timing["wall_s"] == pytest.approx(timing["startup_s"] + timing["work_s"], abs=1e-9)
+    assert timing["startup_s"] > 0                    # the import of the report module is counted
+    assert said.group(0) in (tmp_path / "paper-report.md").read_text()
+    html = (tmp_path / "paper-report.html").read_text()
+    assert said.group(0).replace("`tswm paper`", "<code>tswm paper</code>").replace("'", "&#39;") in html
+
+
+def test_verdict_comes_first_and_names_the_closest_reading(report):
+    result, out = report
+    md = (out / "paper-report.md").read_text()
+    headings = re.findall(r"^## (.*)$", md, flags=re.M)
+    assert headings[0] == "Verdict" and md.index("## Verdict") < md.index("| Test |")
+    html = (out / "paper-report.html").read_text()
+    assert re.findall(r"<h2[^>]*>([^<]*)</h2>", html)[0] == "Verdict"
+    # redo the ranking from the printed numbers and direct runs: most cells within 5 %, then the
+    # smallest mean relative deviation
+    ranking = {}
+    for key in DIRECT:
+        hits, deviations = 0, []
+        for m2, F2 in CASES:
+            paper = printed(m2, F2)
+            if paper is None:
+                continue
+            r = _direct(key, m2, F2)
+            for mine, theirs in ((r.S1_max, paper.S1m), (r.KD1, paper.KD1), (r.S2_max, paper.S2m),
+                                 (r.KD2, paper.KD2)):
+                deviations.append(abs(mine - theirs) / abs(theirs))
+                hits += mine * theirs > 0 and abs(mine - theirs) <= 0.05 * abs(theirs)
+        ranking[key] = (-hits, sum(deviations) / len(deviations))
+    best = min(ranking, key=ranking.get)
+    assert best == "runup" and result["data"]["verdict"]["best"] == best
+    verdict = md[md.index("## Verdict"):md.index("## The readings")]
+    assert f"Closest is (c) `paper-runup`" in verdict
+    assert f"mean deviation of {ranking[best][1]:.0%}" in verdict
+    # why: the starting force against the static friction cone, and the printed equations' energy
+    gamma, rho0 = math.radians(4.76), math.radians(1 / 0.088)
+    assert f"{math.tan(gamma + rho0) * 15000:.0f} N (F2 = -15000 N)" in verdict
+    assert "727.6 N lies inside the static friction cone" in verdict
+    lit = result["data"]["checks"]["energy"]["literal"]
+    assert lit["E_diss"] < 0 and f"friction would dissipate {lit['E_diss']:.0f} J" in verdict
+
+
+def test_markdown_tables_have_as_many_cells_as_headers(report):
+    _, out = report
+    md = (out / "paper-report.md").read_text()
+    for first in ("Test", "Case (test)", "F2 [N]", "reading", "scene"):
+        table = pr.read_markdown_table(md, first)
+        assert len(table) > 1 and {len(row) for row in table} == {len(table[0])}, first
 
 
 @pytest.mark.skipif(CHROMIUM is None and not NEED_CHROMIUM,

@@ -202,6 +202,9 @@ def test_units_in_scene():
     ("five N", "force", "'<number> <unit>'"),
     ("0.1", "dimensionless", "plain number"),
     (True, "mass", "expected a mass"),
+    ("4.76", "angle", "missing unit; expected an angle: "),
+    ("2 deg", "force", "'deg' is an angle unit; expected a force"),
+    (True, "angle", "expected an angle: a plain number in rad"),
     (math.nan, "mass", "finite"),
 ])
 def test_units_errors(raw, quantity, message):

@@ -265,3 +265,23 @@ t_end = "0.5 s"
     csv = (tmp_path / "out" / "block.csv").read_text().splitlines()
     last = [float(x) for x in csv[-1].split(",")[:3]]
     assert last[2] == pytest.approx(a1 * 0.5, rel=1e-9)
+
+
+@pytest.mark.parametrize("value, text", [(-15000.0, "-15 kN"), (-16932.7, "-16.93 kN"), (727.63, "727.6 N"),
+                                         (1729.4, "1729 N"), (-5000.0, "-5000 N"), (0.0, "0 N")])
+def test_force_text(value, text):
+    from tswm_runtime.plot import force_text
+
+    assert force_text(value) == text
+
+
+def test_plot_labels_forces_without_exponents():
+    """The maxima's labels read '-15 kN', not '-1.5e+04 N' (a stuck paper run: S2 = F2)."""
+    from tswm_runtime.contract import load_module
+    from tswm_runtime.plot import figure
+
+    r = simulate("paper", {"m2": 200.0, "F2": -15000.0}, points=11)
+    labels = [t.get_text() for ax in figure(r, load_module("paper")).axes for t in ax.texts]
+    assert r.S2_max == -15000.0
+    assert any(label.startswith("S2 = -15 kN at t = ") for label in labels), labels
+    assert not any("e+" in label for label in labels), labels

@@ -1,4 +1,5 @@
 """Sweeps: rows equal simulate(), failures recorded, resume, dask, CLI errors."""
+import json
 import math
 
 import numpy as np
@@ -91,7 +92,13 @@ def test_cli_sweep_writes_tables(tmp_path, capsys):
                  "-o", str(tmp_path), "--no-progress"]) == 0
     table = pd.read_parquet(tmp_path / "paper-sweep.parquet")
     assert len(table) == 5 and table["F2"].between(-15000, -1000).all() and (table["m2"] == 200).all()
-    assert "5 cases" in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert "5 cases" in out
+    # the run's description beside the tables, as the README says, and named in the output
+    about = json.loads((tmp_path / "paper-sweep.json").read_text())
+    assert about["scene"] == "paper" and about["cases"] == 5 and about["columns"] == list(table.columns)
+    for name in ("paper-sweep.parquet", "paper-sweep.csv", "paper-sweep.json"):
+        assert f"wrote {tmp_path / name}" in out
 
 
 @pytest.mark.parametrize("argv, fragment", [

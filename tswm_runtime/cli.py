@@ -227,7 +227,7 @@ def _paper(args: argparse.Namespace) -> int:
     import time
 
     start = time.perf_counter()
-    from tswm_runtime.paper_report import build_report
+    from tswm_runtime.paper_report import build_report, wall_time_text
 
     cases = None
     if args.case:
@@ -237,11 +237,12 @@ def _paper(args: argparse.Namespace) -> int:
             cases = []
         if not cases or any(len(c) != 2 for c in cases):
             raise UsageError(f"--case {args.case!r}: expected M2,F2 in SI, e.g. --case 200,-15000")
-    report = build_report(args.output, cases, derivation=not args.no_derivation, progress=not args.no_progress)
+    report = build_report(args.output, cases, derivation=not args.no_derivation, progress=not args.no_progress,
+                          started=start)
     for path in report["paths"].values():
         print(f"  wrote {path}")
-    print(f"tswm paper: report in {Path(args.output) / 'paper-report.html'} "
-          f"(wall time {time.perf_counter() - start:.2f} s)")
+    print(f"tswm paper: report in {Path(args.output) / 'paper-report.html'}; "
+          f"{wall_time_text(report['data']['timing'])}")
     return 0
 
 

@@ -1,7 +1,7 @@
-"""Numbers PRINTED IN THE PAPER (Table 3 and section 4), typed in by hand from
-``two-sided-wedge-paper.md``. Nothing here is computed; tswm's own numbers come from
-``simulate`` (see ``paper_report``). Keep the values exactly as printed (decimal commas
-read as points).
+"""Numbers PRINTED IN THE PAPER (Table 3 and section 4), typed in by hand from the paper
+(its citation, data and Table 3 are written out in ``docs/paper.md``). Nothing here is
+computed; tswm's own numbers come from ``simulate`` (see ``paper_report``). Keep the
+values exactly as printed (decimal commas read as points).
 """
 from __future__ import annotations
 

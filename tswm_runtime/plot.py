@@ -5,6 +5,7 @@ Uses matplotlib's object API with the Agg canvas (no pyplot, no display, no glob
 from __future__ import annotations
 
 import io
+import math
 from types import ModuleType
 
 from matplotlib.backends.backend_agg import FigureCanvasAgg
@@ -22,6 +23,21 @@ REGIME_COLOURS = {
 SPARE_COLOURS = ("tab:purple", "tab:brown", "tab:pink", "tab:olive", "tab:cyan")
 PANELS = (("a1", "a1 [m/s^2]", None), ("S1", "S1 [N]", ("S1_max", "t_S1_max")),
           ("S2", "S2 [N]", ("S2_max", "t_S2_max")))
+
+
+def force_text(value: float) -> str:
+    """A force for a label, never in exponent notation: up to 4 significant digits in N below
+    10 kN, else in kN (-15000 -> '-15 kN', -16932.7 -> '-16.93 kN', 727.63 -> '727.6 N')."""
+    if not math.isfinite(value):
+        return f"{value} N"
+    unit, scaled = ("kN", value / 1000.0) if abs(value) >= 1e4 else ("N", value)
+    if scaled == 0:
+        return f"0 {unit}"
+    decimals = max(0, 3 - math.floor(math.log10(abs(scaled))))
+    text = f"{round(scaled, decimals):.{decimals}f}"
+    if "." in text:
+        text = text.rstrip("0").rstrip(".")
+    return f"{text} {unit}"
 
 
 def regime_colours(regimes) -> dict[str, str]:
@@ -61,7 +77,7 @@ def figure(result: Result, module: ModuleType, *, heading: str | None = None,
         if peak is not None and result.t.size:
             value, at = getattr(result, peak[0]), getattr(result, peak[1])
             ax.plot([at], [value], marker="o", color="tab:red", markersize=5, linestyle="none")
-            ax.annotate(f"{name} = {value:.4g} N at t = {at:.4g} s", (at, value),
+            ax.annotate(f"{name} = {force_text(value)} at t = {at:.4g} s", (at, value),
                         textcoords="offset points", xytext=(6, 4), fontsize=8, color="tab:red")
         ax.set_ylabel(label)
         ax.grid(True, linewidth=0.3, alpha=0.5)

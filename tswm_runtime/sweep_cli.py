@@ -60,7 +60,8 @@ def _sweep(args: argparse.Namespace) -> int:
     print("  regime codes (T tractive, I inverse-tractive, S stick, A/B backward, F phi = 0): "
           + ", ".join(f"{k or '-'} {v}" for k, v in regimes.items()))
     if outcome.parquet:
-        print(f"  wrote {outcome.parquet}\n  wrote {outcome.csv}")
+        print(f"  wrote {outcome.parquet}\n  wrote {outcome.csv}\n"
+              f"  wrote {outcome.parquet.with_name(f'{module.SCENE}-sweep.json')}")
     return 0
 
 
