@@ -157,7 +157,7 @@ def test_unit_strings_and_module_path(tmp_path, capsys):
     (["paper", "--t-end", "-1"], "t_end"),
     (["paper", "--points", "0"], "points"),
     (["no-such-scene"], "no-such-scene"),
-    (["derivation/scenes/paper.toml"], "paper.toml"),
+    (["missing/scene.toml"], "missing/scene.toml"),  # a scene file runs as it is; a missing one is named
     (["missing/model.py"], "missing/model.py"),
 ], ids=["unknown-param", "nan", "not-a-number", "wrong-unit", "no-equals", "rtol", "atol", "t-end",
         "points", "unknown-scene", "toml-path", "missing-module"])
