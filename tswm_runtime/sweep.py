@@ -2,11 +2,13 @@
 
 The cases are split into chunks; each chunk is one call of the parallel numba batch
 (``batch.run_batch``, prange over cases on all cores) and is written atomically to
-``DIR/chunks/chunk-NNNNN-HASH.parquet``, HASH a sha256 over the scene module's digest,
-the run settings and the chunk's parameter rows. A rerun skips every chunk whose file
-exists under the expected name, so an interrupted sweep resumes without recomputing
-(and a changed grid or setting never reuses a stale chunk). With a dask.distributed
-``Client`` the chunks run as tasks on its workers instead.
+``DIR/chunks/chunk-NNNNN-HASH.parquet`` with its key inside (``chunks.py``: the model's
+body digest, the runtime's version and digest, the settings, the rows). A rerun reuses a
+chunk only when the file proves it holds exactly those rows; a truncated, foreign or
+stale one is recomputed with a warning, and files no chunk expects are reported (and
+removed with ``prune``). An interrupted sweep leaves only complete chunks and resumes
+without recomputing them. With a dask.distributed ``Client`` the chunks run as tasks on
+its workers instead.
 
 One row per case: the free parameters, then
 
@@ -24,7 +26,6 @@ One row per case: the free parameters, then
 """
 from __future__ import annotations
 
-import hashlib
 import io
 import json
 import math
@@ -34,7 +35,7 @@ from types import ModuleType
 
 import numpy as np
 
-from tswm_runtime import batch, modes
+from tswm_runtime import batch, chunks, modes
 from tswm_runtime.contract import load_module
 from tswm_runtime.files import write_atomic
 from tswm_runtime.result import STATUS_NAMES
@@ -183,22 +184,23 @@ def _chunk_task(scene: str, P: np.ndarray, run: dict):
 
 @dataclass
 class SweepOutcome:
-    """What a sweep did: the rows, the files written, chunks computed and skipped."""
+    """What a sweep did: the rows, the files written, chunks computed, reused and rejected
+    (index, why), stale files found (and pruned), warnings for the user."""
 
     table: object  # pandas.DataFrame
     parquet: Path | None
     csv: Path | None
     computed: list[int] = field(default_factory=list)
     skipped: list[int] = field(default_factory=list)
+    rejected: list[tuple[int, str]] = field(default_factory=list)
+    stale: list[Path] = field(default_factory=list)
+    pruned: bool = False
+    warnings: list[str] = field(default_factory=list)
     seconds: float = 0.0
 
 
-def _chunk_hash(module: ModuleType, run: dict, P: np.ndarray) -> str:
-    h = hashlib.sha256()
-    h.update(getattr(module, "SCENE_DIGEST", module.__name__).encode())
-    h.update(json.dumps(run, sort_keys=True, default=str).encode())
-    h.update(np.ascontiguousarray(P, dtype=np.float64).tobytes())
-    return h.hexdigest()[:16]
+class SweepInterrupted(KeyboardInterrupt):
+    """Ctrl-C during a sweep; the message says how many chunks are safe and how to resume."""
 
 
 def _parquet_bytes(table) -> bytes:
@@ -209,16 +211,16 @@ def _parquet_bytes(table) -> bytes:
 
 def sweep(model: str | ModuleType, P: np.ndarray, overrides: dict | None = None, *,
           output: str | Path | None = None, chunk_size: int = DEFAULT_CHUNK, client=None,
-          progress: bool = False, scene_spec: str | None = None) -> SweepOutcome:
+          progress: bool = False, scene_spec: str | None = None, prune: bool = False) -> SweepOutcome:
     """Run the rows of P (free parameters of the scene, in PARAM_NAMES order).
 
     output: a directory for chunks/ and SCENE-sweep.parquet/.csv (None: in memory only;
     no resume). client: a dask.distributed Client to run the chunks on (its workers
-    load the module by ``scene_spec``, a shipped name or a module path).
+    load the module by ``scene_spec``, a shipped name or a module path). prune: delete
+    stale files in chunks/ (else they are only reported). Ctrl-C raises SweepInterrupted
+    after the chunks finished so far are on disk.
     """
     import time
-
-    import pandas as pd
 
     start = time.perf_counter()
     module = model if isinstance(model, ModuleType) else load_module(model)
@@ -229,20 +231,32 @@ def sweep(model: str | ModuleType, P: np.ndarray, overrides: dict | None = None,
         raise SweepInputError(f"--chunk-size {chunk_size}: must be >= 1")
     bounds = [(a, min(a + chunk_size, P.shape[0])) for a in range(0, P.shape[0], chunk_size)]
     out = Path(output) if output is not None else None
-    names = [f"chunk-{i:05d}-{_chunk_hash(module, run, P[a:b])}.parquet" for i, (a, b) in enumerate(bounds)]
+    runtime = chunks.runtime_digest()
+    keys = [chunks.chunk_key(module, run, P[a:b], i, runtime) for i, (a, b) in enumerate(bounds)]
+    names = [chunks.chunk_name(key) for key in keys]
+    columns = [*module.PARAM_NAMES, *RESULT_COLUMNS]
     tables: dict[int, object] = {}
     outcome = SweepOutcome(table=None, parquet=None, csv=None)
     todo = []
     for i, name in enumerate(names):
-        if out is not None and (out / "chunks" / name).exists():
-            tables[i] = pd.read_parquet(out / "chunks" / name)
-            outcome.skipped.append(i)
-        else:
+        path = out / "chunks" / name if out is not None else None
+        if path is None or not path.exists():
             todo.append(i)
+            continue
+        table, why = chunks.read_chunk(path, keys[i], P[bounds[i][0]:bounds[i][1]], columns)
+        if table is None:
+            outcome.rejected.append((i, why))
+            outcome.warnings.append(f"chunk {i} ({path}): {why}; recomputing it")
+            todo.append(i)
+        else:
+            tables[i] = table
+            outcome.skipped.append(i)
+    if out is not None:
+        _report_stale(outcome, out / "chunks", set(names), prune)
 
     def finish(i, table):
         if out is not None:
-            write_atomic(out / "chunks" / names[i], _parquet_bytes(table))
+            chunks.write_chunk(out / "chunks" / names[i], table, keys[i])
         tables[i] = table
         outcome.computed.append(i)
 
@@ -251,33 +265,72 @@ def sweep(model: str | ModuleType, P: np.ndarray, overrides: dict | None = None,
         from tqdm import tqdm
 
         bar = tqdm(total=len(bounds), initial=len(outcome.skipped), unit="chunk", desc=module.SCENE)
+    try:
+        _run_chunks(module, P, run, bounds, todo, finish, client, scene_spec, bar)
+    except KeyboardInterrupt:
+        done = len(outcome.skipped) + len(outcome.computed)
+        where = (f"{done} of {len(bounds)} chunks are complete in {out / 'chunks'}; rerun the same command to "
+                 "resume from them" if out is not None else "nothing was saved (no -o DIR)")
+        raise SweepInterrupted(f"interrupted: {where}") from None
+    finally:
+        if bar:
+            bar.close()
+    frames = [tables[i] for i in range(len(bounds))]
+    outcome.table = (_concat(frames) if frames else run_cases(module, P[:0], run))
+    if out is not None:
+        stem = module.SCENE
+        outcome.parquet = write_atomic(out / f"{stem}-sweep.parquet", _parquet_bytes(outcome.table))
+        outcome.csv = write_atomic(out / f"{stem}-sweep.csv", outcome.table.to_csv(index=False))
+        write_atomic(out / f"{stem}-sweep.json", json.dumps({
+            "scene": module.SCENE, "scene_digest": getattr(module, "SCENE_DIGEST", None),
+            "model_digest": keys[0]["model_digest"] if keys else chunks.model_digest(module),
+            "runtime_version": chunks.__version__, "runtime_digest": runtime, "settings": run,
+            "cases": int(P.shape[0]), "chunk_size": chunk_size, "chunks": names,
+            "columns": list(outcome.table.columns)}, indent=2, default=str))
+    outcome.seconds = time.perf_counter() - start
+    return outcome
+
+
+def _concat(frames: list):
+    import pandas as pd
+
+    return pd.concat(frames, ignore_index=True)
+
+
+def _report_stale(outcome: SweepOutcome, directory: Path, expected: set[str], prune: bool) -> None:
+    outcome.stale = chunks.stale_files(directory, expected)
+    if not outcome.stale:
+        return
+    if prune:
+        for path in outcome.stale:
+            path.unlink(missing_ok=True)
+        outcome.pruned = True
+        outcome.warnings.append(f"pruned {len(outcome.stale)} stale file(s) from {directory}")
+    else:
+        outcome.warnings.append(f"{len(outcome.stale)} file(s) in {directory} belong to no chunk of this sweep "
+                                "(another model, runtime, setting or grid, or left by a crash); --prune removes them")
+
+
+def _run_chunks(module, P, run, bounds, todo, finish, client, scene_spec, bar) -> None:
+    """Compute the chunks ``todo`` in this process or on a dask client; ``finish`` stores each."""
     if client is None:
         for i in todo:
             a, b = bounds[i]
             finish(i, run_cases(module, P[a:b], run))
             if bar:
                 bar.update()
-    elif todo:
-        from distributed import as_completed
+        return
+    if not todo:
+        return
+    from distributed import as_completed
 
-        futures = {client.submit(_chunk_task, scene_spec, P[bounds[i][0]:bounds[i][1]], run, pure=False): i
-                   for i in todo}
+    futures = {client.submit(_chunk_task, scene_spec, P[bounds[i][0]:bounds[i][1]], run, pure=False): i
+               for i in todo}
+    try:
         for future in as_completed(futures):
             finish(futures[future], future.result())
             if bar:
                 bar.update()
-    if bar:
-        bar.close()
-    frames = [tables[i] for i in range(len(bounds))]
-    outcome.table = (pd.concat(frames, ignore_index=True) if frames
-                     else run_cases(module, P[:0], run))
-    if out is not None:
-        stem = module.SCENE
-        outcome.parquet = write_atomic(out / f"{stem}-sweep.parquet", _parquet_bytes(outcome.table))
-        outcome.csv = write_atomic(out / f"{stem}-sweep.csv", outcome.table.to_csv(index=False))
-        write_atomic(out / f"{stem}-sweep.json", json.dumps({
-            "scene": module.SCENE, "scene_digest": getattr(module, "SCENE_DIGEST", None), "settings": run,
-            "cases": int(P.shape[0]), "chunk_size": chunk_size, "chunks": names,
-            "columns": list(outcome.table.columns)}, indent=2, default=str))
-    outcome.seconds = time.perf_counter() - start
-    return outcome
+    except KeyboardInterrupt:
+        client.cancel(list(futures))
+        raise
