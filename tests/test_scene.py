@@ -333,9 +333,11 @@ BAD = [
     ({"run.t_end": "0"}, ["run.t_end = 0 s", "> 0 s"]),
     ({"run.rtol": "1"}, ["run.rtol = 1", "in [1e-13, 0.1]"]),
     ({"run.rtol": "1e-14"}, ["run.rtol = 1e-14", "in [1e-13, 0.1]"]),
-    ({"run.atol": "0"}, ["run.atol = 0", "> 0"]),
+    ({"run.atol": "0"}, ["run.atol = 0", "in [1e-20, 1]"]),
+    ({"run.atol": "1e300"}, ["run.atol = 1e+300", "in [1e-20, 1]"]),
     ({"run.method": '"rk4"'}, ['run.method = "rk4"', '"dopri5", "rosenbrock23"']),
-    ({"run.max_steps": "0"}, ["run.max_steps = 0", ">= 1"]),
+    ({"run.max_steps": "0"}, ["run.max_steps = 0", "in [1, 1e+09]"]),
+    ({"run.max_steps": "99999999999999999999999"}, ["run.max_steps = 1e+23", "in [1, 1e+09]"]),
     ({"run.t_end": '{ value = "1 s", free = true }'}, ["run.t_end", "model parameters only"]),
     # name, value tables
     ({"name": '"Paper"'}, ['name = "Paper"', "[a-z0-9][a-z0-9-]*"]),

@@ -40,6 +40,7 @@ def _generate(args: argparse.Namespace) -> int:
     from derivation.model import build_model
     from derivation.scene import load_scene
 
+    output_directory(args.output)
     model = build_model(load_scene(args.scene))
     path = write_module(model, args.output, force=args.force)
     print(f"wrote {path}: modes {', '.join(m.name for m in model.modes)}; "
@@ -49,6 +50,17 @@ def _generate(args: argparse.Namespace) -> int:
 
 class UsageError(ValueError):
     """A command-line input that cannot be used; the message names it (exit status 2)."""
+
+
+def output_directory(path: str | None, option: str = "-o") -> Path | None:
+    """``path`` as an output directory, checked before any work: it may be missing, not a file."""
+    if path is None:
+        return None
+    directory = Path(path)
+    if directory.exists() and not directory.is_dir():
+        raise UsageError(f"{option} {path}: exists and is not a directory; name a directory (it is created "
+                         "if missing)")
+    return directory
 
 
 # simulate's setting names -> the option that sets them, for error messages
@@ -189,6 +201,7 @@ def _simulate(args: argparse.Namespace) -> int:
     from tswm_runtime.contract import ContractError
     from tswm_runtime.simulate import SimulationInputError, simulate
 
+    output_directory(args.output)
     module = _load_model(args.scene)
     t_load = time.perf_counter() - start
     params = _parse_sets(args.set, module)
@@ -216,6 +229,7 @@ def _paper(args: argparse.Namespace) -> int:
     import time
 
     start = time.perf_counter()
+    output_directory(args.output)
     from tswm_runtime.paper_report import build_report
 
     cases = None
@@ -294,6 +308,12 @@ def main(argv: list[str] | None = None) -> int:
         return args.run(args)
     except (SceneError, TexUnavailable, EditedModuleError, FileNotFoundError, UsageError) as error:
         print(f"tswm {args.command}: error: {error}", file=sys.stderr)
+        return 2
+    except OSError as error:   # -o naming a file, a name too long, no permission: the path the user gave
+        name = str(error.filename or "")
+        where = f"{name if len(name) <= 200 else name[:160] + '...'}: " if name else ""
+        print(f"tswm {args.command}: error: {where}{error.strerror or error} (check -o and the paths given)",
+              file=sys.stderr)
         return 2
 
 

@@ -45,6 +45,14 @@ REGIME_LETTERS = {"tractive": "T", "inverse-tractive": "I", "stick": "S", "backw
                   "backward on flank b": "B", "sliding along phi = 0": "F"}
 SEQ_LEN = 32  # modes kept per case; longer sequences end in '…'
 DEFAULT_CHUNK = 512
+# Size bounds (docs/promises.md): above LARGE_SWEEP cases a sweep states its size and needs --large;
+# MAX_SWEEP_CASES is refused outright, and so is a sweep that would write more than MAX_CHUNKS chunk files.
+LARGE_SWEEP = 10**6
+MAX_SWEEP_CASES = 10**7
+MAX_CHUNK_SIZE = 10**6
+MAX_CHUNKS = 10**5
+MAX_SEED = 2**63 - 1
+ROW_BYTES = 220   # bytes per case in chunks + parquet + CSV: 214 measured on a 2000-case paper grid
 RESULT_COLUMNS = ("status", "t_stop", "S1m", "tS1m", "S2m", "tS2m", "KD1", "KD2", "x1", "v1",
                   "regimes", "modes", "n_events", "steps", "rejected", "nfev", "njev")
 
@@ -89,8 +97,8 @@ def parse_grid(items: list[str], module: ModuleType) -> dict[str, np.ndarray]:
             count = int(parts[2])
         except ValueError:
             raise SweepInputError(f"--grid {item!r}: count {parts[2]!r} is not an integer") from None
-        if count < 1:
-            raise SweepInputError(f"--grid {item!r}: count {count} must be >= 1")
+        if not 1 <= count <= MAX_SWEEP_CASES:
+            raise SweepInputError(f"--grid {item!r}: count {count} must be in [1, {MAX_SWEEP_CASES:.0e}]")
         grid[name] = np.linspace(start, stop, count)
     return grid
 
@@ -111,6 +119,28 @@ def parse_ranges(items: list[str], module: ModuleType) -> dict[str, tuple[float,
     return ranges
 
 
+def grid_size(grid: dict[str, np.ndarray]) -> int:
+    """Number of cases of a grid (an exact Python int, computed before anything is allocated)."""
+    return math.prod(int(values.size) for values in grid.values())
+
+
+def check_size(cases: int, chunk_size: int, large: bool = False) -> None:
+    """Refuse a sweep too large to be right or to fit, stating its size; above LARGE_SWEEP ask for --large."""
+    if not 1 <= chunk_size <= MAX_CHUNK_SIZE:
+        raise SweepInputError(f"--chunk-size {chunk_size}: must be in [1, {MAX_CHUNK_SIZE:.0e}]")
+    files = -(-cases // chunk_size)
+    size = (f"{cases} cases, about {cases * ROW_BYTES / 1e6:.3g} MB of parquet and CSV output, {files} chunk "
+            f"file{'s' if files != 1 else ''} of {chunk_size}")
+    if cases > MAX_SWEEP_CASES:
+        raise SweepInputError(f"sweep of {size}: more than the {MAX_SWEEP_CASES:.0e} cases tswm runs in one "
+                              "sweep; split it (several -o directories) or coarsen the grid")
+    if files > MAX_CHUNKS:
+        raise SweepInputError(f"sweep of {size}: more than {MAX_CHUNKS:.0e} chunk files; raise --chunk-size to "
+                              f"at least {-(-cases // MAX_CHUNKS)}")
+    if cases > LARGE_SWEEP and not large:
+        raise SweepInputError(f"sweep of {size}: above {LARGE_SWEEP:.0e} cases; pass --large to run it")
+
+
 def grid_cases(module: ModuleType, grid: dict[str, np.ndarray]) -> np.ndarray:
     """All combinations (the first grid name varies slowest) as rows of the free parameters;
     parameters not in the grid keep the scene's defaults."""
@@ -126,8 +156,10 @@ def grid_cases(module: ModuleType, grid: dict[str, np.ndarray]) -> np.ndarray:
 
 def sample_cases(module: ModuleType, samples: int, ranges: dict, seed: int) -> np.ndarray:
     """``samples`` rows, each ranged parameter uniform in [lo, hi) (numpy default_rng(seed))."""
-    if samples < 1:
-        raise SweepInputError(f"--samples {samples}: must be >= 1")
+    if not 1 <= samples <= MAX_SWEEP_CASES:
+        raise SweepInputError(f"--samples {samples}: must be in [1, {MAX_SWEEP_CASES:.0e}]")
+    if not 0 <= seed <= MAX_SEED:
+        raise SweepInputError(f"--seed {seed}: must be an integer in [0, 2^63 - 1]")
     if not ranges:
         raise SweepInputError("--samples needs at least one --range NAME=LO:HI")
     rng = np.random.default_rng(seed)
@@ -227,8 +259,7 @@ def sweep(model: str | ModuleType, P: np.ndarray, overrides: dict | None = None,
     scene_spec = scene_spec or (model if isinstance(model, str) else module.SCENE)
     run = settings(module, overrides or {})
     P = np.ascontiguousarray(P, dtype=np.float64).reshape(-1, len(module.PARAM_NAMES))
-    if chunk_size < 1:
-        raise SweepInputError(f"--chunk-size {chunk_size}: must be >= 1")
+    check_size(P.shape[0], chunk_size, large=True)
     bounds = [(a, min(a + chunk_size, P.shape[0])) for a in range(0, P.shape[0], chunk_size)]
     out = Path(output) if output is not None else None
     runtime = chunks.runtime_digest()

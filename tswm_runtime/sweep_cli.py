@@ -9,11 +9,12 @@ SWEEP_SETTINGS = ("t_end", "rtol", "atol", "method", "max_steps", "max_events")
 
 
 def _sweep(args: argparse.Namespace) -> int:
-    from tswm_runtime.cli import UsageError, _load_model, setting_error, setting_overrides
+    from tswm_runtime.cli import UsageError, _load_model, output_directory, setting_error, setting_overrides
     from tswm_runtime.simulate import SimulationInputError
-    from tswm_runtime.sweep import (SweepInputError, SweepInterrupted, grid_cases, parse_grid, parse_ranges,
-                                    sample_cases, sweep)
+    from tswm_runtime.sweep import (SweepInputError, SweepInterrupted, check_size, grid_cases, grid_size,
+                                    parse_grid, parse_ranges, sample_cases, sweep)
 
+    output_directory(args.output)
     module = _load_model(args.scene)
     overrides = setting_overrides(args, SWEEP_SETTINGS)
     try:
@@ -22,9 +23,13 @@ def _sweep(args: argparse.Namespace) -> int:
         if args.range and args.samples is None:
             raise SweepInputError("--range needs --samples N")
         if args.samples is not None:
-            P = sample_cases(module, args.samples, parse_ranges(args.range, module), args.seed)
+            ranges = parse_ranges(args.range, module)
+            check_size(max(args.samples, 1), args.chunk_size, args.large)   # before the samples are drawn
+            P = sample_cases(module, args.samples, ranges, args.seed)
         elif args.grid:
-            P = grid_cases(module, parse_grid(args.grid, module))
+            grid = parse_grid(args.grid, module)
+            check_size(grid_size(grid), args.chunk_size, args.large)   # before the grid is built
+            P = grid_cases(module, grid)
         else:
             raise SweepInputError("give --grid NAME=START:STOP:COUNT ... or --samples N --range NAME=LO:HI ...")
         client = cluster = None
@@ -105,6 +110,8 @@ def add_parsers(sub) -> None:
                        help="run the chunks on a dask.distributed scheduler at ADDRESS; 'local' starts a "
                             "LocalCluster in this process")
     add_setting_options(sweep, SWEEP_SETTINGS)
+    sweep.add_argument("--large", action="store_true",
+                       help="allow a sweep of more than 10^6 cases (its size is stated when refused)")
     sweep.add_argument("--prune", action="store_true",
                        help="delete files in DIR/chunks/ that belong to no chunk of this sweep (stale: another "
                             "model, runtime, setting or grid); without it they are only reported")

@@ -1,0 +1,64 @@
+"""Sizes, tolerances and paths without bounds are refused before anything is allocated or run,
+naming the option and the allowed range (exit 2, no traceback)."""
+import pytest
+
+from derivation.scene import SceneError, parse_scene
+from tswm_runtime.cli import main
+from tswm_runtime.simulate import MAX_EVENTS, MAX_POINTS, SimulationInputError, simulate
+
+from test_injection import PAPER
+
+
+@pytest.mark.parametrize("argv, named", [
+    (["--points", "100000000"], ["--points", "in [1, 1e6]", "MB"]),
+    (["--points", "99999999999999999999999999"], ["--points", "in [1, 1e6]"]),
+    (["--max-events", "1000000000"], ["--max-events", "in [1, 1e6]", "MB"]),
+    (["--max-steps", "1180591620717411303424"], ["--max-steps", "in [1, 1e9]"]),
+    (["--atol", "1e-300"], ["--atol", "in [1e-20, 1]"]),
+    (["--atol", "1e300"], ["--atol", "in [1e-20, 1]"]),
+    (["--rtol", "1e-300"], ["--rtol"]),
+    (["--t-end", "inf"], ["t_end", "finite"]),
+    (["--set", "F2=1e400"], ["F2", "finite"]),
+])
+def test_simulate_refuses_unbounded_settings(argv, named, capsys, tmp_path):
+    assert main(["simulate", "paper", *argv, "-o", str(tmp_path / "out")]) == 2
+    captured = capsys.readouterr()
+    assert captured.err.startswith("tswm simulate: error: ") and "Traceback" not in captured.err
+    assert all(part in captured.err for part in named), captured.err
+    assert captured.out == "" and not (tmp_path / "out").exists()
+
+
+def test_limits_are_the_documented_ones():
+    assert (MAX_POINTS, MAX_EVENTS) == (10**6, 10**6)
+    with pytest.raises(SimulationInputError, match=r"points = 1000001"):
+        simulate("paper", points=MAX_POINTS + 1)
+
+
+@pytest.mark.parametrize("command", [["generate", "paper"], ["simulate", "paper", "--no-plot"],
+                                     ["sweep", "paper", "--grid", "F2=1:2:2", "--no-progress"],
+                                     ["paper", "--no-derivation", "--no-progress"]])
+def test_output_naming_an_existing_file_is_refused_before_any_work(command, tmp_path, capsys):
+    target = tmp_path / "a-file"
+    target.write_text("keep me")
+    assert main([*command, "-o", str(target)]) == 2
+    captured = capsys.readouterr()
+    assert "exists and is not a directory" in captured.err and str(target) in captured.err
+    assert captured.out == "" and target.read_text() == "keep me"
+
+
+@pytest.mark.parametrize("text, named", [
+    ("a = " + "[" * 5000 + "]" * 5000, "nested too deeply"),
+    ('name = "x"\nwedge = ' + "{a = " * 600 + "1" + "}" * 600, "nested too deeply"),
+    (PAPER.replace('name = "paper"', 'name = "' + "a" * 5000 + '"'), "(5000 characters)"),
+    (PAPER.replace('description = "', 'description = "' + "d" * 3000), "at most 2000"),
+    ("# " + "x" * 1_000_001, "at most 1000000 bytes"),
+])
+def test_hostile_scene_files_are_refused_cleanly(text, named, tmp_path, capsys):
+    with pytest.raises(SceneError, match="s.toml") as error:
+        parse_scene(text, "s.toml")
+    assert named in str(error.value) and len(str(error.value)) < 500
+    path = tmp_path / "s.toml"
+    path.write_text(text)
+    assert main(["derive", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("tswm derive: error: ") and named in err
