@@ -340,8 +340,8 @@ BAD = [
     ({"run.max_steps": "99999999999999999999999"}, ["run.max_steps = 1e+23", "in [1, 1e+09]"]),
     ({"run.t_end": '{ value = "1 s", free = true }'}, ["run.t_end", "model parameters only"]),
     # name, value tables
-    ({"name": '"Paper"'}, ['name = "Paper"', "[a-z0-9][a-z0-9-]*"]),
-    ({"name": '"-x"'}, ['name = "-x"', "[a-z0-9][a-z0-9-]*"]),
+    ({"name": '"Paper"'}, ['name = "Paper"', "[a-z0-9][a-z0-9-]{0,63}"]),
+    ({"name": '"-x"'}, ['name = "-x"', "[a-z0-9][a-z0-9-]{0,63}"]),
     ({"wedge.m2": '{ value = "1 kg", fixed = true }'}, ["wedge.m2.fixed", "unknown key",
                                                         "value, free"]),
     ({"wedge.m2": '{ value = "1 kg", free = "yes" }'}, ["wedge.m2.free", "true or false"]),
