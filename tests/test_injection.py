@@ -24,7 +24,7 @@ def toml_string(text: str) -> str:
         if c in '"\\':
             out.append("\\" + c)
         elif not c.isprintable() or c == "\t":
-            out.append(f"\\u{ord(c):04x}")
+            out.append(f"\\u{ord(c):04x}" if ord(c) <= 0xFFFF else f"\\U{ord(c):08x}")
         else:
             out.append(c)
     return '"' + "".join(out) + '"'
