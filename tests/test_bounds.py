@@ -62,3 +62,19 @@ def test_hostile_scene_files_are_refused_cleanly(text, named, tmp_path, capsys):
     assert main(["derive", str(path)]) == 2
     err = capsys.readouterr().err
     assert err.startswith("tswm derive: error: ") and named in err
+
+
+@pytest.mark.parametrize("argv, named", [
+    (["paper", "--case", "inf,-15000", "--no-derivation", "--no-progress"], "--case inf,-15000"),
+    (["paper", "--case", "-5,-15000", "--no-derivation", "--no-progress"], "--case"),
+    (["paper", "--case", "0,1", "--no-derivation", "--no-progress"], "M2 must be a finite mass > 0"),
+    (["bench", "--cases", "99999999999999999999"], "--cases 99999999999999999999: must be in [1, 1e+07]"),
+])
+def test_paper_and_bench_refuse_unusable_sizes_and_cases(argv, named, capsys, tmp_path):
+    try:
+        code = main([*argv, "-o", str(tmp_path / "out")])
+    except SystemExit as stop:   # argparse's own refusal ("-5,..." reads as an option)
+        code = stop.code
+    err = capsys.readouterr().err
+    assert code == 2 and named in err and "Traceback" not in err
+    assert not (tmp_path / "out").exists()

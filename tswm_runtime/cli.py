@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 from pathlib import Path
 
@@ -240,7 +241,15 @@ def _paper(args: argparse.Namespace) -> int:
             cases = []
         if not cases or any(len(c) != 2 for c in cases):
             raise UsageError(f"--case {args.case!r}: expected M2,F2 in SI, e.g. --case 200,-15000")
-    report = build_report(args.output, cases, derivation=not args.no_derivation, progress=not args.no_progress)
+        for m2, F2 in cases:
+            if not (math.isfinite(m2) and math.isfinite(F2) and m2 > 0):
+                raise UsageError(f"--case {m2:g},{F2:g}: M2 must be a finite mass > 0 kg and F2 a finite force [N]")
+    from tswm_runtime.simulate import SimulationInputError
+
+    try:
+        report = build_report(args.output, cases, derivation=not args.no_derivation, progress=not args.no_progress)
+    except SimulationInputError as error:
+        raise UsageError(f"--case: {error}") from None
     for path in report["paths"].values():
         print(f"  wrote {path}")
     print(f"tswm paper: report in {Path(args.output) / 'paper-report.html'} "

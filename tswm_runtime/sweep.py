@@ -35,7 +35,7 @@ from types import ModuleType
 
 import numpy as np
 
-from tswm_runtime import batch, chunks, modes
+from tswm_runtime import __version__, batch, chunks, modes
 from tswm_runtime.contract import load_module
 from tswm_runtime.files import write_atomic
 from tswm_runtime.result import STATUS_NAMES
@@ -315,7 +315,7 @@ def sweep(model: str | ModuleType, P: np.ndarray, overrides: dict | None = None,
         write_atomic(out / f"{stem}-sweep.json", json.dumps({
             "scene": module.SCENE, "scene_digest": getattr(module, "SCENE_DIGEST", None),
             "model_digest": keys[0]["model_digest"] if keys else chunks.model_digest(module),
-            "runtime_version": chunks.__version__, "runtime_digest": runtime, "settings": run,
+            "runtime_version": __version__, "runtime_digest": runtime, "settings": run,
             "cases": int(P.shape[0]), "chunk_size": chunk_size, "chunks": names,
             "columns": list(outcome.table.columns)}, indent=2, default=str))
     outcome.seconds = time.perf_counter() - start
