@@ -19,7 +19,7 @@ from sympy.printing.pycode import PythonCodePrinter
 
 from derivation.mechanics import S1, S2, t
 from derivation.model import Model, compose_laws as _compose, param_symbol
-from derivation.scene import SceneError
+from derivation.scene import NAME, SceneError
 from tswm_runtime.files import EditedModuleError, write_atomic
 
 GENERATOR_VERSION = "0.1.0"
@@ -362,6 +362,8 @@ def _load_factors(em: _Emitter) -> Function | None:
 def generate_module(model: Model, free: tuple[str, ...] | None = None) -> str:
     """Source of the scene's module. ``free`` overrides which parameters are free (benchmarks)."""
     scene = model.scene
+    if not NAME.fullmatch(scene.name):   # it names the file and the header comment: a loaded scene always matches
+        raise GenerationError(f"{scene.source}: name = {scene.name[:80]!r}: must match {NAME.pattern}")
     free = tuple(p.name for p in scene.params() if p.free) if free is None else free
     em = _Emitter(model, free)
     functions = _functions(em) + [_rhs(model), _jac(model), _guards(em), _observe()]
