@@ -1,5 +1,7 @@
 """Sizes, tolerances and paths without bounds are refused before anything is allocated or run,
 naming the option and the allowed range (exit 2, no traceback)."""
+import math
+
 import pytest
 
 from derivation.scene import SceneError, parse_scene
@@ -78,3 +80,22 @@ def test_paper_and_bench_refuse_unusable_sizes_and_cases(argv, named, capsys, tm
     err = capsys.readouterr().err
     assert code == 2 and named in err and "Traceback" not in err
     assert not (tmp_path / "out").exists()
+
+
+def test_promises_page_states_the_limits_the_code_enforces():
+    from pathlib import Path
+
+    from tswm_runtime import simulate as sim, sweep
+
+    page = (Path(__file__).resolve().parents[1] / "docs" / "promises.md").read_text()
+    rows = {
+        "`--points` | [1, 10^{}]".format(round(math.log10(sim.MAX_POINTS))): "simulate.MAX_POINTS",
+        "`--max-events` | [1, 10^{}]".format(round(math.log10(sim.MAX_EVENTS))): "simulate.MAX_EVENTS",
+        "`--max-steps` | [1, 10^{}]".format(round(math.log10(sim.MAX_STEPS))): "simulate.MAX_STEPS",
+        "`--atol` | [{:g}, {:g}]".format(*sim.ATOL_RANGE): "simulate.ATOL_RANGE",
+        "`--rtol` | [{:g}, {:g}]".format(*sim.RTOL_RANGE): "simulate.RTOL_RANGE",
+        "above 10^{} the sweep".format(round(math.log10(sweep.LARGE_SWEEP))): "sweep.LARGE_SWEEP",
+        "above 10^{} refused".format(round(math.log10(sweep.MAX_SWEEP_CASES))): "sweep.MAX_SWEEP_CASES",
+    }
+    for text, constant in rows.items():
+        assert text in page and constant in page, (text, constant)

@@ -162,3 +162,17 @@ def test_cli_reports_rejected_chunks_on_stderr(tmp_path, capsys):
     assert "tswm sweep: warning: chunk 0" in captured.err and "recomputing" in captured.err
     assert "rejected on disk" in captured.out and "Traceback" not in captured.err
     assert np.isfinite(pd.read_parquet(tmp_path / "paper-sweep.parquet")["F2"]).all()
+
+
+def test_cli_prune_removes_stale_files(tmp_path, capsys):
+    base = ["sweep", "paper", "--chunk-size", "2", "-o", str(tmp_path), "--no-progress"]
+    assert main([*base, "--grid", "F2=-15000:-1000:4"]) == 0
+    leftover = tmp_path / "chunks" / ".chunk-00000-x.parquet.abc.tmp"    # what a SIGKILL mid-write leaves
+    leftover.write_bytes(b"half")
+    capsys.readouterr()
+    assert main([*base, "--grid", "F2=-15000:-1000:6"]) == 0     # another grid: the old chunks are stale
+    err = capsys.readouterr().err
+    assert "3 file(s)" in err and "--prune" in err
+    assert main([*base, "--grid", "F2=-15000:-1000:6", "--prune"]) == 0
+    assert "pruned 3 stale file(s)" in capsys.readouterr().err
+    assert len(chunk_files(tmp_path)) == 3 and not leftover.exists()
