@@ -8,6 +8,7 @@ globals, so numba caches and inlines them. The module imports math, numpy and nu
 from __future__ import annotations
 
 import hashlib
+import math
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
@@ -18,6 +19,7 @@ from sympy.printing.pycode import PythonCodePrinter
 
 from derivation.mechanics import S1, S2, t
 from derivation.model import Model, compose_laws as _compose, param_symbol
+from derivation.scene import NAME, SceneError
 from tswm_runtime.files import EditedModuleError, write_atomic
 
 GENERATOR_VERSION = "0.1.0"
@@ -26,6 +28,48 @@ STICK_GUARDS = ("cone_forward", "cone_backward", "flank_normal")
 SLIDING_GUARDS = ("phi", "v1", "D", "jam")
 SLIDE_GUARDS = ("slide_exit_a", "slide_exit_b")
 OBSERVABLES = (S1, S2)
+
+
+class GenerationError(SceneError):
+    """A scene whose module cannot be generated as inert, finite code; the message names the key."""
+
+
+_NON_FINITE = (sp.oo, -sp.oo, sp.zoo, sp.nan)
+
+
+def _non_finite(expr: sp.Expr) -> bool:
+    """Whether a folded expression holds a number a double cannot carry: inf, nan, or a nonzero
+    number that underflows to 0."""
+    return expr.has(*_NON_FINITE) or any(not math.isfinite(float(a)) or (not a.is_zero and float(a) == 0)
+                                         for a in expr.atoms(sp.Float))
+
+
+def inert(value, name: str) -> str:
+    """Python source for a constant from a scene: repr() of str, bool, int, finite float and
+    tuples/dicts of them; anything else (inf, nan, objects) is refused, naming the constant."""
+    def check(v) -> None:
+        if isinstance(v, (tuple, list)):
+            for item in v:
+                check(item)
+        elif isinstance(v, dict):
+            for key, item in v.items():
+                check(key)
+                check(item)
+        elif isinstance(v, float):
+            if not math.isfinite(v):
+                raise GenerationError(f"module constant {name} would hold {v!r}: every number in generated code "
+                                      "must be finite")
+        elif v is not None and not isinstance(v, (str, bool, int)):
+            raise GenerationError(f"module constant {name}: cannot emit a {type(v).__name__}")
+    check(value)
+    return repr(value)
+
+
+def _docstring(text: str) -> str:
+    """Text for a docstring: only generator-made text, which never holds quotes that end it or escapes."""
+    if '"""' in text or "\\" in text or not text.isprintable():
+        raise GenerationError(f"refusing to emit a docstring that is not plain text: {text[:80]!r}")
+    return text
 
 
 @dataclass(frozen=True)
@@ -63,7 +107,10 @@ class _Printer(PythonCodePrinter):
         super().__init__({"standard": "python3", "fully_qualified_modules": True})
 
     def _print_Float(self, expr):
-        return repr(float(expr))
+        value = float(expr)
+        if not math.isfinite(value) or (value == 0 and not expr.is_zero):  # backstop: fold() names the key
+            raise GenerationError(f"a non-finite number ({value!r}) would be emitted as code")
+        return repr(value)
 
 
 class _Emitter:
@@ -75,6 +122,7 @@ class _Emitter:
         self.printer = _Printer()
         fixed = [p for p in model.params if p.name not in free]
         self.fixed = {param_symbol(p): sp.Float(repr(p.value)) for p in fixed}
+        self.fixed_params = {param_symbol(p): p for p in fixed}
         self.law_functions = {q.symbol: law_function_name(q.symbol) for q in model.laws}
         self.inlined_laws = compose_laws(model)
 
@@ -87,7 +135,7 @@ class _Emitter:
         A law symbol may share its name with a parameter (a constant load ``F2``): outside
         the law's own function the value then comes from the law, inside it from ``p``.
         """
-        exprs = [sp.sympify(e).subs(self.fixed) for e in outputs]
+        exprs = [self.fold(sp.sympify(e)) for e in outputs]
         used = set().union(*(e.free_symbols for e in exprs))
         calls = [q.symbol for q in self.model.laws if q.symbol in used and q.symbol != law]
         lines = [f"{s} = y[{i}]" for i, s in enumerate(self.model.states) if s in used]
@@ -95,8 +143,37 @@ class _Emitter:
                   if sp.Symbol(name, real=True) in used and sp.Symbol(name, real=True) not in calls]
         lines += [f"{s} = {self.law_functions[s]}(t, y, p)" for s in calls]
         replacements, reduced = sp.cse(exprs, symbols=sp.numbered_symbols("c"))
+        if any(_non_finite(e) for e in [*(e for _, e in replacements), *reduced]):   # CSE folds numbers too
+            raise self.refusal([sp.sympify(e) for e in outputs])
         lines += [f"{s} = {self.print(e)}" for s, e in replacements]
         return lines, [self.print(sp.Float(e) if e.is_Number else e) for e in reduced]
+
+    def fold(self, expr: sp.Expr) -> sp.Expr:
+        """``expr`` with the fixed parameters folded in; refuse a non-finite result, naming the keys."""
+        folded = expr.subs(self.fixed)
+        if _non_finite(folded):
+            raise self.refusal([expr])
+        return folded
+
+    def refusal(self, exprs: list[sp.Expr]) -> GenerationError:
+        """The error for outputs whose folded numbers a double cannot hold, naming the scene keys to blame:
+        those without which the fold is finite, else those of extreme magnitude, else all involved."""
+        involved = sorted({s for e in exprs for s in e.free_symbols if s in self.fixed}, key=str)
+
+        def finite_without(s):
+            rest = {k: v for k, v in self.fixed.items() if k != s}
+            return not any(_non_finite(e.subs(rest)) for e in exprs)
+
+        extreme = [s for s in involved if self.fixed_params[s].value and
+                   not 1e-150 < abs(self.fixed_params[s].value) < 1e150]
+        culprits = [s for s in involved if finite_without(s)] or extreme or involved
+        keys = ", ".join(f"{self.fixed_params[s].key} = {self.fixed_params[s].value!r} {self.fixed_params[s].unit}"
+                         .rstrip() for s in culprits)
+        where = "; ".join(_short(e) for e in exprs)
+        return GenerationError(f"{self.model.scene.source}: {keys or 'the fixed parameters'}: folding the fixed "
+                               f"value{'s' if len(culprits) > 1 else ''} into the code gives a number a double "
+                               f"cannot hold (inf, nan, or an underflow to 0) in {where[:300]}; choose a value "
+                               "that keeps it finite, or make the parameter free")
 
     def function(self, name: str, doc: str, outputs: list[sp.Expr], law: sp.Symbol | None = None) -> Function:
         lines, results = self.body(outputs, law)
@@ -307,6 +384,8 @@ def _load_factors(em: _Emitter) -> Function | None:
 def generate_module(model: Model, free: tuple[str, ...] | None = None) -> str:
     """Source of the scene's module. ``free`` overrides which parameters are free (benchmarks)."""
     scene = model.scene
+    if not NAME.fullmatch(scene.name):   # it names the file and the header comment: a loaded scene always matches
+        raise GenerationError(f"{scene.source}: name = {scene.name[:80]!r}: must match {NAME.pattern}")
     free = tuple(p.name for p in scene.params() if p.free) if free is None else free
     em = _Emitter(model, free)
     functions = _functions(em) + [_rhs(model), _jac(model), _guards(em), _observe()]
@@ -317,7 +396,7 @@ def generate_module(model: Model, free: tuple[str, ...] | None = None) -> str:
     free_params = [by_name[n] for n in free]
     fixed = [p for p in scene.params() if p.name not in free]
     constants = {
-        "SCENE": scene.name, "SCENE_DIGEST": scene.digest, "EQUATIONS": scene.equations,
+        "SCENE": scene.name, "DESCRIPTION": scene.description, "SCENE_DIGEST": scene.digest, "EQUATIONS": scene.equations,
         "STATES": tuple(str(s) for s in model.states), "MODES": tuple(m.name for m in model.modes),
         "MODE_REGIME": tuple(m.regime for m in model.modes),
         "MODE_FLANK": tuple({"a": 1, "b": -1}.get(m.flank, 0) for m in model.modes),
@@ -334,18 +413,24 @@ def generate_module(model: Model, free: tuple[str, ...] | None = None) -> str:
     }
     env = jinja2.Environment(loader=jinja2.FileSystemLoader(str(resources.files("derivation") / "templates")),
                              trim_blocks=True, lstrip_blocks=True, keep_trailing_newline=True)
+    env.filters["docstring"] = _docstring
     body = env.get_template("module.py.j2").render(
         scene=scene, model=model, functions=functions, free=free_params, latches=model.latches, fixed=fixed,
         pieces=model.pieces,
         guards=guard_names(model),
-        constants={k: repr(v) for k, v in constants.items()}, directions=_guard_directions(model))
+        constants={k: inert(v, k) for k, v in constants.items()}, directions=_guard_directions(model))
     header = (f"# Generated by tswm {GENERATOR_VERSION} from scene '{scene.name}'. DO NOT EDIT: regenerate with "
               f"`tswm generate {scene.name}`.\n"
               f"# scene-sha256: {scene.digest}\n"
               f"# generator-sha256: {generator_digest()}\n"
               f"# generator-version: {GENERATOR_VERSION}\n"
               f"# body-sha256: {hashlib.sha256(body.encode()).hexdigest()}\n")
-    return header + body
+    source = header + body
+    try:
+        compile(source, f"{module_name(scene.name)}.py", "exec")
+    except SyntaxError as error:  # a generator bug, never the scene's text: that only enters through inert()
+        raise GenerationError(f"{scene.source}: the generated module does not compile ({error})") from None
+    return source
 
 
 def body_is_intact(source: str) -> bool:

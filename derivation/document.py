@@ -2,7 +2,10 @@
 
 ``build_document(model)`` returns a list of sections of text, equations and tables;
 ``render(doc, "latex" | "markdown")`` writes it through a Jinja2 template. Text uses
-``$...$`` for inline math, which both targets understand.
+``$...$`` for inline math, which both targets understand; that text is tswm's own. Text from
+the scene (its description, its file's path) goes through the ``literal`` filter, which
+escapes everything TeX or Markdown would read as markup: maths in the document comes
+from SymPy, never from a scene string.
 """
 from __future__ import annotations
 
@@ -266,7 +269,26 @@ def build_document(model: Model) -> dict:
 
 
 _MATH_OR_CODE = re.compile(r"(\$[^$]*\$|`[^`]*`)")
-_TEX_SPECIAL = str.maketrans({c: "\\" + c for c in "&%#_{}"})
+# Every character TeX gives a meaning to, for text that came from a scene file: nothing in it is markup.
+_TEX_LITERAL = str.maketrans({**{c: "\\" + c for c in "&%#_{}$"}, "\\": "\\textbackslash{}",
+                              "^": "\\textasciicircum{}", "~": "\\textasciitilde{}",
+                              "<": "\\textless{}", ">": "\\textgreater{}", "|": "\\textbar{}"})
+_MARKDOWN_SPECIAL = re.compile(r"([\\`*_\[\]<>#|$~&])")
+
+
+def _plain(text: str) -> str:
+    """Scene text on one line: control characters (line breaks, NUL, ...) become spaces."""
+    return "".join(c if c.isprintable() else " " for c in str(text))
+
+
+def latex_literal(text: str) -> str:
+    """Text from a scene (its description, its file's path) as inert LaTeX: every special escaped."""
+    return _plain(text).translate(_TEX_LITERAL)
+
+
+def markdown_literal(text: str) -> str:
+    """Text from a scene as inert Markdown: every character Markdown, HTML or $math$ reads is escaped."""
+    return _MARKDOWN_SPECIAL.sub(r"\\\1", _plain(text))
 
 
 def latex_prose(text: str) -> str:
@@ -276,9 +298,9 @@ def latex_prose(text: str) -> str:
         if part.startswith("$"):
             out.append(part)
         elif part.startswith("`"):
-            out.append("\\texttt{" + part[1:-1].translate(_TEX_SPECIAL) + "}")
+            out.append("\\texttt{" + latex_literal(part[1:-1]) + "}")
         else:
-            out.append(re.sub(r'"([^"]*)"', r"``\1''", part.translate(_TEX_SPECIAL)))
+            out.append(re.sub(r'"([^"]*)"', r"``\1''", latex_literal(part)))
     return "".join(out)
 
 
@@ -290,9 +312,11 @@ def _environment(target: str) -> jinja2.Environment:
                                  variable_end_string=")))", comment_start_string="((#", comment_end_string="#))",
                                  **options)
         env.filters["prose"] = latex_prose
+        env.filters["literal"] = latex_literal
     else:
         env = jinja2.Environment(**options)
         env.filters["prose"] = lambda text: text
+        env.filters["literal"] = markdown_literal
     return env
 
 

@@ -1,6 +1,7 @@
 """Build a PDF from a LaTeX file with pdflatex, when a TeX engine is installed."""
 from __future__ import annotations
 
+import os
 import shutil
 import subprocess
 import tempfile
@@ -24,8 +25,10 @@ def build_pdf(tex_source: str, pdf_path: Path) -> Path:
     with tempfile.TemporaryDirectory() as work:
         tex = Path(work) / "derivation.tex"
         tex.write_text(tex_source)
-        run = subprocess.run([engine, "-interaction=nonstopmode", "-halt-on-error", tex.name],
-                             cwd=work, capture_output=True, text=True)
+        # No shell escape, and (openin_any/openout_any = p) no reading or writing outside the work directory.
+        env = {**os.environ, "openin_any": "p", "openout_any": "p", "shell_escape": "f"}
+        run = subprocess.run([engine, "-no-shell-escape", "-interaction=nonstopmode", "-halt-on-error", tex.name],
+                             cwd=work, capture_output=True, text=True, env=env)
         if run.returncode != 0:
             errors = [line for line in run.stdout.splitlines() if line.startswith("!")]
             raise RuntimeError(f"pdflatex failed: {errors[0] if errors else run.stdout[-500:]}")

@@ -23,7 +23,9 @@ EQUATIONS = ("consistent", "literal")
 METHODS = ("dopri5", "rosenbrock23")
 TOP_KEYS = ("name", "description", "equations", "wedge", "friction", "drive", "load",
             "reference", "modes", "run")
-NAME = re.compile(r"[a-z0-9][a-z0-9-]*")
+NAME = re.compile(r"[a-z0-9][a-z0-9-]{0,63}")     # a file name on every system: at most 64 characters
+MAX_DESCRIPTION = 2000                            # characters
+MAX_SCENE_BYTES = 1_000_000                       # a scene file is a page of TOML; refuse anything near this
 _SCENES = importlib.resources.files("derivation") / "scenes"
 
 
@@ -150,8 +152,8 @@ RUN = {
     "x1": Rule("length", default=0.0),
     "v1": Rule("velocity", default=0.0),
     "rtol": Rule("dimensionless", 1e-13, 1e-1, lo_in=True, hi_in=True, default=1e-6),
-    "atol": Rule("dimensionless", 0.0, default=1e-9),
-    "max_steps": Rule("dimensionless", 1, lo_in=True, default=100000, integer=True),
+    "atol": Rule("dimensionless", 1e-20, 1.0, lo_in=True, hi_in=True, default=1e-9),   # = simulate.ATOL_RANGE
+    "max_steps": Rule("dimensionless", 1, 1e9, lo_in=True, hi_in=True, default=100000, integer=True),  # MAX_STEPS
 }
 # Largest friction angle of a law (at v = 0) and the key that sets it, for the jam check.
 MAX_RHO = {
@@ -190,11 +192,19 @@ def parse_scene(text: str, source: str = "<string>") -> Scene:
 
 
 def _parse(data: bytes, source: str) -> Scene:
+    if len(data) > MAX_SCENE_BYTES:
+        raise SceneError(f"{source}: {len(data)} bytes: a scene file must be at most {MAX_SCENE_BYTES} bytes")
     try:
         doc = tomllib.loads(data.decode("utf-8"))
     except (UnicodeDecodeError, tomllib.TOMLDecodeError) as err:
         raise SceneError(f"{source}: not a valid UTF-8 TOML file: {err}") from err
-    return _Reader(source).scene(doc, hashlib.sha256(data).hexdigest())
+    except RecursionError:
+        raise SceneError(f"{source}: not a usable TOML file: its arrays or tables are nested too deeply "
+                         "(a scene nests tables two levels deep)") from None
+    try:
+        return _Reader(source).scene(doc, hashlib.sha256(data).hexdigest())
+    except RecursionError:   # writing a deeply nested value back for a message
+        raise SceneError(f"{source}: a value is nested too deeply to be a scene value") from None
 
 
 def _join(path: str, key: str) -> str:
@@ -207,7 +217,7 @@ def _toml(raw: object) -> str:
     if isinstance(raw, bool):
         return str(raw).lower()
     if isinstance(raw, str):
-        return f'"{raw}"'
+        return f'"{raw}"' if len(raw) <= 80 else f'"{raw[:60]}..." ({len(raw)} characters)'
     if isinstance(raw, float):
         return f"{raw:g}"
     if isinstance(raw, list):
@@ -527,6 +537,8 @@ class _Reader:
         self.keys(doc, "", TOP_KEYS)
         name = self.text(doc, "name", "", pattern=NAME)
         description = self.text(doc, "description", "", default="")
+        if len(description) > MAX_DESCRIPTION:
+            self.fail("description", f"{len(description)} characters: must be at most {MAX_DESCRIPTION}")
         equations = self.text(doc, "equations", "", EQUATIONS, default="consistent")
         wedge = self.table(doc, "wedge")
         self.keys(wedge, "wedge", ("flanks", "gamma", "gamma_a", "gamma_b", *WEDGE))

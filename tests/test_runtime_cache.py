@@ -45,3 +45,24 @@ def test_a_module_loaded_by_path_runs_again_from_its_cache(tmp_path):
     assert _python(code, tmp_path).strip() == "finished"
     assert list(tmp_path.glob("__pycache__/*.nbi")), "the model was cached"
     assert _python(code, tmp_path).strip() == "finished"
+
+
+def test_a_cache_directory_that_vanishes_while_compiling_costs_the_cache_not_the_run(tmp_path, monkeypatch, capsys):
+    """numba writing its cache index into a __pycache__ that another process just deleted: the run
+    goes on compiled in memory (exit 0), with a warning, instead of exiting 2 as if the input were bad."""
+    import pytest
+    from numba.core import caching
+
+    from tswm_runtime.cli import main
+
+    def vanished(self, key, data):
+        raise FileNotFoundError(2, "No such file or directory", str(tmp_path / "__pycache__" / "m.nbi.tmp"))
+
+    model = tmp_path / "seating_copy.py"
+    shutil.copyfile(ROOT / "generated" / "seating.py", model)
+    monkeypatch.setattr(caching.IndexDataCacheFile, "save", vanished)
+    with pytest.warns(cache_guard.CacheIOWarning, match="compiled in memory only"):
+        code = main(["simulate", str(model), "--t-end", "0.01", "--no-plot"])
+    captured = capsys.readouterr()
+    assert code == 0, captured.err
+    assert "status: finished" in captured.out

@@ -285,3 +285,20 @@ def test_plot_labels_forces_without_exponents():
     assert r.S2_max == -15000.0
     assert any(label.startswith("S2 = -15 kN at t = ") for label in labels), labels
     assert not any("e+" in label for label in labels), labels
+
+
+def test_the_simulation_path_imports_neither_sympy_nor_derivation(tmp_path):
+    """A shipped scene's simulate, its files and a sweep run without the CAS: in a fresh
+    process, neither sympy, jinja2's code generation nor derivation/ is imported."""
+    import subprocess
+    import sys
+
+    script = (
+        "import sys\n"
+        "from tswm_runtime.cli import main\n"
+        f"assert main(['simulate', 'paper', '--t-end', '0.01', '--points', '5', '-o', {str(tmp_path)!r}]) == 0\n"
+        "from tswm_runtime.sweep import sweep\n"
+        "sweep('paper', [[200.0, -1000.0]], {'t_end': 0.01})\n"
+        "print(sorted({m.split('.')[0] for m in sys.modules} & {'sympy', 'derivation'}))\n")
+    out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, check=True).stdout
+    assert out.strip().splitlines()[-1] == "[]", out

@@ -8,16 +8,37 @@ so an edited kernel can never run as stale machine code.
 """
 from __future__ import annotations
 
+import contextlib
 import hashlib
+import warnings
 from pathlib import Path
 
 from numba import njit
+from numba.core import caching
 
 from tswm_runtime.files import write_atomic
 
 KERNEL_SOURCES = ("structures.py", "control.py", "dopri5.py", "rosenbrock.py", "events.py", "segment.py", "painleve.py",
                   "hybrid.py",
                   "batch.py")
+
+
+class CacheIOWarning(UserWarning):
+    """numba's on-disk cache could not be read or written; the function runs compiled in memory."""
+
+
+@contextlib.contextmanager
+def _tolerate_cache_io_errors(self):
+    """numba's cache is an optimisation: a cache directory deleted or unwritable while a function
+    compiles (another process cleaning it, a read-only tree) costs the cache, never the run."""
+    try:
+        yield
+    except OSError as error:
+        warnings.warn(f"numba cache {getattr(error, 'filename', '') or ''}: {error.strerror or error}; "
+                      "compiled in memory only", CacheIOWarning, stacklevel=3)
+
+
+caching.Cache._guard_against_spurious_io_errors = _tolerate_cache_io_errors   # load and save both go through it
 
 
 def kernel_digest() -> str:

@@ -41,6 +41,7 @@ def _generate(args: argparse.Namespace) -> int:
     from derivation.model import build_model
     from derivation.scene import load_scene
 
+    output_directory(args.output)
     model = build_model(load_scene(args.scene))
     path = write_module(model, args.output, force=args.force)
     print(f"wrote {path}: modes {', '.join(m.name for m in model.modes)}; "
@@ -50,6 +51,17 @@ def _generate(args: argparse.Namespace) -> int:
 
 class UsageError(ValueError):
     """A command-line input that cannot be used; the message names it (exit status 2)."""
+
+
+def output_directory(path: str | None, option: str = "-o") -> Path | None:
+    """``path`` as an output directory, checked before any work: it may be missing, not a file."""
+    if path is None:
+        return None
+    directory = Path(path)
+    if directory.exists() and not directory.is_dir():
+        raise UsageError(f"{option} {path}: exists and is not a directory; name a directory (it is created "
+                         "if missing)")
+    return directory
 
 
 # simulate's setting names -> the option that sets them, for error messages
@@ -196,6 +208,7 @@ def _simulate(args: argparse.Namespace) -> int:
     from tswm_runtime.contract import ContractError
     from tswm_runtime.simulate import SimulationInputError, simulate
 
+    output_directory(args.output)
     module = _load_model(args.scene)
     t_load = time.perf_counter() - start
     params = _parse_sets(args.set, module)
@@ -227,6 +240,7 @@ def _paper(args: argparse.Namespace) -> int:
     import time
 
     start = time.perf_counter()
+    output_directory(args.output)
     from tswm_runtime.paper_report import build_report, wall_time_text
 
     cases = None
@@ -237,8 +251,16 @@ def _paper(args: argparse.Namespace) -> int:
             cases = []
         if not cases or any(len(c) != 2 for c in cases):
             raise UsageError(f"--case {args.case!r}: expected M2,F2 in SI, e.g. --case 200,-15000")
-    report = build_report(args.output, cases, derivation=not args.no_derivation, progress=not args.no_progress,
-                          started=start)
+        for m2, F2 in cases:
+            if not (math.isfinite(m2) and math.isfinite(F2) and m2 > 0):
+                raise UsageError(f"--case {m2:g},{F2:g}: M2 must be a finite mass > 0 kg and F2 a finite force [N]")
+    from tswm_runtime.simulate import SimulationInputError
+
+    try:
+        report = build_report(args.output, cases, derivation=not args.no_derivation, progress=not args.no_progress,
+                              started=start)
+    except SimulationInputError as error:
+        raise UsageError(f"--case: {error}") from None
     for path in report["paths"].values():
         print(f"  wrote {path}")
     print(f"tswm paper: report in {Path(args.output) / 'paper-report.html'}; "
@@ -296,17 +318,38 @@ def _parser() -> argparse.ArgumentParser:
     return parser
 
 
-def main(argv: list[str] | None = None) -> int:
-    args = _parser().parse_args(argv)
-    from derivation.latex import TexUnavailable
-    from derivation.scene import SceneError
+def _bad_input() -> tuple[type[Exception], ...]:
+    """The exception types that mean bad input (exit 2). derivation/'s own count only if it was
+    loaded, so a simulation never imports it (and if it was not loaded, none was raised)."""
     from tswm_runtime.files import EditedModuleError
 
+    kinds = [EditedModuleError, FileNotFoundError, UsageError]
+    for module, name in (("derivation.scene", "SceneError"), ("derivation.latex", "TexUnavailable")):
+        if module in sys.modules:
+            kinds.append(getattr(sys.modules[module], name))
+    return tuple(kinds)
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = _parser().parse_args(argv)
     try:
         return args.run(args)
-    except (SceneError, TexUnavailable, EditedModuleError, FileNotFoundError, UsageError) as error:
+    except Exception as error:
+        if not isinstance(error, _bad_input()):
+            if isinstance(error, OSError):
+                return _os_error(args, error)
+            raise
         print(f"tswm {args.command}: error: {error}", file=sys.stderr)
         return 2
+
+
+def _os_error(args: argparse.Namespace, error: OSError) -> int:
+    """-o naming a file, a name too long, no permission: the path the user gave (exit 2)."""
+    name = str(error.filename or "")
+    where = f"{name if len(name) <= 200 else name[:160] + '...'}: " if name else ""
+    print(f"tswm {args.command}: error: {where}{error.strerror or error} (check -o and the paths given)",
+          file=sys.stderr)
+    return 2
 
 
 if __name__ == "__main__":

@@ -11,6 +11,8 @@ import sys
 from pathlib import Path
 from types import ModuleType
 
+from tswm_runtime import cache_guard  # noqa: F401  (numba cache I/O errors never fail a run)
+
 CONSTANTS = {
     "SCENE": "scene name",
     "SCENE_DIGEST": "sha256 of the scene file the module was generated from",

@@ -17,8 +17,17 @@ from tswm_runtime.result import Event, Result, status_message
 
 METHODS = {"dopri5": segment.DOPRI5, "rosenbrock23": segment.ROSENBROCK23}
 RTOL_RANGE = (1e-13, 0.1)
+# atol is absolute on x1 [m] and v1 [m/s]: below 1e-20 the error estimate underflows (NaN steps), above 1 m
+# it accepts any step and the answer is silently wrong.
+ATOL_RANGE = (1e-20, 1.0)
 DEFAULT_POINTS = 1001
 DEFAULT_MAX_EVENTS = 1000
+# Sizes that allocate memory up front (docs/promises.md): output points and the event log.
+MAX_POINTS = 10**6           # about 100 MB of arrays and 150 MB of CSV at the limit
+MAX_EVENTS = 10**6           # about 60 MB of event log at the limit
+MAX_STEPS = 10**9            # a step budget (no memory); keeps it an int64
+BYTES_PER_POINT = 8 * 16     # t, states, mode, a1, S1, S2, F1, F2 ... (estimate for messages)
+BYTES_PER_EVENT = 8 * 7
 
 
 class SimulationInputError(ValueError):
@@ -91,12 +100,21 @@ def settings(module: ModuleType, overrides: dict) -> dict:
         run[key] = float(run[key]) if key == "hmax" else _finite(key, run[key])
     lo, hi = RTOL_RANGE
     _check(lo <= run["rtol"] <= hi, "rtol", run["rtol"], f"in [{lo:g}, {hi:g}]")
-    _check(run["atol"] > 0.0, "atol", run["atol"], "> 0")
+    lo, hi = ATOL_RANGE
+    _check(lo <= run["atol"] <= hi, "atol", run["atol"], f"in [{lo:g}, {hi:g}] (absolute, in m and m/s)")
     _check(run["t_end"] > 0.0, "t_end", run["t_end"], "> t0 = 0 s")
     _check(run["hmax"] > 0.0, "hmax", run["hmax"], "> 0 s")
-    for key in ("max_steps", "points", "max_events"):
-        _check(isinstance(run[key], int) and run[key] >= 1, key, run[key], "an integer >= 1")
+    for key, top in (("max_steps", MAX_STEPS), ("points", MAX_POINTS), ("max_events", MAX_EVENTS)):
+        _check(isinstance(run[key], int) and not isinstance(run[key], bool) and 1 <= run[key] <= top, key,
+               run[key], f"an integer in [1, {top:.0e}]".replace("e+0", "e").replace("e+", "e")
+               + (f" (it sizes memory up front: about {memory_estimate(key, top) / 1e6:.0f} MB at the limit)"
+                  if key != "max_steps" else ""))
     return run
+
+
+def memory_estimate(key: str, count: int) -> float:
+    """Bytes allocated up front for ``count`` output points or events (an estimate, for messages)."""
+    return count * (BYTES_PER_POINT if key == "points" else BYTES_PER_EVENT)
 
 
 PROGRESS_EVERY = 2.0  # seconds between progress lines of an interruptible run

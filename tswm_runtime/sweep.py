@@ -2,11 +2,13 @@
 
 The cases are split into chunks; each chunk is one call of the parallel numba batch
 (``batch.run_batch``, prange over cases on all cores) and is written atomically to
-``DIR/chunks/chunk-NNNNN-HASH.parquet``, HASH a sha256 over the scene module's digest,
-the run settings and the chunk's parameter rows. A rerun skips every chunk whose file
-exists under the expected name, so an interrupted sweep resumes without recomputing
-(and a changed grid or setting never reuses a stale chunk). With a dask.distributed
-``Client`` the chunks run as tasks on its workers instead.
+``DIR/chunks/chunk-NNNNN-HASH.parquet`` with its key inside (``chunks.py``: the model's
+body digest, the runtime's version and digest, the settings, the rows). A rerun reuses a
+chunk only when the file proves it holds exactly those rows; a truncated, foreign or
+stale one is recomputed with a warning, and files no chunk expects are reported (and
+removed with ``prune``). An interrupted sweep leaves only complete chunks and resumes
+without recomputing them. With a dask.distributed ``Client`` the chunks run as tasks on
+its workers instead.
 
 One row per case: the free parameters, then
 
@@ -26,7 +28,6 @@ One row per case: the free parameters, then
 """
 from __future__ import annotations
 
-import hashlib
 import io
 import json
 import math
@@ -36,7 +37,7 @@ from types import ModuleType
 
 import numpy as np
 
-from tswm_runtime import batch, checks, modes
+from tswm_runtime import __version__, batch, checks, chunks, modes
 from tswm_runtime.contract import load_module
 from tswm_runtime.files import write_atomic
 from tswm_runtime.result import STATUS_NAMES
@@ -47,6 +48,14 @@ REGIME_LETTERS = {"tractive": "T", "inverse-tractive": "I", "stick": "S", "backw
                   "backward on flank b": "B", "sliding along phi = 0": "F"}
 SEQ_LEN = 32  # modes kept per case; longer sequences end in '…'
 DEFAULT_CHUNK = 512
+# Size bounds (docs/promises.md): above LARGE_SWEEP cases a sweep states its size and needs --large;
+# MAX_SWEEP_CASES is refused outright, and so is a sweep that would write more than MAX_CHUNKS chunk files.
+LARGE_SWEEP = 10**6
+MAX_SWEEP_CASES = 10**7
+MAX_CHUNK_SIZE = 10**6
+MAX_CHUNKS = 10**5
+MAX_SEED = 2**63 - 1
+ROW_BYTES = 220   # bytes per case in chunks + parquet + CSV: 214 measured on a 2000-case paper grid
 INVALID = "invalid-parameter"
 RESULT_COLUMNS = ("status", "problem", "t_stop", "S1m", "tS1m", "S2m", "tS2m", "KD1", "KD2", "x1", "v1",
                   "regimes", "modes", "n_events", "steps", "rejected", "nfev", "njev")
@@ -92,8 +101,8 @@ def parse_grid(items: list[str], module: ModuleType) -> dict[str, np.ndarray]:
             count = int(parts[2])
         except ValueError:
             raise SweepInputError(f"--grid {item!r}: count {parts[2]!r} is not an integer") from None
-        if count < 1:
-            raise SweepInputError(f"--grid {item!r}: count {count} must be >= 1")
+        if not 1 <= count <= MAX_SWEEP_CASES:
+            raise SweepInputError(f"--grid {item!r}: count {count} must be in [1, {MAX_SWEEP_CASES:.0e}]")
         grid[name] = np.linspace(start, stop, count)
     return grid
 
@@ -114,6 +123,28 @@ def parse_ranges(items: list[str], module: ModuleType) -> dict[str, tuple[float,
     return ranges
 
 
+def grid_size(grid: dict[str, np.ndarray]) -> int:
+    """Number of cases of a grid (an exact Python int, computed before anything is allocated)."""
+    return math.prod(int(values.size) for values in grid.values())
+
+
+def check_size(cases: int, chunk_size: int, large: bool = False) -> None:
+    """Refuse a sweep too large to be right or to fit, stating its size; above LARGE_SWEEP ask for --large."""
+    if not 1 <= chunk_size <= MAX_CHUNK_SIZE:
+        raise SweepInputError(f"--chunk-size {chunk_size}: must be in [1, {MAX_CHUNK_SIZE:.0e}]")
+    files = -(-cases // chunk_size)
+    size = (f"{cases} cases, about {cases * ROW_BYTES / 1e6:.3g} MB of parquet and CSV output, {files} chunk "
+            f"file{'s' if files != 1 else ''} of {chunk_size}")
+    if cases > MAX_SWEEP_CASES:
+        raise SweepInputError(f"sweep of {size}: more than the {MAX_SWEEP_CASES:.0e} cases tswm runs in one "
+                              "sweep; split it (several -o directories) or coarsen the grid")
+    if files > MAX_CHUNKS:
+        raise SweepInputError(f"sweep of {size}: more than {MAX_CHUNKS:.0e} chunk files; raise --chunk-size to "
+                              f"at least {-(-cases // MAX_CHUNKS)}")
+    if cases > LARGE_SWEEP and not large:
+        raise SweepInputError(f"sweep of {size}: above {LARGE_SWEEP:.0e} cases; pass --large to run it")
+
+
 def grid_cases(module: ModuleType, grid: dict[str, np.ndarray]) -> np.ndarray:
     """All combinations (the first grid name varies slowest) as rows of the free parameters;
     parameters not in the grid keep the scene's defaults."""
@@ -129,8 +160,10 @@ def grid_cases(module: ModuleType, grid: dict[str, np.ndarray]) -> np.ndarray:
 
 def sample_cases(module: ModuleType, samples: int, ranges: dict, seed: int) -> np.ndarray:
     """``samples`` rows, each ranged parameter uniform in [lo, hi) (numpy default_rng(seed))."""
-    if samples < 1:
-        raise SweepInputError(f"--samples {samples}: must be >= 1")
+    if not 1 <= samples <= MAX_SWEEP_CASES:
+        raise SweepInputError(f"--samples {samples}: must be in [1, {MAX_SWEEP_CASES:.0e}]")
+    if not 0 <= seed <= MAX_SEED:
+        raise SweepInputError(f"--seed {seed}: must be an integer in [0, 2^63 - 1]")
     if not ranges:
         raise SweepInputError("--samples needs at least one --range NAME=LO:HI")
     rng = np.random.default_rng(seed)
@@ -193,22 +226,23 @@ def _chunk_task(scene: str, P: np.ndarray, run: dict):
 
 @dataclass
 class SweepOutcome:
-    """What a sweep did: the rows, the files written, chunks computed and skipped."""
+    """What a sweep did: the rows, the files written, chunks computed, reused and rejected
+    (index, why), stale files found (and pruned), warnings for the user."""
 
     table: object  # pandas.DataFrame
     parquet: Path | None
     csv: Path | None
     computed: list[int] = field(default_factory=list)
     skipped: list[int] = field(default_factory=list)
+    rejected: list[tuple[int, str]] = field(default_factory=list)
+    stale: list[Path] = field(default_factory=list)
+    pruned: bool = False
+    warnings: list[str] = field(default_factory=list)
     seconds: float = 0.0
 
 
-def _chunk_hash(module: ModuleType, run: dict, P: np.ndarray) -> str:
-    h = hashlib.sha256()
-    h.update(getattr(module, "SCENE_DIGEST", module.__name__).encode())
-    h.update(json.dumps(run, sort_keys=True, default=str).encode())
-    h.update(np.ascontiguousarray(P, dtype=np.float64).tobytes())
-    return h.hexdigest()[:16]
+class SweepInterrupted(KeyboardInterrupt):
+    """Ctrl-C during a sweep; the message says how many chunks are safe and how to resume."""
 
 
 def _parquet_bytes(table) -> bytes:
@@ -219,40 +253,51 @@ def _parquet_bytes(table) -> bytes:
 
 def sweep(model: str | ModuleType, P: np.ndarray, overrides: dict | None = None, *,
           output: str | Path | None = None, chunk_size: int = DEFAULT_CHUNK, client=None,
-          progress: bool = False, scene_spec: str | None = None) -> SweepOutcome:
+          progress: bool = False, scene_spec: str | None = None, prune: bool = False) -> SweepOutcome:
     """Run the rows of P (free parameters of the scene, in PARAM_NAMES order).
 
     output: a directory for chunks/ and SCENE-sweep.parquet/.csv (None: in memory only;
     no resume). client: a dask.distributed Client to run the chunks on (its workers
-    load the module by ``scene_spec``, a shipped name or a module path).
+    load the module by ``scene_spec``, a shipped name or a module path). prune: delete
+    stale files in chunks/ (else they are only reported). Ctrl-C raises SweepInterrupted
+    after the chunks finished so far are on disk.
     """
     import time
-
-    import pandas as pd
 
     start = time.perf_counter()
     module = model if isinstance(model, ModuleType) else load_module(model)
     scene_spec = scene_spec or (model if isinstance(model, str) else module.SCENE)
     run = settings(module, overrides or {})
     P = np.ascontiguousarray(P, dtype=np.float64).reshape(-1, len(module.PARAM_NAMES))
-    if chunk_size < 1:
-        raise SweepInputError(f"--chunk-size {chunk_size}: must be >= 1")
+    check_size(P.shape[0], chunk_size, large=True)
     bounds = [(a, min(a + chunk_size, P.shape[0])) for a in range(0, P.shape[0], chunk_size)]
     out = Path(output) if output is not None else None
-    names = [f"chunk-{i:05d}-{_chunk_hash(module, run, P[a:b])}.parquet" for i, (a, b) in enumerate(bounds)]
+    runtime = chunks.runtime_digest()
+    keys = [chunks.chunk_key(module, run, P[a:b], i, runtime) for i, (a, b) in enumerate(bounds)]
+    names = [chunks.chunk_name(key) for key in keys]
+    columns = [*module.PARAM_NAMES, *RESULT_COLUMNS]
     tables: dict[int, object] = {}
     outcome = SweepOutcome(table=None, parquet=None, csv=None)
     todo = []
     for i, name in enumerate(names):
-        if out is not None and (out / "chunks" / name).exists():
-            tables[i] = pd.read_parquet(out / "chunks" / name)
-            outcome.skipped.append(i)
-        else:
+        path = out / "chunks" / name if out is not None else None
+        if path is None or not path.exists():
             todo.append(i)
+            continue
+        table, why = chunks.read_chunk(path, keys[i], P[bounds[i][0]:bounds[i][1]], columns)
+        if table is None:
+            outcome.rejected.append((i, why))
+            outcome.warnings.append(f"chunk {i} ({path}): {why}; recomputing it")
+            todo.append(i)
+        else:
+            tables[i] = table
+            outcome.skipped.append(i)
+    if out is not None:
+        _report_stale(outcome, out / "chunks", set(names), prune)
 
     def finish(i, table):
         if out is not None:
-            write_atomic(out / "chunks" / names[i], _parquet_bytes(table))
+            chunks.write_chunk(out / "chunks" / names[i], table, keys[i])
         tables[i] = table
         outcome.computed.append(i)
 
@@ -261,33 +306,72 @@ def sweep(model: str | ModuleType, P: np.ndarray, overrides: dict | None = None,
         from tqdm import tqdm
 
         bar = tqdm(total=len(bounds), initial=len(outcome.skipped), unit="chunk", desc=module.SCENE)
+    try:
+        _run_chunks(module, P, run, bounds, todo, finish, client, scene_spec, bar)
+    except KeyboardInterrupt:
+        done = len(outcome.skipped) + len(outcome.computed)
+        where = (f"{done} of {len(bounds)} chunks are complete in {out / 'chunks'}; rerun the same command to "
+                 "resume from them" if out is not None else "nothing was saved (no -o DIR)")
+        raise SweepInterrupted(f"interrupted: {where}") from None
+    finally:
+        if bar:
+            bar.close()
+    frames = [tables[i] for i in range(len(bounds))]
+    outcome.table = (_concat(frames) if frames else run_cases(module, P[:0], run))
+    if out is not None:
+        stem = module.SCENE
+        outcome.parquet = write_atomic(out / f"{stem}-sweep.parquet", _parquet_bytes(outcome.table))
+        outcome.csv = write_atomic(out / f"{stem}-sweep.csv", outcome.table.to_csv(index=False))
+        write_atomic(out / f"{stem}-sweep.json", json.dumps({
+            "scene": module.SCENE, "scene_digest": getattr(module, "SCENE_DIGEST", None),
+            "model_digest": keys[0]["model_digest"] if keys else chunks.model_digest(module),
+            "runtime_version": __version__, "runtime_digest": runtime, "settings": run,
+            "cases": int(P.shape[0]), "chunk_size": chunk_size, "chunks": names,
+            "columns": list(outcome.table.columns)}, indent=2, default=str))
+    outcome.seconds = time.perf_counter() - start
+    return outcome
+
+
+def _concat(frames: list):
+    import pandas as pd
+
+    return pd.concat(frames, ignore_index=True)
+
+
+def _report_stale(outcome: SweepOutcome, directory: Path, expected: set[str], prune: bool) -> None:
+    outcome.stale = chunks.stale_files(directory, expected)
+    if not outcome.stale:
+        return
+    if prune:
+        for path in outcome.stale:
+            path.unlink(missing_ok=True)
+        outcome.pruned = True
+        outcome.warnings.append(f"pruned {len(outcome.stale)} stale file(s) from {directory}")
+    else:
+        outcome.warnings.append(f"{len(outcome.stale)} file(s) in {directory} belong to no chunk of this sweep "
+                                "(another model, runtime, setting or grid, or left by a crash); --prune removes them")
+
+
+def _run_chunks(module, P, run, bounds, todo, finish, client, scene_spec, bar) -> None:
+    """Compute the chunks ``todo`` in this process or on a dask client; ``finish`` stores each."""
     if client is None:
         for i in todo:
             a, b = bounds[i]
             finish(i, run_cases(module, P[a:b], run))
             if bar:
                 bar.update()
-    elif todo:
-        from distributed import as_completed
+        return
+    if not todo:
+        return
+    from distributed import as_completed
 
-        futures = {client.submit(_chunk_task, scene_spec, P[bounds[i][0]:bounds[i][1]], run, pure=False): i
-                   for i in todo}
+    futures = {client.submit(_chunk_task, scene_spec, P[bounds[i][0]:bounds[i][1]], run, pure=False): i
+               for i in todo}
+    try:
         for future in as_completed(futures):
             finish(futures[future], future.result())
             if bar:
                 bar.update()
-    if bar:
-        bar.close()
-    frames = [tables[i] for i in range(len(bounds))]
-    outcome.table = (pd.concat(frames, ignore_index=True) if frames
-                     else run_cases(module, P[:0], run))
-    if out is not None:
-        stem = module.SCENE
-        outcome.parquet = write_atomic(out / f"{stem}-sweep.parquet", _parquet_bytes(outcome.table))
-        outcome.csv = write_atomic(out / f"{stem}-sweep.csv", outcome.table.to_csv(index=False))
-        write_atomic(out / f"{stem}-sweep.json", json.dumps({
-            "scene": module.SCENE, "scene_digest": getattr(module, "SCENE_DIGEST", None), "settings": run,
-            "cases": int(P.shape[0]), "chunk_size": chunk_size, "chunks": names,
-            "columns": list(outcome.table.columns)}, indent=2, default=str))
-    outcome.seconds = time.perf_counter() - start
-    return outcome
+    except KeyboardInterrupt:
+        client.cancel(list(futures))
+        raise

@@ -3,16 +3,19 @@ imported when a command runs)."""
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
 SWEEP_SETTINGS = ("t_end", "rtol", "atol", "method", "max_steps", "max_events")
 
 
 def _sweep(args: argparse.Namespace) -> int:
-    from tswm_runtime.cli import UsageError, _load_model, setting_error, setting_overrides
+    from tswm_runtime.cli import UsageError, _load_model, output_directory, setting_error, setting_overrides
     from tswm_runtime.simulate import SimulationInputError
-    from tswm_runtime.sweep import SweepInputError, grid_cases, parse_grid, parse_ranges, sample_cases, sweep
+    from tswm_runtime.sweep import (SweepInputError, SweepInterrupted, check_size, grid_cases, grid_size,
+                                    parse_grid, parse_ranges, sample_cases, sweep)
 
+    output_directory(args.output)
     module = _load_model(args.scene)
     overrides = setting_overrides(args, SWEEP_SETTINGS)
     try:
@@ -21,9 +24,13 @@ def _sweep(args: argparse.Namespace) -> int:
         if args.range and args.samples is None:
             raise SweepInputError("--range needs --samples N")
         if args.samples is not None:
-            P = sample_cases(module, args.samples, parse_ranges(args.range, module), args.seed)
+            ranges = parse_ranges(args.range, module)
+            check_size(max(args.samples, 1), args.chunk_size, args.large)   # before the samples are drawn
+            P = sample_cases(module, args.samples, ranges, args.seed)
         elif args.grid:
-            P = grid_cases(module, parse_grid(args.grid, module))
+            grid = parse_grid(args.grid, module)
+            check_size(grid_size(grid), args.chunk_size, args.large)   # before the grid is built
+            P = grid_cases(module, grid)
         else:
             raise SweepInputError("give --grid NAME=START:STOP:COUNT ... or --samples N --range NAME=LO:HI ...")
         client = cluster = None
@@ -39,7 +46,11 @@ def _sweep(args: argparse.Namespace) -> int:
         try:
             outcome = sweep(module, P, overrides, output=args.output, chunk_size=args.chunk_size,
                             client=client, progress=not args.no_progress,
-                            scene_spec=module.__file__ if Path(args.scene).suffix else args.scene)
+                            scene_spec=module.__file__ if Path(args.scene).suffix else args.scene,
+                            prune=args.prune)
+        except SweepInterrupted as stop:
+            print(f"tswm sweep: {stop}", file=sys.stderr)
+            return 1
         finally:
             if client is not None:
                 client.close()
@@ -49,11 +60,14 @@ def _sweep(args: argparse.Namespace) -> int:
         raise UsageError(str(error)) from None
     except SimulationInputError as error:
         raise setting_error(error, overrides) from None
+    for warning in outcome.warnings:
+        print(f"tswm sweep: warning: {warning}", file=sys.stderr)
     table = outcome.table
     n = len(table)
     print(f"scene {module.SCENE}: {n} cases in {outcome.seconds:.3g} s "
           f"({n / outcome.seconds if outcome.seconds else 0:.4g} cases/s incl. load and writing); "
-          f"chunks computed {len(outcome.computed)}, reused {len(outcome.skipped)}")
+          f"chunks computed {len(outcome.computed)} (of them {len(outcome.rejected)} rejected on disk), "
+          f"reused {len(outcome.skipped)}")
     counts = table["status"].value_counts()
     print("  status: " + ", ".join(f"{k} {v}" for k, v in counts.items()))
     regimes = table["regimes"].value_counts().head(8)
@@ -67,7 +81,12 @@ def _sweep(args: argparse.Namespace) -> int:
 
 def _bench(args: argparse.Namespace) -> int:
     from tswm_runtime import bench
+    from tswm_runtime.cli import UsageError, output_directory
+    from tswm_runtime.sweep import MAX_SWEEP_CASES
 
+    output_directory(args.output)
+    if not 1 <= args.cases <= MAX_SWEEP_CASES:
+        raise UsageError(f"--cases {args.cases}: must be in [1, {MAX_SWEEP_CASES:.0e}]")
     return bench.main(quick=args.quick, output=args.output, cases=args.cases)
 
 
@@ -80,8 +99,10 @@ def add_parsers(sub) -> None:
         description="Run a scene over a grid (--grid) or seeded random samples (--samples, --range) of "
                     "its free parameters on all cores; one row per case (parameters, status, S1/S2 "
                     "maxima, KD1/KD2, final state, regime code, counts) in DIR/SCENE-sweep.parquet "
-                    "and .csv. Work is done in chunks written to DIR/chunks/; a rerun skips finished "
-                    "chunks. Exit status 2: bad input.")
+                    "and .csv. Work is done in chunks written to DIR/chunks/, each holding its key "
+                    "(model, runtime, settings, rows); a rerun reuses only chunks that prove they hold "
+                    "the asked rows and recomputes others with a warning. Exit status: 0 done, 1 "
+                    "interrupted (complete chunks are kept: rerun to resume), 2 bad input.")
     sweep.add_argument("scene", help="a shipped scene name or a generated module's .py path")
     sweep.add_argument("--grid", action="append", default=[], metavar="NAME=START:STOP:COUNT",
                        help="COUNT values from START to STOP (both included), or NAME=VALUE; repeatable: "
@@ -97,6 +118,11 @@ def add_parsers(sub) -> None:
                        help="run the chunks on a dask.distributed scheduler at ADDRESS; 'local' starts a "
                             "LocalCluster in this process")
     add_setting_options(sweep, SWEEP_SETTINGS)
+    sweep.add_argument("--large", action="store_true",
+                       help="allow a sweep of more than 10^6 cases (its size is stated when refused)")
+    sweep.add_argument("--prune", action="store_true",
+                       help="delete files in DIR/chunks/ that belong to no chunk of this sweep (stale: another "
+                            "model, runtime, setting or grid); without it they are only reported")
     sweep.add_argument("--no-progress", action="store_true", help="no progress bar")
     sweep.set_defaults(run=_sweep)
     bench = sub.add_parser(
