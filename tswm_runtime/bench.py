@@ -74,8 +74,8 @@ def measure(configs, repeats, log=print):
     for (case, solver, rtol, _, _), out, ts in zip(configs, outcomes, times):
         row = {"case": case.name, "solver": solver, "rtol": rtol, "atol": rtol * ATOL_PER_RTOL}
         if isinstance(out, Exception):
-            row |= {"err_S1": math.nan, "err_v1": math.nan, "err_t": math.nan, "err": math.nan,
-                    "t_med": math.nan, "t_min": math.nan, "t_max": math.nan, "repeats": 0, "events": -1,
+            row |= {k: math.nan for k in ("err_S1", "err_v1", "err_x1", "err_t", "err")}
+            row |= {"t_med": math.nan, "t_min": math.nan, "t_max": math.nan, "repeats": 0, "events": -1,
                     "nfev": -1, "status": f"failed: {out}"}
         else:
             row |= errors(out, reference(case))
@@ -205,7 +205,7 @@ def main(quick: bool = False, output: str | os.PathLike = "tswm-report/bench", c
     write_atomic(out / "verdicts.csv", pd.DataFrame(verdicts).to_csv(index=False))
     report.plot(rows, out / "work-precision.png")
     refs = [{"case": c.name, "scene": c.scene, "params": dict(c.params), "v1(0)": c.v0, "t_end": c.t_end,
-             "m1": c.m1, "S1_max": reference(c).S1, "v1_end": reference(c).v_end,
+             "m1": c.m1, "S1_max": reference(c).S1, "v1_end": reference(c).v_end, "x1_end": reference(c).x_end,
              "events": ", ".join(f"{k} {t:.12g}" for k, t in reference(c).events) or "none"} for c in chosen]
     md = _markdown(info, refs, t_ref, rows, verdicts, thr, flat, cold, tols, repeats, sweep_n,
                    time.perf_counter() - start)
@@ -219,8 +219,9 @@ def main(quick: bool = False, output: str | os.PathLike = "tswm-report/bench", c
 
 
 def _markdown(info, refs, t_ref, rows, verdicts, thr, flat, cold, tols, repeats, sweep_n, total) -> str:
-    fmt = {"rtol": "{:.0e}", "atol": "{:.0e}", "err_S1": "{:.2e}", "err_v1": "{:.2e}", "err_t": "{:.2e}",
-           "err": "{:.2e}", "t_med": "{:.3e}", "t_min": "{:.3e}", "t_max": "{:.3e}"}
+    fmt = {"rtol": "{:.0e}", "atol": "{:.0e}"} | {k: "{:.2e}" for k in ("err_S1", "err_v1", "err_x1", "err_t", "err")} \
+        | {k: "{:.3e}" for k in ("t_med", "t_min", "t_max")}
+    vfmt = {"error": "{:.0e}", "tswm_s": "{:.3e}", "peer_s": "{:.3e}"}
     n_met = sum(v["verdict"].startswith("met") for v in verdicts)
     md = ["# tswm work-precision benchmark", "",
           "Machine: " + ", ".join(f"{k} {v}" for k, v in info.items()), "",
@@ -231,20 +232,23 @@ def _markdown(info, refs, t_ref, rows, verdicts, thr, flat, cold, tols, repeats,
           f"peers as a careful user writes them (`tswm_runtime/bench_peers.py`: span split at load times, "
           f"directed terminal events, restart with the new flank, phi event armed only where phi can "
           f"vanish). One untimed warm-up call per configuration, then {repeats} rounds over all "
-          f"configurations in turn; median (min, max) seconds per call. Tolerances {', '.join(f'{t:g}' for t in tols)}; "
-          f"atol = rtol x {ATOL_PER_RTOL:g} for every solver.", "",
+          f"configurations in turn; median (min, max) seconds per call. Tolerances "
+          f"{', '.join(f'{t:g}' for t in tols)}; atol = rtol x {ATOL_PER_RTOL:g} for every solver.", "",
           "Errors against the independent quadrature reference (`tswm_runtime/quadrature.py`, 34 "
           f"digits, {t_ref:.1f} s for all cases): err_S1 relative error of max |S1|; err_v1 error of "
-          "v1(t_end) relative to max(|v1_ref|, 1 m/s); err_t largest absolute error of the event times "
-          "[s] (inf: other events than the reference's; NaN: the sweep reports no event times); err the "
-          "largest of them.", "",
-          report.md_table(refs, list(refs[0]), {"S1_max": "{:.12g}", "v1_end": "{:.12g}"}), "",
+          "v1(t_end) relative to max(|v1_ref|, 1 m/s); err_x1 relative error of x1(t_end) (it integrates the "
+          "whole transient, while max |S1| and v1(t_end) can sit on equilibria that implicit methods hit to "
+          "rounding); err_t largest absolute error of the event times [s] (inf: other events than the "
+          "reference's; NaN: the sweep reports no event times); err the largest of them.", "",
+          report.md_table(refs, list(refs[0]), {"S1_max": "{:.12g}", "v1_end": "{:.12g}", "x1_end": "{:.12g}"}), "",
           "## Targets (issue 13; reported, not asserted)", "",
           f"### simulate() with default output vs the fastest peer at equal error: {n_met} of "
           f"{len(verdicts)} met", "",
           "Time to reach the error: log-log interpolation on each solver's work-precision front "
           "(`bench_report.cost_at`), never extrapolated.", "",
-          report.md_table(verdicts, list(verdicts[0]), {"error": "{:.0e}", "tswm_s": "{:.3e}", "peer_s": "{:.3e}"}),
+          report.md_table(verdicts, list(verdicts[0]), vfmt), "",
+          "For information, the same with `simulate(..., points=2)` (not the target's configuration):", "",
+          report.md_table(report.speedup_verdicts(rows, tswm="tswm simulate points=2"), list(verdicts[0]), vfmt),
           "", f"### Sweep throughput at rtol {THROUGHPUT_RTOL:g} (target {report.SWEEP_TARGET:g} cases/s)", "",
           report.md_table([thr], list(thr), {"cases_per_s": "{:.0f}", "s_median": "{:.3f}", "s_min": "{:.3f}",
                                             "s_max": "{:.3f}"}), "",
@@ -253,8 +257,8 @@ def _markdown(info, refs, t_ref, rows, verdicts, thr, flat, cold, tols, repeats,
           "### First call in a fresh process (imports, numba cache, first result)", "",
           report.md_table(cold, list(cold[0])), "",
           "## All runs", "",
-          report.md_table(rows, ["case", "solver", "rtol", "err_S1", "err_v1", "err_t", "err", "t_med", "t_min",
-                                 "t_max", "events", "nfev", "status"], fmt), "",
+          report.md_table(rows, ["case", "solver", "rtol", "err_S1", "err_v1", "err_x1", "err_t", "err", "t_med",
+                                 "t_min", "t_max", "events", "nfev", "status"], fmt), "",
           "Plot: work-precision.png (error vs median time per call, one panel per case).",
           f"Total bench time {total:.1f} s."]
     return "\n".join(md) + "\n"

@@ -21,7 +21,9 @@ derivation or runtime. What the careful user does:
   alone and v1 is monotone, so a bounded scalar maximisation over v1 between the
   neighbouring steps needs no dense output (the same for every method, CVODE included).
 
-``peer_run`` is one whole call: problem set-up, integration, max |S1|, v1(t_end), events.
+The state is (x1, v1): x1(t_end) is part of what a user wants and what tswm returns.
+``peer_run`` is one whole call: problem set-up, integration, max |S1|, v1(t_end),
+x1(t_end), events.
 Backward sliding is not written (none of the benchmark's cases enters it): it raises.
 """
 from __future__ import annotations
@@ -49,6 +51,7 @@ class Outcome:
     v_end: float  # v1(t_end)
     events: list = field(default_factory=list)  # [(kind, t)], kind 'load', 'phi' or 'v1'
     nfev: int = 0
+    x_end: float = math.nan  # x1(t_end) - x1(0)
 
 
 def available_methods() -> tuple[str, ...]:
@@ -80,24 +83,24 @@ class _Best:
             self.value = s1
 
 
-def _solve_scipy(method, rtol, atol, t, t_to, v, rhs, events):
+def _solve_scipy(method, rtol, atol, t, t_to, y, rhs, events):
     from scipy.integrate import solve_ivp
 
-    sol = solve_ivp(rhs, (t, t_to), [v], method=method, rtol=rtol, atol=atol, events=events)
+    sol = solve_ivp(rhs, (t, t_to), y, method=method, rtol=rtol, atol=atol, events=events)
     if sol.status < 0:
         raise PeerGaveUp(f"{method}: {sol.message}")
     hit = None
     if sol.status == 1:
         which = next(i for i, te in enumerate(sol.t_events) if len(te))
-        hit = (which, float(sol.t_events[which][0]), float(sol.y_events[which][0][0]))
-    return sol.y[0], hit, sol.nfev
+        hit = (which, float(sol.t_events[which][0]), sol.y_events[which][0])
+    return sol.y, hit, sol.nfev
 
 
-def _solve_cvode(rtol, atol, t, t_to, v, f_rhs, f_events, armed):
+def _solve_cvode(rtol, atol, t, t_to, y, f_rhs, f_events, armed):
     from sksundae.cvode import CVODE
 
     def frhs(_t, y, yp):  # scikit-sundae counts arguments: no defaults here
-        yp[0] = f_rhs(_t, y)[0]
+        yp[:] = f_rhs(_t, y)
 
     def fev(_t, y, e):
         e[0] = f_events[0](_t, y) if armed else 1.0
@@ -105,15 +108,15 @@ def _solve_cvode(rtol, atol, t, t_to, v, f_rhs, f_events, armed):
     fev.terminal = [True, True]
     fev.direction = [f_events[0].direction if armed else 0, -1]
     sol = CVODE(frhs, rtol=rtol, atol=atol, method="BDF", eventsfn=fev, num_events=2,
-                max_num_steps=1_000_000).solve([t, t_to], [v])
-    vs = np.asarray(sol.y)[:, 0]
+                max_num_steps=1_000_000).solve([t, t_to], y)
+    ys = np.asarray(sol.y).T
     hit = None
     if sol.status == 2 and len(sol.t_events):
         which = int(np.argmax(np.abs(np.asarray(sol.i_events)[0])))
-        hit = (which, float(sol.t_events[0]), float(np.asarray(sol.y_events)[0][0]))
+        hit = (which, float(sol.t_events[0]), np.asarray(sol.y_events)[0])
     elif sol.status < 0:
         raise PeerGaveUp(f"CVODE: {sol.message}")
-    return vs, hit, int(sol.nfev)
+    return ys, hit, int(sol.nfev)
 
 
 def _refine_max(s1_of, vs, best: _Best) -> None:
@@ -139,7 +142,7 @@ def peer_run(method: str, rtol: float, atol: float, m2: float, loads, v0: float,
     """One careful user's run. loads: [(t_from, F2), ...], piecewise constant, t_from of the
     first 0. Returns max |S1| (signed), v1(t_end), the events (load, phi, v1) and rhs calls."""
     best, out = _Best(), Outcome(0.0, math.nan)
-    v, flank, switched = v0, 1, False
+    x, v, flank, switched = 0.0, v0, 1, False
     bounds = [tf for tf, _ in loads[1:]] + [t_end]
     for (t_from, F2), t_to in zip(loads, bounds):
         if t_from > 0.0:
@@ -157,32 +160,32 @@ def peer_run(method: str, rtol: float, atol: float, m2: float, loads, v0: float,
             f, switched = flank, False
 
             def rhs(_t, y, f=f, F2=F2):
-                return [accel(y[0], f, F2, m2, m1)]
+                return [y[1], accel(y[1], f, F2, m2, m1)]
 
             def ev_phi(_t, y, F2=F2):
-                return phi(y[0], F2, m2, m1)
+                return phi(y[1], F2, m2, m1)
 
             def ev_v(_t, y):
-                return y[0]
+                return y[1]
             armed = phi_can_vanish(flank, F2, v)
             ev_phi.terminal = ev_v.terminal = True
             ev_phi.direction, ev_v.direction = -flank, -1
             if method == "CVODE":
-                vs, hit, n = _solve_cvode(rtol, atol, t, t_to, v, rhs, (ev_phi, ev_v), armed)
+                ys, hit, n = _solve_cvode(rtol, atol, t, t_to, [x, v], rhs, (ev_phi, ev_v), armed)
             else:
                 events = [ev_phi, ev_v] if armed else [ev_v]
-                vs, hit, n = _solve_scipy(method, rtol, atol, t, t_to, v, rhs, events)
+                ys, hit, n = _solve_scipy(method, rtol, atol, t, t_to, [x, v], rhs, events)
                 if hit is not None and not armed:
                     hit = (1, *hit[1:])
             out.nfev += n
 
             def s1_of(x, f=f, F2=F2):
                 return reactions(x, f, F2, m2, m1)[0]
-            _refine_max(s1_of, vs, best)
+            _refine_max(s1_of, ys[1], best)
             if hit is None:
-                t, v = t_to, float(vs[-1])
+                t, x, v = t_to, float(ys[0][-1]), float(ys[1][-1])
                 break
-            which, t, v = hit
+            which, t, (x, v) = hit[0], hit[1], map(float, hit[2])
             out.events.append(("phi" if which == 0 else "v1", t))
             if len(out.events) > MAX_EVENTS:
                 raise PeerGaveUp(f"more than {MAX_EVENTS} events by t = {t:.9g} s (chatter)")
@@ -193,5 +196,5 @@ def peer_run(method: str, rtol: float, atol: float, m2: float, loads, v0: float,
             else:
                 v = 0.0
                 best.offer(s1_of(0.0))  # the limit v1 -> 0+ of the phase that stops
-    out.S1, out.v_end = best.value, v
+    out.S1, out.v_end, out.x_end = best.value, v, x
     return out

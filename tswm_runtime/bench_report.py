@@ -52,13 +52,25 @@ def speedup_verdicts(rows, tswm=TSWM_SIMULATE, levels=SPEEDUP_LEVELS, target=SPE
             factor = costs[best] / t_tswm if best and not math.isnan(t_tswm) else math.nan
             out.append({"case": case, "error": level, "tswm": tswm, "tswm_s": t_tswm, "fastest_peer": best,
                         "peer_s": costs.get(best, math.nan), "factor": factor,
-                        "verdict": speedup_text(factor, target, t_tswm, best)})
+                        "verdict": speedup_text(factor, target, t_tswm, best, _smallest(rows, case, tswm))})
     return out
 
 
-def speedup_text(factor: float, target: float, t_tswm: float = 1.0, best: str | None = "peer") -> str:
+def _smallest(rows, case, solver) -> str:
+    """The smallest error the solver reached on the case, and which component it was."""
+    runs = [r for r in rows if r["case"] == case and r["solver"] == solver and math.isfinite(r["err"])]
+    if not runs:
+        return "none finished"
+    r = min(runs, key=lambda r: r["err"])
+    part = max((k for k in ("err_S1", "err_v1", "err_x1", "err_t") if k in r and math.isfinite(r[k])),
+               key=lambda k: r[k], default="err")
+    return f"{r['err']:.2g}, {part} at rtol {r['rtol']:g}" if "rtol" in r else f"{r['err']:.2g}"
+
+
+def speedup_text(factor: float, target: float, t_tswm: float = 1.0, best: str | None = "peer",
+                 smallest: str = "") -> str:
     if math.isnan(t_tswm):
-        return "tswm does not reach this error at the tolerances run"
+        return f"tswm does not reach this error at the tolerances run (smallest: {smallest})"
     if best is None:
         return "no peer reaches this error at the tolerances run"
     if factor >= target:
@@ -89,7 +101,7 @@ def md_table(rows, keys, fmt=None) -> str:
 
 
 def plot(rows, path) -> None:
-    """Work-precision: error (largest of the three) against median time per call, log-log,
+    """Work-precision: error (largest of the four) against median time per call, log-log,
     one panel per case."""
     import matplotlib
     matplotlib.use("Agg")
@@ -108,7 +120,7 @@ def plot(rows, path) -> None:
                 ax.loglog(x, y, "o-" if solver.startswith("tswm") else ".--", label=solver, ms=4)
         ax.set_title(case, fontsize=10)
         ax.set_xlabel("median wall time per call [s]")
-        ax.set_ylabel("error (max of S1, v1, event times)")
+        ax.set_ylabel("error (max of S1, v1, x1, event times)")
         ax.grid(True, which="both", alpha=0.3)
     for ax in list(axes.flat)[len(cases):]:
         ax.axis("off")
