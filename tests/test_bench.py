@@ -12,6 +12,7 @@ from tswm_runtime.bench_peers import PeerGaveUp, available_methods, peer_run
 from tswm_runtime.cli import main
 
 RUNUP, FLANK, STICK = CASES["run-up then load"], CASES["flank switch near V0"], CASES["decelerate-and-stick"]
+SCHEDULE = CASES["load schedule: stall, restart"]
 
 
 def test_dop853_matches_the_quadrature_reference_on_the_run_up():
@@ -20,7 +21,7 @@ def test_dop853_matches_the_quadrature_reference_on_the_run_up():
 
 
 @pytest.mark.parametrize("method", available_methods())
-@pytest.mark.parametrize("case", [RUNUP, FLANK, STICK], ids=lambda c: c.name)
+@pytest.mark.parametrize("case", [RUNUP, FLANK, STICK, SCHEDULE], ids=lambda c: c.name)
 def test_each_peer_agrees_with_the_reference_at_its_tolerance(method, case):
     """rtol 1e-8 (atol 1e-11): the same events as the reference, every error below 1e-5
     (a global error a few hundred times the local tolerance at most; the loosest is

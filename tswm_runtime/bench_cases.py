@@ -44,6 +44,7 @@ CASES = {c.name: c for c in (
     Case("flank switch near V0", "paper", (("F2", 200.0),), ((0.0, 200.0),)),
     Case("decelerate-and-stick", "paper", (("F2", -15000.0),), ((0.0, -15000.0),), v0=2.0),
     Case("long run T=100", "paper-runup", (), RUNUP, t_end=100.0),
+    Case("load schedule: stall, restart", "load-schedule", (), ((0.0, 0.0), (0.3, -30000.0), (0.6, -2000.0))),
 )}
 
 
