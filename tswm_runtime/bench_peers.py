@@ -140,7 +140,8 @@ def _refine_max(s1_of, vs, best: _Best) -> None:
 def peer_run(method: str, rtol: float, atol: float, m2: float, loads, v0: float, t_end: float,
              m1: float = M1) -> Outcome:
     """One careful user's run. loads: [(t_from, F2), ...], piecewise constant, t_from of the
-    first 0. Returns max |S1| (signed), v1(t_end), the events (load, phi, v1) and rhs calls."""
+    first 0. Returns max |S1| (signed), v1(t_end), x1(t_end), the events (load, phi, v1)
+    and the rhs calls."""
     best, out = _Best(), Outcome(0.0, math.nan)
     x, v, flank, switched = 0.0, v0, 1, False
     bounds = [tf for tf, _ in loads[1:]] + [t_end]
@@ -179,8 +180,8 @@ def peer_run(method: str, rtol: float, atol: float, m2: float, loads, v0: float,
                     hit = (1, *hit[1:])
             out.nfev += n
 
-            def s1_of(x, f=f, F2=F2):
-                return reactions(x, f, F2, m2, m1)[0]
+            def s1_of(speed, f=f, F2=F2):
+                return reactions(speed, f, F2, m2, m1)[0]
             _refine_max(s1_of, ys[1], best)
             if hit is None:
                 t, x, v = t_to, float(ys[0][-1]), float(ys[1][-1])
