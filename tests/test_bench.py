@@ -97,7 +97,10 @@ def test_cli_quick_option_reaches_the_bench(monkeypatch, tmp_path):
 
 
 @pytest.mark.slow
-def test_bench_quick_full_configuration(tmp_path):
-    assert main(["bench", "--quick", "-o", str(tmp_path)]) == 0
+def test_bench_full_run(tmp_path):
+    """The full benchmark (a few minutes): every configuration finishes, every target gets a verdict."""
+    assert main(["bench", "-o", str(tmp_path)]) == 0
+    runs = pd.read_csv(tmp_path / "runs.csv")
+    assert (runs["status"] == "finished").all() and set(runs["case"]) == set(CASES)
     verdicts = pd.read_csv(tmp_path / "verdicts.csv")
     assert len(verdicts) == 2 * len(CASES) and verdicts["verdict"].str.match("(met|missed|tswm|no peer)").all()
