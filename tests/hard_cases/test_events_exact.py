@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from hard_cases import quadrature as q
+from tswm_runtime import quadrature as q
 from tswm_runtime import paper_gear as gear
 from tswm_runtime.simulate import SimulationInputError, simulate
 

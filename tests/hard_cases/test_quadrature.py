@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from hard_cases import quadrature as q
+from tswm_runtime import quadrature as q
 from tswm_runtime import paper_gear as gear
 
 DOP = dict(method="DOP853", rtol=1e-13, atol=1e-15, dense_output=True)

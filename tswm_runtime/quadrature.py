@@ -1,8 +1,9 @@
 """An independent high-accuracy reference for the two-sided friction wedge: quadrature in v.
 
-Written from first principles (force balance of the wedge), nothing from derivation/,
-generated/ or the runtime. Between events the load F2 is constant, so a sliding phase
-is the autonomous scalar ODE v' = A(v) = N(v) / D(v) with
+Written from first principles (force balance of the wedge); imports nothing from
+derivation/, generated/ or the rest of tswm_runtime (the benchmark's reference).
+Between events the load F2 is constant, so a sliding phase is the autonomous scalar ODE
+v' = A(v) = N(v) / D(v) with
 
     Psi = tan(gamma + f s rho(v)),  N = F1(v) + Psi F2,  D = m1 + Psi m2 tan(gamma),
 
