@@ -1,20 +1,27 @@
 """Emit one numba module per scene from the model IR, through a Jinja2 template.
 
-Fixed parameters are folded in as numbers (SymPy then evaluates what depends only on
-them, such as tan(gamma)); free ones are read from the parameter vector ``p``. Every
-function is a top-level ``@njit(cache=True)`` function calling the others as module
-globals, so numba caches and inlines them. The module imports math, numpy and numba only.
+Fixed parameters become named module constants (``gamma = 0.083...  # wedge.gamma``), and
+every subexpression of fixed parameters only a derived constant defined by its formula
+(``tan_gamma = math.tan(gamma)``), evaluated once at import; numba folds module globals,
+so the code reads like the derivation at no cost. Free parameters are read from the
+parameter vector ``p``. Every function is a top-level ``@njit(cache=True)`` function
+calling the others as module globals, so numba caches and inlines them; a function whose
+body equals an earlier one's is emitted as an alias of it. The module imports math and
+numba only.
 """
 from __future__ import annotations
 
 import hashlib
+import keyword
 import math
+import re
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
 
 import jinja2
 import sympy as sp
+from sympy.functions.elementary.piecewise import ExprCondPair
 from sympy.printing.pycode import PythonCodePrinter
 
 from derivation.mechanics import S1, S2, t
@@ -65,6 +72,28 @@ def inert(value, name: str) -> str:
     return repr(value)
 
 
+def _comment(text: str) -> str:
+    """Text for a comment after code: a scene key such as ``load.at[0]``, nothing else."""
+    if not re.fullmatch(r"[A-Za-z0-9_.\[\]]{1,80}", text):
+        raise GenerationError(f"refusing to emit a comment that is not a scene key: {text[:80]!r}")
+    return text
+
+
+def _aliased(functions: list[Function]) -> list[Function]:
+    """The functions with each one whose body, arguments and signature equal an earlier
+    one's turned into an alias of it (mirror-image modes often have one Jacobian)."""
+    first: dict[tuple, str] = {}
+    out = []
+    for f in functions:
+        key = (f.args, f.lines, f.result, f.signature)
+        if key in first and f.lines:
+            out.append(Function(f.name, f.args, f.doc, (), "", alias=first[key]))
+        else:
+            first.setdefault(key, f.name)
+            out.append(f)
+    return out
+
+
 def _docstring(text: str) -> str:
     """Text for a docstring: only generator-made text, which never holds quotes that end it or escapes."""
     if '"""' in text or "\\" in text or not text.isprintable():
@@ -82,21 +111,26 @@ class Function:
     lines: tuple[str, ...]
     result: str
     signature: str = ""          # explicit numba signature name, for the contract functions
+    alias: str = ""              # the earlier function with the same body: emitted as name = alias
 
 
 def module_name(scene_name: str) -> str:
     return scene_name.replace("-", "_")
 
 
+# What code generation reads (not the document writer, the audit or PDF building): a module
+# names the sha256 of these, so only a change that can change the code makes it stale.
+GENERATOR_SOURCES = ("scene.py", "mechanics.py", "laws.py", "paper.py", "model.py", "codegen.py",
+                     "templates/module.py.j2")
+
+
 def generator_digest() -> str:
     """sha256 over the generator's own sources, so a module names the code that wrote it."""
     h = hashlib.sha256()
     root = resources.files("derivation")
-    names = sorted(p.name for p in root.iterdir() if p.name.endswith(".py"))
-    for name in names:
-        h.update(name.encode() + (root / name).read_bytes())
-    for name in sorted(p.name for p in (root / "templates").iterdir()):
-        h.update(name.encode() + (root / "templates" / name).read_bytes())
+    for name in GENERATOR_SOURCES:
+        h.update(name.encode() + root.joinpath(*name.split("/")).read_bytes())
+    h.update(b"units.py" + (resources.files("tswm_runtime") / "units.py").read_bytes())   # the scene's units
     return h.hexdigest()
 
 
@@ -123,6 +157,7 @@ class _Emitter:
         fixed = [p for p in model.params if p.name not in free]
         self.fixed = {param_symbol(p): sp.Float(repr(p.value)) for p in fixed}
         self.fixed_params = {param_symbol(p): p for p in fixed}
+        self.derived: dict[sp.Expr, sp.Symbol] = {}   # subexpression of fixed parameters -> its constant
         self.law_functions = {q.symbol: law_function_name(q.symbol) for q in model.laws}
         self.inlined_laws = compose_laws(model)
 
@@ -135,7 +170,7 @@ class _Emitter:
         A law symbol may share its name with a parameter (a constant load ``F2``): outside
         the law's own function the value then comes from the law, inside it from ``p``.
         """
-        exprs = [self.fold(sp.sympify(e)) for e in outputs]
+        exprs = [self.named(self.fold(sp.sympify(e))) for e in outputs]
         used = set().union(*(e.free_symbols for e in exprs))
         calls = [q.symbol for q in self.model.laws if q.symbol in used and q.symbol != law]
         lines = [f"{s} = y[{i}]" for i, s in enumerate(self.model.states) if s in used]
@@ -149,11 +184,57 @@ class _Emitter:
         return lines, [self.print(sp.Float(e) if e.is_Number else e) for e in reduced]
 
     def fold(self, expr: sp.Expr) -> sp.Expr:
-        """``expr`` with the fixed parameters folded in; refuse a non-finite result, naming the keys."""
-        folded = expr.subs(self.fixed)
-        if _non_finite(folded):
+        """``expr``, checked: with the fixed parameters folded in it must stay finite (else
+        refused, naming the keys). Returned as it is: the constants stay named."""
+        if _non_finite(expr.subs(self.fixed)):
             raise self.refusal([expr])
-        return folded
+        return expr
+
+    def _fixed_only(self, expr) -> bool:
+        return (isinstance(expr, sp.Expr) and not isinstance(expr, ExprCondPair) and bool(expr.free_symbols)
+                and expr.free_symbols <= self.fixed.keys())
+
+    def named(self, expr: sp.Expr) -> sp.Expr:
+        """``expr`` with every maximal subexpression of fixed parameters only (beyond a lone
+        parameter) replaced by a derived module constant."""
+        if expr.is_Atom:
+            return expr
+        if self._fixed_only(expr):
+            return self.constant(expr)
+        if isinstance(expr, sp.Piecewise):
+            return sp.Piecewise(*[(self.named(e), self.named(c)) for e, c in expr.args])
+        if isinstance(expr, (sp.Add, sp.Mul)):
+            fixed = [a for a in expr.args if self._fixed_only(a)]
+            rest = [self.named(a) for a in expr.args if not self._fixed_only(a)]
+            if len(fixed) > 1 or (fixed and not fixed[0].is_Symbol):
+                fixed = [self.constant(expr.func(*fixed))]
+            return expr.func(*fixed, *rest)
+        return expr.func(*(self.named(a) for a in expr.args))
+
+    def constant(self, expr: sp.Expr) -> sp.Expr:
+        """The derived constant for a subexpression of fixed parameters (a lone one is itself)."""
+        if expr.is_Symbol:
+            return expr
+        if expr not in self.derived:
+            self.derived[expr] = sp.Symbol(self._constant_name(expr), real=True)
+        return self.derived[expr]
+
+    def _constant_name(self, expr: sp.Expr) -> str:
+        """A readable identifier for a derived constant: tan_gamma, m1_tan_gamma, ..."""
+        if isinstance(expr, sp.Pow) and expr.exp == -1:
+            text = "inv_" + sp.sstr(expr.base)
+        else:
+            text = sp.sstr(expr).replace("**", "_pow_")
+        text = re.sub(r"[^0-9a-zA-Z]+", "_", text).strip("_")
+        name = ("k_" + text if text[:1].isdigit() else text) if len(text) <= 32 else f"k{len(self.derived) + 1}"
+        taken = {str(s) for s in self.derived.values()} | {str(s) for s in self.fixed} | set(self.vector)
+        while name in taken or keyword.iskeyword(name):
+            name += "_"
+        return name
+
+    def derived_constants(self) -> list[tuple[str, str]]:
+        """(name, formula) of the derived constants, in the order they were made."""
+        return [(str(symbol), self.print(expr)) for expr, symbol in self.derived.items()]
 
     def refusal(self, exprs: list[sp.Expr]) -> GenerationError:
         """The error for outputs whose folded numbers a double cannot hold, naming the scene keys to blame:
@@ -284,7 +365,7 @@ def _guard_directions(model: Model) -> tuple[tuple[int, ...], ...]:
 def _guards(em: _Emitter) -> Function:
     model = em.model
     names = guard_names(model)
-    lines = ["for k in range(g.shape[0]):", "    g[k] = 1.0"]
+    lines = ["for i in range(g.shape[0]):", "    g[i] = 1.0"]
     for index, mode in enumerate(model.modes):
         lines.append(f"{'if' if index == 0 else 'elif'} mode == {index}:  # {mode.name}")
         if mode.slide is not None:
@@ -392,6 +473,7 @@ def generate_module(model: Model, free: tuple[str, ...] | None = None) -> str:
     load_factors = _load_factors(em)
     if load_factors:
         functions.append(load_factors)
+    functions = _aliased(functions)
     by_name = {p.name: p for p in scene.params()}
     free_params = [by_name[n] for n in free]
     fixed = [p for p in scene.params() if p.name not in free]
@@ -414,13 +496,16 @@ def generate_module(model: Model, free: tuple[str, ...] | None = None) -> str:
     env = jinja2.Environment(loader=jinja2.FileSystemLoader(str(resources.files("derivation") / "templates")),
                              trim_blocks=True, lstrip_blocks=True, keep_trailing_newline=True)
     env.filters["docstring"] = _docstring
+    env.filters["inert"] = inert
+    env.filters["comment"] = _comment
     body = env.get_template("module.py.j2").render(
         scene=scene, model=model, functions=functions, free=free_params, latches=model.latches, fixed=fixed,
-        pieces=model.pieces,
+        pieces=model.pieces, derived=em.derived_constants(),
         guards=guard_names(model),
         constants={k: inert(v, k) for k, v in constants.items()}, directions=_guard_directions(model))
+    again = scene.name if scene.source.startswith("shipped:") else "SCENE_FILE"
     header = (f"# Generated by tswm {GENERATOR_VERSION} from scene '{scene.name}'. DO NOT EDIT: regenerate with "
-              f"`tswm generate {scene.name}`.\n"
+              f"`tswm generate {again}`.\n"
               f"# scene-sha256: {scene.digest}\n"
               f"# generator-sha256: {generator_digest()}\n"
               f"# generator-version: {GENERATOR_VERSION}\n"

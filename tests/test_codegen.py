@@ -358,3 +358,42 @@ def test_seating_torque_switch_equals_hand_formulas():
     cones = m.stick_conditions(0.3, y, p)[:2]
     assert cones == pytest.approx((math.tan(rho0) * normal - tangential, math.tan(rho0) * normal + tangential))
     assert min(cones) > 0
+
+
+def test_fixed_parameters_are_named_constants_not_anonymous_literals():
+    """Fixed parameters appear once, as module constants with their scene key; no function
+    body carries their value (or tan(gamma)) as a bare number."""
+    import re
+
+    source = (Path(__file__).parents[1] / "generated" / "paper_runup.py").read_text()
+    constants, _, functions = source.partition("\n@njit")
+    m = load_module("paper_runup")
+    for name, value in m.FIXED.items():
+        assert re.search(rf"^{name} = {re.escape(repr(value))}  # ", constants, re.M), name
+        assert getattr(m, name) == value
+    for number in (repr(11.8), repr(math.tan(m.FIXED["gamma"])), repr(m.FIXED["gamma"])):
+        assert number not in functions, number
+    assert m.tan_gamma == math.tan(m.FIXED["gamma"])
+
+
+def test_equal_bodies_are_emitted_once_as_aliases():
+    """Backward on flank a has forward-on-b's FTF (f s = -1 in both): one body, two names."""
+    m = load_module("seating")
+    assert m.jac_bwd_a is m.jac_fwd_b and m.accel_bwd_b is m.accel_fwd_a
+    source = (Path(__file__).parents[1] / "generated" / "seating.py").read_text()
+    assert "def jac_bwd_a" not in source and "jac_bwd_a = jac_fwd_b" in source
+
+
+def test_generator_digest_covers_exactly_what_code_generation_reads():
+    """Every derivation module that codegen imports is hashed; the document writer is not,
+    so editing the LaTeX writer does not make the checked-in modules stale."""
+    import subprocess
+    import sys
+
+    from derivation.codegen import GENERATOR_SOURCES
+
+    script = ("import sys, derivation.codegen\n"
+              "print(' '.join(sorted(m.split('.')[1] for m in sys.modules if m.startswith('derivation.'))))")
+    loaded = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, check=True).stdout.split()
+    assert {f"{name}.py" for name in loaded} <= set(GENERATOR_SOURCES)
+    assert not {"document.py", "latex.py", "audit.py"} & set(GENERATOR_SOURCES)

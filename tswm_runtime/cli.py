@@ -139,7 +139,7 @@ def _parse_sets(items: list[str], module) -> dict:
 
     Names the module does not have are passed on as written: ``simulate`` rejects them
     with a message listing the free parameters."""
-    from derivation import units
+    from tswm_runtime import units
 
     quantity_of = {units.si_unit(q): q for q in units.UNITS}
     unit_of = dict(zip(module.PARAM_NAMES, module.PARAM_UNITS))

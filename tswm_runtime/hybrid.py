@@ -235,6 +235,15 @@ def _unbounded(observe, guards, mode, t, y, p, k_d, mon, obs, g):
 
 
 @njit(cache=True, error_model="numpy")
+def _observe_max(observe, mode, t, y, p, mon, obs):
+    """Update the running maxima of the observables with their values at (t, y)."""
+    observe(mode, t, y, p, obs)
+    for k in range(mon.shape[0]):
+        if abs(obs[k]) > mon[k, 0]:
+            mon[k, 0], mon[k, 1], mon[k, 2] = abs(obs[k]), obs[k], t
+
+
+@njit(cache=True, error_model="numpy")
 def _log(log, n_ev, t, k, mode_from, mode_to, y, quad):
     """Append an event (time, guard, from, to, state) to the EventLog."""
     n = y.size
@@ -356,6 +365,9 @@ def integrate_hybrid(method, rhs, jac, guards, observe, p, tables, t0, y0, quad,
             status = TOO_MANY_EVENTS
             break
         kind = tables.guard_kind[k]
+        if kind == G_V1:  # at rest exactly: the left limits of the observables there, v1 = 0
+            y[n - 1] = 0.0
+            _observe_max(observe, mode, t, y, p, mon, obs)
         if kind == G_D or kind == G_JAM:  # D or the jam factor of this mode reached 0
             if mon.shape[0] > 0 and mon[0, 0] != np.inf:  # (the approach marked them already)
                 _unbounded(observe, guards, mode, t, y, p, k_d, mon, obs, g)

@@ -85,7 +85,7 @@ def _bench(args: argparse.Namespace) -> int:
     from tswm_runtime.sweep import MAX_SWEEP_CASES
 
     output_directory(args.output)
-    if not 1 <= args.cases <= MAX_SWEEP_CASES:
+    if args.cases is not None and not 1 <= args.cases <= MAX_SWEEP_CASES:
         raise UsageError(f"--cases {args.cases}: must be in [1, {MAX_SWEEP_CASES:.0e}]")
     return bench.main(quick=args.quick, output=args.output, cases=args.cases)
 
