@@ -27,7 +27,7 @@ from sympy.printing.pycode import PythonCodePrinter
 from derivation.mechanics import S1, S2, t
 from derivation.model import Model, compose_laws as _compose, param_symbol
 from derivation.scene import NAME, SceneError
-from tswm_runtime.files import EditedModuleError, write_atomic
+from tswm_runtime.common.files import EditedModuleError, write_atomic
 
 GENERATOR_VERSION = "0.1.0"
 HEADER_LINES = 5
@@ -130,7 +130,7 @@ def generator_digest() -> str:
     root = resources.files("derivation")
     for name in GENERATOR_SOURCES:
         h.update(name.encode() + root.joinpath(*name.split("/")).read_bytes())
-    h.update(b"units.py" + (resources.files("tswm_runtime") / "units.py").read_bytes())   # the scene's units
+    h.update(b"units.py" + (resources.files("tswm_runtime") / "common" / "units.py").read_bytes())   # scene units
     return h.hexdigest()
 
 

@@ -6,7 +6,7 @@ import pytest
 from derivation.codegen import module_name, write_module
 from derivation.model import build_model
 from derivation.scene import parse_scene
-from tswm_runtime.contract import load_module
+from tswm_runtime.model.contract import load_module
 
 
 @pytest.fixture(scope="session")

@@ -6,9 +6,9 @@ import math
 import pandas as pd
 import pytest
 
-from tswm_runtime import bench, bench_report
-from tswm_runtime.bench_cases import CASES, errors, reference, run_peer
-from tswm_runtime.bench_peers import PeerGaveUp, available_methods, peer_run
+from tswm_runtime.apps import bench, bench_report
+from tswm_runtime.apps.bench_cases import CASES, errors, reference, run_peer
+from tswm_runtime.apps.bench_peers import PeerGaveUp, available_methods, peer_run
 from tswm_runtime.cli import main
 
 RUNUP, FLANK, STICK = CASES["run-up then load"], CASES["flank switch near V0"], CASES["decelerate-and-stick"]

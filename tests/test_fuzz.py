@@ -15,7 +15,7 @@ from derivation.codegen import generate_module
 from derivation.model import build_model
 from derivation.scene import SceneError, parse_scene
 from tswm_runtime.cli import main
-from tswm_runtime.result import STATUS_NAMES
+from tswm_runtime.results.result import STATUS_NAMES
 
 from test_injection import PAPER, toml_string
 

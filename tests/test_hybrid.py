@@ -10,8 +10,8 @@ import math
 import numpy as np
 import pytest
 
-from tswm_runtime.paper_gear import cones
-from tswm_runtime.simulate import simulate
+from tswm_runtime.apps.paper_gear import cones
+from tswm_runtime.apps.simulate import simulate
 
 SCENE = """
 name = "closed-form"

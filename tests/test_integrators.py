@@ -11,11 +11,11 @@ import pytest
 from numba import njit
 from scipy.integrate import RK45, solve_ivp
 
-from tswm_runtime import events as ev
-from tswm_runtime import rosenbrock as ros
-from tswm_runtime import segment as seg
-from tswm_runtime.signatures import GUARDS_SIG, JAC_SIG, RHS_SIG
-from tswm_runtime.structures import EventSettings, Tolerances
+from tswm_runtime.integration import events as ev
+from tswm_runtime.integration import rosenbrock as ros
+from tswm_runtime.integration import segment as seg
+from tswm_runtime.integration.signatures import GUARDS_SIG, JAC_SIG, RHS_SIG
+from tswm_runtime.integration.structures import EventSettings, Tolerances
 
 METHODS = [seg.DOPRI5, seg.ROSENBROCK23]
 METHOD_IDS = ["dopri5", "rosenbrock23"]

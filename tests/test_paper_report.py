@@ -10,9 +10,9 @@ import sys
 
 import pytest
 
-from tswm_runtime import paper_report as pr
-from tswm_runtime.paper_data import FIGURE2, printed
-from tswm_runtime.simulate import simulate
+from tswm_runtime.apps import paper_report as pr
+from tswm_runtime.apps.paper_data import FIGURE2, printed
+from tswm_runtime.apps.simulate import simulate
 
 NEED_CHROMIUM = os.environ.get("CI") == "true"   # CI installs chromium and must render the report
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")

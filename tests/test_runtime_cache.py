@@ -4,11 +4,11 @@ import subprocess
 import sys
 from pathlib import Path
 
-from tswm_runtime import cache_guard
+from tswm_runtime.integration import cache_guard
 
 ROOT = Path(__file__).parents[1]
 KERNEL_USER = '''
-from tswm_runtime.cache_guard import compile_cached
+from tswm_runtime.integration.cache_guard import compile_cached
 
 @compile_cached("float64(float64)")
 def twice(x):
@@ -40,7 +40,7 @@ def test_a_stale_kernel_digest_flushes_the_cache_and_is_renewed(tmp_path):
 def test_a_module_loaded_by_path_runs_again_from_its_cache(tmp_path):
     """numba rebuilds a cached function's module by name: load_module must register it."""
     shutil.copy(ROOT / "generated" / "paper.py", tmp_path / "paper.py")
-    code = ("from tswm_runtime.simulate import simulate; "
+    code = ("from tswm_runtime.apps.simulate import simulate; "
             f"print(simulate({str(tmp_path / 'paper.py')!r}, {{'F2': -1000.0}}).status)")
     assert _python(code, tmp_path).strip() == "finished"
     assert list(tmp_path.glob("__pycache__/*.nbi")), "the model was cached"

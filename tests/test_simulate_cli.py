@@ -16,8 +16,8 @@ from matplotlib.image import imread
 
 import generated
 from tswm_runtime.cli import main
-from tswm_runtime.export import SERIES
-from tswm_runtime.simulate import simulate
+from tswm_runtime.results.export import SERIES
+from tswm_runtime.apps.simulate import simulate
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 
@@ -270,15 +270,15 @@ t_end = "0.5 s"
 @pytest.mark.parametrize("value, text", [(-15000.0, "-15 kN"), (-16932.7, "-16.93 kN"), (727.63, "727.6 N"),
                                          (1729.4, "1729 N"), (-5000.0, "-5000 N"), (0.0, "0 N")])
 def test_force_text(value, text):
-    from tswm_runtime.plot import force_text
+    from tswm_runtime.results.plot import force_text
 
     assert force_text(value) == text
 
 
 def test_plot_labels_forces_without_exponents():
     """The maxima's labels read '-15 kN', not '-1.5e+04 N' (a stuck paper run: S2 = F2)."""
-    from tswm_runtime.contract import load_module
-    from tswm_runtime.plot import figure
+    from tswm_runtime.model.contract import load_module
+    from tswm_runtime.results.plot import figure
 
     r = simulate("paper", {"m2": 200.0, "F2": -15000.0}, points=11)
     labels = [t.get_text() for ax in figure(r, load_module("paper")).axes for t in ax.texts]
@@ -297,7 +297,7 @@ def test_the_simulation_path_imports_neither_sympy_nor_derivation(tmp_path):
         "import sys\n"
         "from tswm_runtime.cli import main\n"
         f"assert main(['simulate', 'paper', '--t-end', '0.01', '--points', '5', '-o', {str(tmp_path)!r}]) == 0\n"
-        "from tswm_runtime.sweep import sweep\n"
+        "from tswm_runtime.apps.sweep import sweep\n"
         "sweep('paper', [[200.0, -1000.0]], {'t_end': 0.01})\n"
         "print(sorted({m.split('.')[0] for m in sys.modules} & {'sympy', 'derivation'}))\n")
     out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, check=True).stdout

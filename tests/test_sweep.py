@@ -7,10 +7,10 @@ import pandas as pd
 import pytest
 
 from tswm_runtime.cli import main
-from tswm_runtime.contract import load_module
-from tswm_runtime.result import STATUS_NAMES
-from tswm_runtime.simulate import simulate
-from tswm_runtime.sweep import REGIME_LETTERS, SweepInputError, grid_cases, parse_grid, sweep
+from tswm_runtime.model.contract import load_module
+from tswm_runtime.results.result import STATUS_NAMES
+from tswm_runtime.apps.simulate import simulate
+from tswm_runtime.apps.sweep import REGIME_LETTERS, SweepInputError, grid_cases, parse_grid, sweep
 
 LETTER = REGIME_LETTERS
 

@@ -1,6 +1,6 @@
 """Measure how model functions are best passed to the numba integrator.
 
-Variants, same integrator code (tswm_runtime.segment):
+Variants, same integrator code (tswm_runtime.integration.segment):
   signature   integrate_segment, compiled with an explicit signature whose model
               arguments are numba FunctionTypes (the runtime's design).
   dispatcher  segment._run called with the model's dispatchers as plain arguments:
@@ -31,7 +31,7 @@ ROOT = Path(__file__).resolve().parents[1]
 MODEL_SOURCE = textwrap.dedent('''
     """Harmonic oscillator in the generated-module contract (benchmark model)."""
     from numba import float64, int64, njit
-    from tswm_runtime.signatures import GUARDS_SIG, JAC_SIG, RHS_SIG, RhsFunction, VECTOR
+    from tswm_runtime.integration.signatures import GUARDS_SIG, JAC_SIG, RHS_SIG, RhsFunction, VECTOR
 
     @njit(RHS_SIG, cache=True)
     def rhs(mode, t, y, p, dy):
@@ -98,7 +98,7 @@ def phase(variant):
     import numpy as np
     importlib.import_module("numba")      # timed: the import alone
     t_numba = time.perf_counter()
-    from tswm_runtime import segment as seg
+    from tswm_runtime.integration import segment as seg
     import bench_model as model
     t_import = time.perf_counter()
     out = {"import_numba_s": t_numba - t0, "import_runtime_and_model_s": t_import - t_numba}
@@ -159,7 +159,7 @@ def main():
 
 def _report(results):
     print(f"python {sys.version.split()[0]}, {os.cpu_count()} cpus")
-    print("\nstart-up per process (s): 'import' = import of tswm_runtime.segment and the model;"
+    print("\nstart-up per process (s): 'import' = import of tswm_runtime.integration.segment and the model;"
           "\n'1st calls' = first call minus a steady-state run, summed over the three runs")
     print(f"{'variant':<11}{'':6}{'numba':>8}{'import':>8}{'1st calls':>10}{'hits':>6}"
           f"{'misses':>7}")

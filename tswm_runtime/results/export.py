@@ -15,8 +15,8 @@ from types import ModuleType
 
 import numpy as np
 
-from tswm_runtime.files import write_atomic
-from tswm_runtime.result import SERIES, Result
+from tswm_runtime.common.files import write_atomic
+from tswm_runtime.results.result import SERIES, Result
 SCALARS = ("S1_max", "t_S1_max", "S2_max", "t_S2_max", "t_stop", "n_steps", "n_rejected", "nfev", "njev")
 
 
@@ -135,7 +135,7 @@ def write_outputs(result: Result, module: ModuleType, out_dir: str | Path, *, pl
                write_atomic(paths["npz"], npz_bytes(result, module)),
                write_atomic(paths["json"], summary_json(result, wall_time))]
     if plot:
-        from tswm_runtime.plot import png_bytes
+        from tswm_runtime.results.plot import png_bytes
 
         written.append(write_atomic(paths["png"], png_bytes(result, module)))
     return written

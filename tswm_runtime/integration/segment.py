@@ -29,9 +29,9 @@ from collections import namedtuple
 import numpy as np
 from numba import njit, types
 
-from tswm_runtime import cache_guard, control, dopri5, events, painleve, rosenbrock
-from tswm_runtime.signatures import JAC_SIG, MATRIX, VECTOR, GuardsFunction, JacFunction, RhsFunction
-from tswm_runtime.structures import EVENT_SETTINGS, TOLERANCES, Outputs, Step, StepWork
+from tswm_runtime.integration import cache_guard, control, dopri5, events, painleve, rosenbrock
+from tswm_runtime.integration.signatures import JAC_SIG, MATRIX, VECTOR, GuardsFunction, JacFunction, RhsFunction
+from tswm_runtime.integration.structures import EVENT_SETTINGS, TOLERANCES, Outputs, Step, StepWork
 
 # Method codes.
 DOPRI5 = 0  # Dormand-Prince 5(4), explicit (dopri5.py).

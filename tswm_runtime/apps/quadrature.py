@@ -116,7 +116,7 @@ class Wedge:
 def paper_wedge(m2, m1=11.8, gamma_deg=4.76, Fmax=2178.0, V0=7.85, Vmax=6.5,
                 a=0.161, b=0.535, c=0.088):
     """The paper's worm gear with Kloss' drive and the paper's friction law, in mp arithmetic
-    (the formulas of tswm_runtime/paper_gear.py; gamma is the double radians(4.76))."""
+    (the formulas of tswm_runtime/apps/paper_gear.py; gamma is the double radians(4.76))."""
     gamma = math.radians(gamma_deg)
     cg = mp.cos(mp.mpf(gamma))
     Fmax, V0, Vmax, a, b, c = (mp.mpf(x) for x in (Fmax, V0, Vmax, a, b, c))

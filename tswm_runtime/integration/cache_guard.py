@@ -16,11 +16,11 @@ from pathlib import Path
 from numba import njit
 from numba.core import caching
 
-from tswm_runtime.files import write_atomic
+from tswm_runtime.common.files import write_atomic
 
-KERNEL_SOURCES = ("structures.py", "control.py", "dopri5.py", "rosenbrock.py", "events.py", "segment.py", "painleve.py",
-                  "hybrid.py",
-                  "batch.py")
+KERNEL_SOURCES = ("integration/structures.py", "integration/control.py", "integration/dopri5.py",
+                  "integration/rosenbrock.py", "integration/events.py", "integration/segment.py",
+                  "integration/painleve.py", "hybrid/machine.py", "hybrid/batch.py")
 
 
 class CacheIOWarning(UserWarning):
@@ -44,7 +44,7 @@ caching.Cache._guard_against_spurious_io_errors = _tolerate_cache_io_errors   # 
 def kernel_digest() -> str:
     """sha256 over the kernel sources of this package."""
     h = hashlib.sha256()
-    here = Path(__file__).parent
+    here = Path(__file__).parents[1]   # tswm_runtime/
     for name in KERNEL_SOURCES:
         h.update(name.encode() + (here / name).read_bytes())
     return h.hexdigest()

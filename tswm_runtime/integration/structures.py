@@ -9,7 +9,7 @@ from collections import namedtuple
 
 from numba import types
 
-from tswm_runtime.signatures import MATRIX, VECTOR
+from tswm_runtime.integration.signatures import MATRIX, VECTOR
 
 INTS = types.int64[::1]
 

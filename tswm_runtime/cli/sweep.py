@@ -11,8 +11,8 @@ SWEEP_SETTINGS = ("t_end", "rtol", "atol", "method", "max_steps", "max_events")
 
 def _sweep(args: argparse.Namespace) -> int:
     from tswm_runtime.cli import UsageError, _load_model, output_directory, setting_error, setting_overrides
-    from tswm_runtime.simulate import SimulationInputError
-    from tswm_runtime.sweep import (SweepInputError, SweepInterrupted, check_size, grid_cases, grid_size,
+    from tswm_runtime.apps.simulate import SimulationInputError
+    from tswm_runtime.apps.sweep import (SweepInputError, SweepInterrupted, check_size, grid_cases, grid_size,
                                     parse_grid, parse_ranges, sample_cases, sweep)
 
     output_directory(args.output)
@@ -80,9 +80,9 @@ def _sweep(args: argparse.Namespace) -> int:
 
 
 def _bench(args: argparse.Namespace) -> int:
-    from tswm_runtime import bench
+    from tswm_runtime.apps import bench
     from tswm_runtime.cli import UsageError, output_directory
-    from tswm_runtime.sweep import MAX_SWEEP_CASES
+    from tswm_runtime.apps.sweep import MAX_SWEEP_CASES
 
     output_directory(args.output)
     if args.cases is not None and not 1 <= args.cases <= MAX_SWEEP_CASES:

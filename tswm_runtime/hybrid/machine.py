@@ -29,9 +29,9 @@ stops the run with status CHATTERING instead of looping.
 import numpy as np
 from numba import njit, types
 
-from tswm_runtime import cache_guard, painleve, segment
-from tswm_runtime.signatures import MATRIX, VECTOR, GuardsFunction, JacFunction, RhsFunction
-from tswm_runtime.structures import (EVENT_LOG, MODE_TABLES, OUTPUTS, TOLERANCES, EventLog, EventSettings,
+from tswm_runtime.integration import cache_guard, painleve, segment
+from tswm_runtime.integration.signatures import MATRIX, VECTOR, GuardsFunction, JacFunction, RhsFunction
+from tswm_runtime.integration.structures import (EVENT_LOG, MODE_TABLES, OUTPUTS, TOLERANCES, EventLog, EventSettings,
                                      Outputs, Tolerances)
 
 # Guard kinds (modes.GUARD_KINDS maps the generated GUARDS names to these).

@@ -21,13 +21,13 @@ from types import ModuleType
 import numpy as np
 
 from tswm_runtime import __version__
-from tswm_runtime.cache_guard import kernel_digest
-from tswm_runtime.files import write_atomic
+from tswm_runtime.integration.cache_guard import kernel_digest
+from tswm_runtime.common.files import write_atomic
 
 KEY_FORMAT = 1
 METADATA_KEY = b"tswm.chunk"
 PATTERN = "chunk-*.parquet"
-RUNTIME_SOURCES = ("modes.py", "checks.py", "simulate.py", "sweep.py", "chunks.py")   # besides cache_guard's kernels
+RUNTIME_SOURCES = ("model/modes.py", "model/checks.py", "apps/simulate.py", "apps/sweep.py", "apps/chunks.py")   # besides cache_guard's kernels
 
 
 def model_digest(module: ModuleType) -> str:
@@ -45,7 +45,7 @@ def model_digest(module: ModuleType) -> str:
 def runtime_digest() -> str:
     """sha256 over the runtime's numerical sources: a changed integrator never reuses old rows."""
     h = hashlib.sha256(kernel_digest().encode())
-    here = Path(__file__).parent
+    here = Path(__file__).parents[1]   # tswm_runtime/
     for name in RUNTIME_SOURCES:
         h.update(name.encode() + (here / name).read_bytes())
     return h.hexdigest()

@@ -33,7 +33,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from tswm_runtime.paper_gear import GAMMA, M1, V0, accel, cones, kloss, phi, reactions, rho
+from tswm_runtime.apps.paper_gear import GAMMA, M1, V0, accel, cones, kloss, phi, reactions, rho
 
 SCIPY_METHODS = ("RK45", "DOP853", "Radau", "BDF", "LSODA")
 MAX_EVENTS = 100  # a run with more events is given up (chatter)

@@ -37,12 +37,18 @@ from types import ModuleType
 
 import numpy as np
 
-from tswm_runtime import __version__, batch, checks, chunks, modes
-from tswm_runtime.contract import load_module
-from tswm_runtime.files import write_atomic
-from tswm_runtime.result import STATUS_NAMES
-from tswm_runtime.structures import Tolerances
-from tswm_runtime.simulate import METHODS, initial_state, jacobian, settings, unknown_parameter, with_latches
+from tswm_runtime import __version__
+
+from tswm_runtime.apps import chunks
+
+from tswm_runtime.hybrid import batch
+
+from tswm_runtime.model import checks, modes
+from tswm_runtime.model.contract import load_module
+from tswm_runtime.common.files import write_atomic
+from tswm_runtime.results.result import STATUS_NAMES
+from tswm_runtime.integration.structures import Tolerances
+from tswm_runtime.apps.simulate import METHODS, initial_state, jacobian, settings, unknown_parameter, with_latches
 
 REGIME_LETTERS = {"tractive": "T", "inverse-tractive": "I", "stick": "S", "backward on flank a": "A",
                   "backward on flank b": "B", "sliding along phi = 0": "F"}

@@ -8,8 +8,8 @@ from types import ModuleType
 
 import numpy as np
 
-from tswm_runtime import hybrid
-from tswm_runtime.modes import event_name
+from tswm_runtime.hybrid import machine as hybrid
+from tswm_runtime.model.modes import event_name
 
 class Status(IntEnum):
     """The mode machine's status codes (hybrid.FINISHED, ...), for Python."""

@@ -13,7 +13,7 @@ from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 from matplotlib.patches import Patch
 
-from tswm_runtime.result import Result
+from tswm_runtime.results.result import Result
 
 DPI = 200
 REGIME_COLOURS = {

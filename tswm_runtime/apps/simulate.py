@@ -11,9 +11,13 @@ from types import ModuleType
 
 import numpy as np
 
-from tswm_runtime import checks, hybrid, modes, segment
-from tswm_runtime.contract import load_module
-from tswm_runtime.result import Event, Result, status_message
+from tswm_runtime.hybrid import machine as hybrid
+
+from tswm_runtime.integration import segment
+
+from tswm_runtime.model import checks, modes
+from tswm_runtime.model.contract import load_module
+from tswm_runtime.results.result import Event, Result, status_message
 
 METHODS = {"dopri5": segment.DOPRI5, "rosenbrock23": segment.ROSENBROCK23}
 RTOL_RANGE = (1e-13, 0.1)

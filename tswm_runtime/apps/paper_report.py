@@ -22,14 +22,14 @@ import jinja2
 import markupsafe
 import numpy as np
 
-from tswm_runtime.contract import load_module
-from tswm_runtime.export import jsonable
-from tswm_runtime.files import write_atomic
-from tswm_runtime.paper_data import F2_LISTED, FIGURE2, M2_LISTED, SOURCE, TABLE3_PRINTED, printed
-from tswm_runtime.paper_gear import cones
-from tswm_runtime.provenance import machine, package_versions
-from tswm_runtime.result import Result
-from tswm_runtime.simulate import simulate
+from tswm_runtime.model.contract import load_module
+from tswm_runtime.results.export import jsonable
+from tswm_runtime.common.files import write_atomic
+from tswm_runtime.apps.paper_data import F2_LISTED, FIGURE2, M2_LISTED, SOURCE, TABLE3_PRINTED, printed
+from tswm_runtime.apps.paper_gear import cones
+from tswm_runtime.common.provenance import machine, package_versions
+from tswm_runtime.results.result import Result
+from tswm_runtime.apps.simulate import simulate
 
 TOLERANCE = 0.05   # a computed value "agrees" with a printed one within 5 % and with the same sign
 NOISE = 1e-6      # a dissipation rate counts as negative below -NOISE * max |input power| of the run
@@ -325,7 +325,7 @@ def verdict(rows: list[dict], checks: dict) -> dict:
 
 
 def _figure(result: Result, module, reading: Reading, m2: float, F2: float) -> bytes:
-    from tswm_runtime.plot import png_bytes
+    from tswm_runtime.results.plot import png_bytes
 
     heading = (f"{reading.label} {reading.scene}: {reading.title}\n"
                f"m2 = {m2:g} kg, F2 = {F2:g} N; {drive_word(result)}")

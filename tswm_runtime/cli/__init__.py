@@ -13,7 +13,7 @@ def _derive(args: argparse.Namespace) -> int:
     from derivation.latex import build_pdf
     from derivation.model import build_model
     from derivation.scene import load_scene
-    from tswm_runtime.files import write_atomic
+    from tswm_runtime.common.files import write_atomic
 
     scene = load_scene(args.scene)
     model = build_model(scene)
@@ -89,7 +89,7 @@ def _shipped_modules() -> list[str]:
 def _load_model(scene: str):
     """The generated module of a shipped scene name, a scene file (.toml: generated into the
     user cache on first use, see derivation.model_cache) or a module's .py path."""
-    from tswm_runtime.contract import ContractError, load_module
+    from tswm_runtime.model.contract import ContractError, load_module
 
     if Path(scene).suffix == ".toml":
         from derivation.model_cache import module_for_scene
@@ -139,7 +139,7 @@ def _parse_sets(items: list[str], module) -> dict:
 
     Names the module does not have are passed on as written: ``simulate`` rejects them
     with a message listing the free parameters."""
-    from tswm_runtime import units
+    from tswm_runtime.common import units
 
     quantity_of = {units.si_unit(q): q for q in units.UNITS}
     unit_of = dict(zip(module.PARAM_NAMES, module.PARAM_UNITS))
@@ -205,8 +205,8 @@ def _simulate(args: argparse.Namespace) -> int:
     import time
 
     start = time.perf_counter()
-    from tswm_runtime.contract import ContractError
-    from tswm_runtime.simulate import SimulationInputError, simulate
+    from tswm_runtime.model.contract import ContractError
+    from tswm_runtime.apps.simulate import SimulationInputError, simulate
 
     output_directory(args.output)
     module = _load_model(args.scene)
@@ -228,7 +228,7 @@ def _simulate(args: argparse.Namespace) -> int:
     origin = args.scene if args.scene.endswith(".py") else f"generated/{args.scene.replace('-', '_')}.py"
     _print_summary(result, module, origin, t_load, t_run)
     if args.output:
-        from tswm_runtime.export import write_outputs
+        from tswm_runtime.results.export import write_outputs
 
         for path in write_outputs(result, module, args.output, plot=not args.no_plot,
                                   wall_time=t_load + t_run):
@@ -241,7 +241,7 @@ def _paper(args: argparse.Namespace) -> int:
 
     start = time.perf_counter()
     output_directory(args.output)
-    from tswm_runtime.paper_report import build_report, wall_time_text
+    from tswm_runtime.apps.paper_report import build_report, wall_time_text
 
     cases = None
     if args.case:
@@ -254,7 +254,7 @@ def _paper(args: argparse.Namespace) -> int:
         for m2, F2 in cases:
             if not (math.isfinite(m2) and math.isfinite(F2) and m2 > 0):
                 raise UsageError(f"--case {m2:g},{F2:g}: M2 must be a finite mass > 0 kg and F2 a finite force [N]")
-    from tswm_runtime.simulate import SimulationInputError
+    from tswm_runtime.apps.simulate import SimulationInputError
 
     try:
         report = build_report(args.output, cases, derivation=not args.no_derivation, progress=not args.no_progress,
@@ -300,7 +300,7 @@ def _parser() -> argparse.ArgumentParser:
                           help="write DIR/SCENE.csv, SCENE.npz, SCENE-summary.json and SCENE.png")
     simulate.add_argument("--no-plot", action="store_true", help="with -o: do not write the PNG")
     simulate.set_defaults(run=_simulate)
-    from tswm_runtime import sweep_cli  # sweep and bench: argument parsing only, work imported lazily
+    from tswm_runtime.cli import sweep as sweep_cli  # sweep and bench: argument parsing only, work imported lazily
 
     sweep_cli.add_parsers(sub)
     paper = sub.add_parser("paper", help="the paper's Table 3 and Figure 2 against tswm: a Markdown/HTML report",
@@ -321,7 +321,7 @@ def _parser() -> argparse.ArgumentParser:
 def _bad_input() -> tuple[type[Exception], ...]:
     """The exception types that mean bad input (exit 2). derivation/'s own count only if it was
     loaded, so a simulation never imports it (and if it was not loaded, none was raised)."""
-    from tswm_runtime.files import EditedModuleError
+    from tswm_runtime.common.files import EditedModuleError
 
     kinds = [EditedModuleError, FileNotFoundError, UsageError]
     for module, name in (("derivation.scene", "SceneError"), ("derivation.latex", "TexUnavailable")):

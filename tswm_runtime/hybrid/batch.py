@@ -24,9 +24,11 @@ Per case the result rows hold:
 import numpy as np
 from numba import prange, types
 
-from tswm_runtime import cache_guard, hybrid, segment
-from tswm_runtime.signatures import MATRIX, VECTOR, GuardsFunction, JacFunction, RhsFunction
-from tswm_runtime.structures import MODE_TABLES, TOLERANCES, EventLog, Outputs
+from tswm_runtime.hybrid import machine as hybrid
+
+from tswm_runtime.integration import cache_guard, segment
+from tswm_runtime.integration.signatures import MATRIX, VECTOR, GuardsFunction, JacFunction, RhsFunction
+from tswm_runtime.integration.structures import MODE_TABLES, TOLERANCES, EventLog, Outputs
 
 F_T_STOP, F_S1M, F_TS1M, F_S2M, F_TS2M, F_X1, F_V1 = range(7)
 N_F = 7

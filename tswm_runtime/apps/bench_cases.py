@@ -17,8 +17,8 @@ from functools import lru_cache
 
 import numpy as np
 
-from tswm_runtime.bench_peers import Outcome, peer_run
-from tswm_runtime.paper_gear import M1
+from tswm_runtime.apps.bench_peers import Outcome, peer_run
+from tswm_runtime.apps.paper_gear import M1
 
 
 @dataclass(frozen=True)
@@ -51,7 +51,7 @@ CASES = {c.name: c for c in (
 @lru_cache(maxsize=None)
 def reference(case: Case) -> Outcome:
     """The quadrature reference: max |S1| (signed), v1(t_end), events (cached per case)."""
-    from tswm_runtime import quadrature as q
+    from tswm_runtime.apps import quadrature as q
 
     tr = q.solve(q.paper_wedge(case.m2, m1=case.m1), list(case.loads), case.v0, case.t_end)
     if tr.status != "finished":
@@ -70,7 +70,7 @@ def _tswm_kind(guard: str) -> str:
 def run_simulate(case: Case, rtol: float, atol: float, points: int | None = None) -> Outcome:
     """tswm as a user calls it: simulate(scene, params, rtol=, atol=, ...) (default output:
     1001 points), then max |S1|, v1(t_end) and the events from the Result."""
-    from tswm_runtime.simulate import simulate
+    from tswm_runtime.apps.simulate import simulate
 
     extra = {} if points is None else {"points": points}
     r = simulate(case.scene, dict(case.params), rtol=rtol, atol=atol, **case.overrides(), **extra)
@@ -83,8 +83,8 @@ def run_simulate(case: Case, rtol: float, atol: float, points: int | None = None
 def run_sweep(case: Case, rtol: float, atol: float, n: int) -> Outcome:
     """tswm's sweep of n identical cases (all cores), one whole call; the Outcome of the
     first row (the sweep table has no event times: events empty, counted in nfev only)."""
-    from tswm_runtime.contract import load_module
-    from tswm_runtime.sweep import sweep
+    from tswm_runtime.model.contract import load_module
+    from tswm_runtime.apps.sweep import sweep
 
     module = load_module(case.scene)
     row = dict(zip(module.PARAM_NAMES, module.PARAM_DEFAULTS)) | dict(case.params)

@@ -30,10 +30,10 @@ import time
 from functools import partial
 from pathlib import Path
 
-from tswm_runtime import bench_report as report
-from tswm_runtime import provenance
-from tswm_runtime.bench_cases import CASES, errors, reference, run_peer, run_simulate, run_sweep
-from tswm_runtime.bench_peers import available_methods
+from tswm_runtime.apps import bench_report as report
+from tswm_runtime.common import provenance
+from tswm_runtime.apps.bench_cases import CASES, errors, reference, run_peer, run_simulate, run_sweep
+from tswm_runtime.apps.bench_peers import available_methods
 
 TOLS_FULL = (1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8, 1e-9, 1e-10, 1e-11)
 TOLS_QUICK = (1e-4, 1e-6, 1e-8, 1e-10)
@@ -92,8 +92,8 @@ def throughput(n_cases: int, repeats: int = 3, log=print) -> dict:
     import numba
     import numpy as np
 
-    from tswm_runtime.contract import load_module
-    from tswm_runtime.sweep import grid_cases, sweep
+    from tswm_runtime.model.contract import load_module
+    from tswm_runtime.apps.sweep import grid_cases, sweep
 
     module = load_module("paper-runup")
     nm = max(int(round(math.sqrt(n_cases))), 1)
@@ -130,8 +130,8 @@ def flat_cost(rows, short="run-up then load", long="long run T=100", rtol=THROUG
 
 
 COLD = {
-    "tswm simulate('paper-runup')": "from tswm_runtime.simulate import simulate; simulate('paper-runup')",
-    "RK45 peer, run-up then load": ("from tswm_runtime.bench_peers import peer_run; "
+    "tswm simulate('paper-runup')": "from tswm_runtime.apps.simulate import simulate; simulate('paper-runup')",
+    "RK45 peer, run-up then load": ("from tswm_runtime.apps.bench_peers import peer_run; "
                                     "peer_run('RK45', 1e-6, 1e-9, 200.0, [(0.0, 0.0), (0.3, -15000.0)], 0.0, 1.0)"),
 }
 
@@ -177,7 +177,7 @@ def main(quick: bool = False, output: str | os.PathLike = "tswm-report/bench", c
     the run (tests)."""
     import pandas as pd
 
-    from tswm_runtime.files import write_atomic
+    from tswm_runtime.common.files import write_atomic
 
     out = Path(output)
     out.mkdir(parents=True, exist_ok=True)
@@ -229,12 +229,12 @@ def _markdown(info, refs, t_ref, rows, verdicts, thr, flat, cold, tols, repeats,
           f"Every call timed whole in this process: `simulate()` with its default output (1001 points) "
           f"and with `points=2`; `sweep()` over {sweep_n} identical cases on all cores, divided by "
           f"{sweep_n} (not comparable with one-thread calls: it uses {info['numba_threads']} threads); "
-          f"peers as a careful user writes them (`tswm_runtime/bench_peers.py`: span split at load times, "
+          f"peers as a careful user writes them (`tswm_runtime/apps/bench_peers.py`: span split at load times, "
           f"directed terminal events, restart with the new flank, phi event armed only where phi can "
           f"vanish). One untimed warm-up call per configuration, then {repeats} rounds over all "
           f"configurations in turn; median (min, max) seconds per call. Tolerances "
           f"{', '.join(f'{t:g}' for t in tols)}; atol = rtol x {ATOL_PER_RTOL:g} for every solver.", "",
-          "Errors against the independent quadrature reference (`tswm_runtime/quadrature.py`, 34 "
+          "Errors against the independent quadrature reference (`tswm_runtime/apps/quadrature.py`, 34 "
           f"digits, {t_ref:.1f} s for all cases): err_S1 relative error of max |S1|; err_v1 error of "
           "v1(t_end) relative to max(|v1_ref|, 1 m/s); err_x1 relative error of x1(t_end) (it integrates the "
           "whole transient, while max |S1| and v1(t_end) can sit on equilibria that implicit methods hit to "

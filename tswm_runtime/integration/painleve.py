@@ -26,7 +26,7 @@ re-taken steps; the observables' running maxima are updated at step ends.
 import numpy as np
 from numba import njit
 
-from tswm_runtime import control, dopri5, events
+from tswm_runtime.integration import control, dopri5, events
 
 ZERO, END, OTHER, CLEAR = 0, 1, 2, 3  # outcomes besides the integrator's failure codes
 TRIGGER_STEPS = 4.0  # The segment loop hands over when D would reach 0 within this many steps,

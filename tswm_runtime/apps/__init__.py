@@ -1,0 +1,1 @@
+"""Applications: simulate, sweep, the benchmark, the paper report and their references."""

@@ -1,0 +1,1 @@
+"""Shared leaves: atomic file writes, units, provenance (versions) of results."""

@@ -1,0 +1,1 @@
+"""Results: the Result object and its serialisations (dict, DataFrame, files), plots."""
