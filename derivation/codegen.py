@@ -428,6 +428,13 @@ def _observe() -> Function:
                     "its reactions.", (f"{targets} = reactions(mode, t, y, p)",), "", "GUARDS_SIG")
 
 
+def _outputs() -> Function:
+    return Function("outputs", "mode, t, y, p, out", "The quantities of an output row in `mode`, in the order of "
+                    "OUTPUTS: a1, S1, S2, F1, F2.",
+                    ("out[0] = accel(mode, t, y, p)", "out[1], out[2] = reactions(mode, t, y, p)",
+                     "out[3] = drive_force(t, y, p)", "out[4] = load_force(t, y, p)"), "", "GUARDS_SIG")
+
+
 def _rhs(model: Model) -> Function:
     last = len(model.states) - 1
     lines = ["a1 = accel(mode, t, y, p)"]
@@ -469,7 +476,7 @@ def generate_module(model: Model, free: tuple[str, ...] | None = None) -> str:
         raise GenerationError(f"{scene.source}: name = {scene.name[:80]!r}: must match {NAME.pattern}")
     free = tuple(p.name for p in scene.params() if p.free) if free is None else free
     em = _Emitter(model, free)
-    functions = _functions(em) + [_rhs(model), _jac(model), _guards(em), _observe()]
+    functions = _functions(em) + [_rhs(model), _jac(model), _guards(em), _observe(), _outputs()]
     load_factors = _load_factors(em)
     if load_factors:
         functions.append(load_factors)
@@ -489,7 +496,7 @@ def generate_module(model: Model, free: tuple[str, ...] | None = None) -> str:
         "LATCH_NAMES": latch_names(model), "GUARD_LATCH": guard_latches(model, free),
         "MODE_D": tuple(_short(m.denominator) if m.denominator is not None else "" for m in model.modes),
         "PARAM_CHECKS": _parameter_checks(model, free),
-        "OBSERVABLES": tuple(map(str, OBSERVABLES)),
+        "OBSERVABLES": tuple(map(str, OBSERVABLES)), "OUTPUTS": ("a1", "S1", "S2", "F1", "F2"),
         "GUARDS": guard_names(model), "HAS_LOAD_FACTORS": load_factors is not None,
         "RUN": dict(vars(scene.run)),
     }

@@ -164,7 +164,7 @@ def run(method, model, y0, t_end, t0=0.0, rtol=1e-8, atol=None, h0=0.0, hmin=0.0
     status, t, k, n_out, h = seg.integrate_segment(
         method, model.rhs, model.jac, model.guards, mode, np.array(p, dtype=np.float64),
         t0, y0, t_end, Tolerances(rtol, atol, hmin, hmax), max_steps, h0,
-        EventSettings(np.array(directions, dtype=np.int64), gtol, ttol, False, -1), t_out, 0, y_out, y, counters)
+        EventSettings(np.array(directions, dtype=np.int64), gtol, ttol, False, -1, False), t_out, 0, y_out, y, counters)
     return SimpleNamespace(status=status, t=t, k=k, n_out=n_out, h=h, y=y, y_out=y_out,
                            steps=counters[seg.N_STEPS], rejected=counters[seg.N_REJECTED],
                            nrhs=counters[seg.N_RHS], njac=counters[seg.N_JAC])
@@ -420,7 +420,7 @@ def test_output_samples_stop_at_event_and_continue():
     y, counters = np.empty(2), np.zeros(seg.N_COUNTERS, np.int64)
     t, i_out = 0.0, 0
     kw = dict(tol=Tolerances(1e-10, np.full(2, 1e-12), 0.0, np.inf), max_steps=10**5,
-              ev=EventSettings(np.zeros(1, np.int64), 0.0, 0.0, False, -1), t_out=t_out, y_out=y_out,
+              ev=EventSettings(np.zeros(1, np.int64), 0.0, 0.0, False, -1, False), t_out=t_out, y_out=y_out,
               y_stop=y, counters=counters)
     events = []
     status, h = seg.EVENT, 0.0
@@ -494,7 +494,7 @@ def test_invalid_input():
     y0 = np.zeros(2)
     status = seg.integrate_segment(  # atol has 3 entries for 2 states
         seg.DOPRI5, osc_rhs, seg.no_jacobian, osc_guards, 0, np.zeros(1), 0.0, y0, 1.0,
-        Tolerances(1e-6, np.zeros(3), 0.0, np.inf), 100, 0.0, EventSettings(np.zeros(0, np.int64), 0.0, 0.0, False, -1),
+        Tolerances(1e-6, np.zeros(3), 0.0, np.inf), 100, 0.0, EventSettings(np.zeros(0, np.int64), 0.0, 0.0, False, -1, False),
         np.zeros(0), 0, np.zeros((0, 2)), np.zeros(2), np.zeros(4, np.int64))[0]
     assert status == seg.INVALID_INPUT
 

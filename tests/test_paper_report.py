@@ -165,7 +165,7 @@ def test_verdict_comes_first_and_names_the_closest_reading(report):
     best = min(ranking, key=ranking.get)
     assert best == "runup" and result["data"]["verdict"]["best"] == best
     verdict = md[md.index("## Verdict"):md.index("## The readings")]
-    assert f"Closest is (c) `paper-runup`" in verdict
+    assert "Closest is (c) `paper-runup`" in verdict
     assert f"mean deviation of {ranking[best][1]:.0%}" in verdict
     # why: the starting force against the static friction cone, and the printed equations' energy
     gamma, rho0 = math.radians(4.76), math.radians(1 / 0.088)

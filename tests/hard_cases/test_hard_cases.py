@@ -134,9 +134,10 @@ def test_breakaway_with_the_non_lipschitz_friction_law(method):
 
 
 def test_stiff_light_worm_both_methods_agree(scene_module):
-    """m1 = 0.05 kg makes the run-up stiff (lambda ~ 1700 /s near V0): DOPRI5 is held at
-    its stability limit (~500 steps at any rtol), the L-stable ode23s is not (70 steps at
-    rtol 1e-4); both agree with the reference at t_end to the accuracy asked."""
+    """m1 = 0.05 kg makes the run-up stiff (lambda ~ 1700 /s near V0): DOPRI5 would step at
+    its stability limit on the equilibrium tail (~500 steps a second at any rtol); the tail
+    is held instead (integration.steady), so its cost is flat in the simulated time; both
+    methods agree with the reference at t_end to the accuracy asked."""
     text = PAPER.read_text().replace('m1 = "11.8 kg"', 'm1 = "0.05 kg"').replace('name = "paper"', 'name = "paper-light-worm"')
     scene = scene_module(text)
     _, v_ref, _ = ref.run_flanks(1e-12, 0.0, 1.0, -1000.0, 200.0, m1=0.05)
@@ -146,9 +147,10 @@ def test_stiff_light_worm_both_methods_agree(scene_module):
         for r in runs.values():
             assert r.status == "finished", r.message
             assert r.v1[-1] == pytest.approx(v_ref[-1], rel=accuracy)
-    loose = {m: simulate(scene, {"F2": -1000.0}, method=m, rtol=1e-4, atol=1e-7).n_steps
-             for m in ("dopri5", "rosenbrock23")}
-    assert loose["rosenbrock23"] < loose["dopri5"] / 5   # DOPRI5 is held at its stability limit
+    for m in ("dopri5", "rosenbrock23"):
+        steps = [simulate(scene, {"F2": -1000.0}, method=m, rtol=1e-4, atol=1e-7, t_end=T).n_steps
+                 for T in (1.0, 100.0)]
+        assert steps[1] <= steps[0] + 2 and steps[0] < 150, (m, steps)   # flat in T, no stability-limit crawl
 
 
 def test_torque_switch_seating_overshoots_and_self_locks():

@@ -12,6 +12,8 @@ from types import ModuleType
 import numpy as np
 
 from tswm_runtime.hybrid import machine as hybrid
+from tswm_runtime.hybrid.rows import fill_rows
+from tswm_runtime.integration.signatures import GUARDS_SIG
 
 from tswm_runtime.integration import segment
 
@@ -85,11 +87,6 @@ def initial_state(module: ModuleType, run: dict) -> tuple[np.ndarray, np.ndarray
     n = len(module.STATES)
     y0 = np.array([run["x1"], run["v1"]][2 - n:], dtype=np.float64)
     return y0, (np.array([run["x1"]]) if n == 1 else np.empty(0))
-
-
-def jacobian(module: ModuleType, method: str):
-    """The model's jac for the Rosenbrock method; DOPRI5 never calls one."""
-    return module.jac if method == "rosenbrock23" else segment.no_jacobian
 
 
 def settings(module: ModuleType, overrides: dict) -> dict:
@@ -168,7 +165,11 @@ def simulate(model: str | ModuleType, params: dict | None = None, *, interruptib
                     module.MODES[log.index[e, 2]] if log.index[e, 2] >= 0 else None,
                     float(log.state[e, n] if n == 1 else log.state[e, 0]), float(log.state[e, n - 1]))
               for e in range(n_ev)]
-    return Result.build(module, p, out.p[keep], run, t_out[keep], x1, out.y[keep, n - 1], out.mode[keep], events,
+    rows = np.empty((int(keep.sum()), len(module.OUTPUTS)))
+    p_rows, modes_kept = np.ascontiguousarray(out.p[keep]), np.ascontiguousarray(out.mode[keep])
+    fill_rows(hybrid.compiled(module.outputs, GUARDS_SIG), np.ascontiguousarray(t_out[keep]), np.ascontiguousarray(out.y[keep]), modes_kept,
+              p_rows, n, rows)
+    return Result.build(module, p, p_rows, run, t_out[keep], x1, out.y[keep, n - 1], modes_kept, rows, events,
                         mon, counters, hybrid_status=status, t_stop=t_stop,
                         first_mode=first, message=status_message(module, status, t_stop, y_stop, last,
                                                                  need, events, p))

@@ -48,7 +48,7 @@ from tswm_runtime.model.contract import load_module
 from tswm_runtime.common.files import write_atomic
 from tswm_runtime.results.result import STATUS_NAMES
 from tswm_runtime.integration.structures import Tolerances
-from tswm_runtime.apps.simulate import METHODS, initial_state, jacobian, settings, unknown_parameter, with_latches
+from tswm_runtime.apps.simulate import METHODS, initial_state, settings, unknown_parameter, with_latches
 
 REGIME_LETTERS = {"tractive": "T", "inverse-tractive": "I", "stick": "S", "backward on flank a": "A",
                   "backward on flank b": "B", "sliding along phi = 0": "F"}
@@ -194,7 +194,7 @@ def run_cases(module: ModuleType, P: np.ndarray, run: dict):
     seq = np.full((cases, SEQ_LEN), -1, np.int64)
     if valid.any():
         f, i, sq = out_f[valid], out_i[valid], seq[valid]
-        batch.run_batch(METHODS[run["method"]], module.rhs, jacobian(module, run["method"]), module.guards,
+        batch.run_batch(METHODS[run["method"]], module.rhs, module.jac, module.guards,
                         module.observe, np.ascontiguousarray(full[valid]), modes.tables(module), y0, quad,
                         run["t_end"], Tolerances(run["rtol"], np.full(y0.size, run["atol"]), 0.0, run["hmax"]),
                         run["max_steps"], run["max_events"], len(module.OBSERVABLES), f, i, sq)

@@ -28,9 +28,11 @@ stops the run with status CHATTERING instead of looping.
 """
 import numpy as np
 from numba import njit, types
+from numba.core.types.function_type import CompileResultWAP
 
 from tswm_runtime.integration import cache_guard, painleve, segment
-from tswm_runtime.integration.signatures import MATRIX, VECTOR, GuardsFunction, JacFunction, RhsFunction
+from tswm_runtime.integration.signatures import (GUARDS_SIG, JAC_SIG, MATRIX, RHS_SIG, VECTOR, GuardsFunction,
+                                                 JacFunction, RhsFunction)
 from tswm_runtime.integration.structures import (EVENT_LOG, MODE_TABLES, OUTPUTS, TOLERANCES, EventLog, EventSettings,
                                      Outputs, Tolerances)
 
@@ -327,7 +329,7 @@ def integrate_hybrid(method, rhs, jac, guards, observe, p, tables, t0, y0, quad,
         steps = counters[segment.N_STEPS] + counters[segment.N_REJECTED]
         i0 = i
         k_singular = k_d if singular and k_d >= 0 and tables.guard_direction[mode, k_d] != 0 else -1
-        ev = EventSettings(tables.guard_direction[mode], 0.0, 0.0, True, k_singular)
+        ev = EventSettings(tables.guard_direction[mode], 0.0, 0.0, True, k_singular, True)
         seg_status, t_new, k, i, h = segment.run(method, rhs, jac, guards, observe, mode, p, t, t_end, tol,
                                                  max(max_steps - steps, 0), h, ev, out, i, y, q, mon, counters)
         singular = True
@@ -335,7 +337,7 @@ def integrate_hybrid(method, rhs, jac, guards, observe, p, tables, t0, y0, quad,
         if k_singular >= 0 and stalled and counters[segment.N_STEPS] > 0:
             seg_status = segment.APPROACH  # steps in t shrank to nothing: try Sundman's time
         if seg_status == segment.APPROACH:
-            ev = EventSettings(tables.guard_direction[mode], 0.0, 0.0, True, k_d)
+            ev = EventSettings(tables.guard_direction[mode], 0.0, 0.0, True, k_d, False)
             left = max(max_steps - counters[segment.N_STEPS] - counters[segment.N_REJECTED], 0)
             outcome, t_new, i, _ = painleve.approach(rhs, guards, observe, mode, p, ev, t_new, y, q, t_end, h,
                                                           tol, left, out, i, mon, counters)
@@ -400,6 +402,18 @@ def _call(kernel, args, counters):
     return kernel(*args)
 
 
+_ADDRESSES: dict = {}
+
+
+def compiled(function, signature):
+    """A model function as numba's first-class function value for ``signature``, looked up
+    once: passing the dispatcher itself costs ~20 us a call to find its compiled code."""
+    key = (id(function), signature)
+    if key not in _ADDRESSES:
+        _ADDRESSES[key] = (function, CompileResultWAP(function.get_compile_result(signature)))
+    return _ADDRESSES[key][1]
+
+
 def integrate(method, model, p, tables, y0, t_end, *, rtol, atol, t_out, max_events, quad=None, t0=0.0,
               mode0=-1, hmin=0.0, hmax=np.inf, max_steps=100_000, call=_call):
     """integrate_hybrid with keyword arguments: builds the structures and work arrays from
@@ -416,8 +430,9 @@ def integrate(method, model, p, tables, y0, t_end, *, rtol, atol, t_out, max_eve
     mon, counters = np.zeros((len(model.OBSERVABLES), 3)), np.zeros(segment.N_COUNTERS, np.int64)
     tol = Tolerances(float(rtol), np.array(np.broadcast_to(np.asarray(atol, np.float64), y0.shape)),
                      float(hmin), float(hmax))
-    jac = model.jac if method == segment.ROSENBROCK23 else segment.no_jacobian
-    args = (method, model.rhs, jac, model.guards, model.observe, p, tables, float(t0), y0, quad, int(mode0),
-            float(t_end), tol, int(max_steps), out, log, mon, counters)
+    jac = model.jac  # DOPRI5 calls it only to confirm an equilibrium before holding it (steady)
+    args = (method, compiled(model.rhs, RHS_SIG), compiled(jac, JAC_SIG), compiled(model.guards, GUARDS_SIG),
+            compiled(model.observe, GUARDS_SIG), p, tables, float(t0), y0, quad, int(mode0), float(t_end), tol,
+            int(max_steps), out, log, mon, counters)
     result = call(integrate_hybrid, args, counters)
     return (*result, out, log, mon, counters)

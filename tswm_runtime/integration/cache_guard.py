@@ -20,7 +20,7 @@ from tswm_runtime.common.files import write_atomic
 
 KERNEL_SOURCES = ("integration/structures.py", "integration/control.py", "integration/dopri5.py",
                   "integration/rosenbrock.py", "integration/events.py", "integration/segment.py",
-                  "integration/painleve.py", "hybrid/machine.py", "hybrid/batch.py")
+                  "integration/painleve.py", "integration/steady.py", "hybrid/machine.py", "hybrid/batch.py", "hybrid/rows.py")
 
 
 class CacheIOWarning(UserWarning):
@@ -50,6 +50,20 @@ def kernel_digest() -> str:
     return h.hexdigest()
 
 
+def _purge_kernel_caches() -> None:
+    """Delete numba's cache files of every function in the kernel sources: a kernel links its
+    callees' cached machine code, and numba would keep a callee whose own file did not change
+    but whose callee (in another file) did."""
+    here = Path(__file__).parents[1]
+    for name in KERNEL_SOURCES:
+        source = here / name
+        for cached in (source.parent / "__pycache__").glob(f"{source.stem}.*.nb[ic]"):
+            try:
+                cached.unlink()
+            except OSError:  # gone already (another process), or read-only: numba recompiles anyway
+                pass
+
+
 def compile_cached(signature, **options):
     """Like ``njit(signature, cache=True, **options)``, with the kernel check above."""
     def decorate(py_func):
@@ -60,6 +74,7 @@ def compile_cached(signature, **options):
         known = marker.read_text() if marker.exists() else ""
         if known != digest:
             cache.flush()
+            _purge_kernel_caches()
             try:
                 write_atomic(marker, digest)
             except OSError:  # a read-only cache directory: numba then compiles in memory anyway

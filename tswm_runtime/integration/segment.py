@@ -29,7 +29,7 @@ from collections import namedtuple
 import numpy as np
 from numba import njit, types
 
-from tswm_runtime.integration import cache_guard, control, dopri5, events, painleve, rosenbrock
+from tswm_runtime.integration import cache_guard, control, dopri5, events, painleve, rosenbrock, steady
 from tswm_runtime.integration.signatures import JAC_SIG, MATRIX, VECTOR, GuardsFunction, JacFunction, RhsFunction
 from tswm_runtime.integration.structures import EVENT_SETTINGS, TOLERANCES, Outputs, Step, StepWork
 
@@ -199,6 +199,18 @@ def _write_samples(out, i, step, t_hi, y_hi, quad, q_tmp):
         if quad.size > 0:
             events.dense_integral(step.y_a, step.h, step.Q, theta, q_tmp)
             out.y[i, n:] = quad + q_tmp
+        i += 1
+    return i
+
+
+@njit(cache=True, error_model="numpy")
+def _hold_samples(out, i, t, t_hi, y, quad):
+    """Rows for the output times in (t, t_hi] while the state is held at y (steady)."""
+    n = y.size
+    while i < out.t.size and out.t[i] <= t_hi:
+        out.y[i, :n] = y
+        if quad.size > 0:
+            out.y[i, n:] = quad + y * (out.t[i] - t)
         i += 1
     return i
 
@@ -403,10 +415,25 @@ def run(method, rhs, jac, guards, observe, mode, p, t0, t_end, tol, max_steps, h
         if k_sing >= 0 and t < t_end and painleve.heading_for_zero(G[0, k_sing], g_b[k_sing]):
             status = APPROACH
             break
+        fresh_jac = False  # J at the new point, for the next Rosenbrock step
+        if ev.hold and t < t_end and steady.worth_checking(f_b, h, tol, y):
+            jac(mode, t, y, p, work.J, work.dfdt)
+            counters[N_JAC] += 1
+            fresh_jac = True
+            if steady.at_stable_rest(f_b, work.J, work.dfdt, tol, y, quad):
+                y[0] -= f_b[0] / work.J[0, 0]  # one Newton step onto the equilibrium itself
+                guards(mode, t, y, p, g_b)
+                t_hold, k = steady.hold(guards, mode, t, y, p, t_end, g_b, ev, g_tmp)
+                i = _hold_samples(out, i, t, t_hold, y, quad)
+                if quad.size > 0:
+                    quad += y * (t_hold - t)
+                t = t_hold
+                status = EVENT if k >= 0 else REACHED_END
+                break
         f_a[:] = f_b
         G[0, :] = g_b
         rejected = False
-        jac_current = False
+        jac_current = fresh_jac
         if t == t_end:
             status = REACHED_END
             break

@@ -20,10 +20,12 @@ TOLERANCES = types.NamedTuple((types.float64, VECTOR, types.float64, types.float
 #: What ends a segment besides t_end: per guard its direction (+1 rising, -1 falling, 0
 #: both), guards within gtol of 0 count as zero, ttol widens the root time tolerance,
 #: noise_band drops sign changes within a guard's integration noise, singular is the index
-#: of a guard whose zero cannot be reached in t (D: hand over to the Painleve approach; -1 none).
-EventSettings = namedtuple("EventSettings", "directions gtol ttol noise_band singular")
-EVENT_SETTINGS = types.NamedTuple((INTS, types.float64, types.float64, types.boolean, types.int64),
-                                  EventSettings)
+#: of a guard whose zero cannot be reached in t (D: hand over to the Painleve approach; -1 none),
+#: hold: a stable equilibrium of an autonomous scalar segment is held up to the next guard
+#: crossing in t (``steady``) instead of being stepped through.
+EventSettings = namedtuple("EventSettings", "directions gtol ttol noise_band singular hold")
+EVENT_SETTINGS = types.NamedTuple((INTS, types.float64, types.float64, types.boolean, types.int64,
+                                   types.boolean), EventSettings)
 
 #: Output rows: times (sorted), states (and their integral), mode and parameter vector.
 Outputs = namedtuple("Outputs", "t y mode p")

@@ -33,6 +33,7 @@ CONSTANTS = {
     "GUARDS": "names of the event functions, in the order guards() fills them",
     "GUARD_DIRECTIONS": "per mode, per guard: -1 falling, +1 rising, 0 either way",
     "OBSERVABLES": "names of the quantities observe() fills: ('S1', 'S2')",
+    "OUTPUTS": "names of the quantities outputs() fills: ('a1', 'S1', 'S2', 'F1', 'F2')",
     "HAS_LOAD_FACTORS": "whether load_factors() exists (the scene gives Ft1, Ft2)",
     "RUN": "the scene's run settings: t_end, x1, v1, rtol, atol, method, max_steps",
 }
@@ -41,6 +42,7 @@ FUNCTIONS = {
     "jac": "jac(mode, t, y, p, J, dfdt): J = df/dy, dfdt = df/dt; explicit signature JAC_SIG",
     "guards": "guards(mode, t, y, p, g): event functions; inactive ones are 1.0; signature GUARDS_SIG",
     "observe": "observe(mode, t, y, p, out): out = OBSERVABLES of `mode` (its reactions); signature GUARDS_SIG",
+    "outputs": "outputs(mode, t, y, p, out): out = OUTPUTS of `mode` at an output row; signature GUARDS_SIG",
     "accel": "accel(mode, t, y, p) -> a1",
     "reactions": "reactions(mode, t, y, p) -> (S1, S2)",
     "switching": "switching(t, y, p) -> phi, zero where the contact force is",

@@ -7,6 +7,7 @@ turns the names into the integer kinds of ``hybrid`` once, in Python.
 """
 from __future__ import annotations
 
+import functools
 import re
 from enum import IntEnum
 from types import ModuleType
@@ -72,6 +73,7 @@ def mode_kind(name: str) -> int:
     return hybrid.M_SLIDING
 
 
+@functools.lru_cache(maxsize=64)
 def tables(module: ModuleType) -> ModeTables:
     """The module's modes and guards as the integer ModeTables of the mode machine."""
     unknown = [g for g in module.GUARDS if guard_kind(g) is None]

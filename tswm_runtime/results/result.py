@@ -179,18 +179,13 @@ class Result:
         return out
 
     @classmethod
-    def build(cls, module: ModuleType, p: np.ndarray, p_rows: np.ndarray, run: dict, t, x1, v1, mode,
+    def build(cls, module: ModuleType, p: np.ndarray, p_rows: np.ndarray, run: dict, t, x1, v1, mode, rows,
               events, mon, counters, *, hybrid_status: int, t_stop: float, first_mode: int,
               message: str) -> Result:
-        """Evaluate the laws and reactions at the output points, each with the mode and
-        the latched laws in force there (``p_rows``), and assemble the result."""
+        """Assemble the result; ``rows``: (a1, S1, S2, F1, F2) at each output point, each
+        evaluated with the mode and the latched laws in force there (``p_rows``)."""
         n = len(module.STATES)
-        a1, S1, S2, F1, F2 = (np.empty(t.size) for _ in range(5))
-        for r in range(t.size):
-            y, pr = np.array([x1[r], v1[r]][2 - n:]), p_rows[r]
-            a1[r] = module.accel(mode[r], t[r], y, pr)
-            S1[r], S2[r] = module.reactions(mode[r], t[r], y, pr)
-            F1[r], F2[r] = module.drive_force(t[r], y, pr), module.load_force(t[r], y, pr)
+        a1, S1, S2, F1, F2 = (np.ascontiguousarray(rows[:, k]) for k in range(5))
         event_a1 = np.full(len(events), np.nan)
         for e, event in enumerate(events):
             if event.to_mode is not None:
