@@ -159,17 +159,16 @@ def simulate(model: str | ModuleType, params: dict | None = None, *, interruptib
         atol=run["atol"], t_out=t_out, max_events=run["max_events"], quad=quad, hmax=run["hmax"],
         max_steps=run["max_steps"], call=_in_a_thread if interruptible else hybrid._call)
     keep = out.mode >= 0
+    t_kept, y_kept, p_rows, modes_kept = (np.ascontiguousarray(a[keep]) for a in (t_out, out.y, out.p, out.mode))
     y_stop = log.state[n_ev - 1, :n].copy() if n_ev else y0
-    x1 = out.y[keep, n] if n == 1 else out.y[keep, 0]
+    x1 = y_kept[:, n] if n == 1 else y_kept[:, 0]
     events = [Event(float(log.t[e]), module.GUARDS[log.index[e, 0]], module.MODES[log.index[e, 1]],
                     module.MODES[log.index[e, 2]] if log.index[e, 2] >= 0 else None,
                     float(log.state[e, n] if n == 1 else log.state[e, 0]), float(log.state[e, n - 1]))
               for e in range(n_ev)]
-    rows = np.empty((int(keep.sum()), len(module.OUTPUTS)))
-    p_rows, modes_kept = np.ascontiguousarray(out.p[keep]), np.ascontiguousarray(out.mode[keep])
-    fill_rows(hybrid.compiled(module.outputs, GUARDS_SIG), np.ascontiguousarray(t_out[keep]), np.ascontiguousarray(out.y[keep]), modes_kept,
-              p_rows, n, rows)
-    return Result.build(module, p, p_rows, run, t_out[keep], x1, out.y[keep, n - 1], modes_kept, rows, events,
+    rows = np.empty((t_kept.size, len(module.OUTPUTS)))
+    fill_rows(hybrid.compiled(module.outputs, GUARDS_SIG), t_kept, y_kept, modes_kept, p_rows, n, rows)
+    return Result.build(module, p, p_rows, run, t_kept, x1, y_kept[:, n - 1], modes_kept, rows, events,
                         mon, counters, hybrid_status=status, t_stop=t_stop,
                         first_mode=first, message=status_message(module, status, t_stop, y_stop, last,
                                                                  need, events, p))

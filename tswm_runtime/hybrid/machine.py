@@ -1,6 +1,6 @@
 """The mode machine: integrate a generated model across regime changes, in nopython mode.
 
-``integrate_hybrid`` runs segments of fixed mode (``segment._run``) and, at each
+``integrate_hybrid`` runs segments of fixed mode (``segment.run``) and, at each
 event, decides the next mode from the guard that fired and the model's own
 functions, generically over the contract (modes and guards are described by the
 integer tables built in ``modes.py``):
@@ -339,22 +339,22 @@ def integrate_hybrid(method, rhs, jac, guards, observe, p, tables, t0, y0, quad,
         if seg_status == segment.APPROACH:
             ev = EventSettings(tables.guard_direction[mode], 0.0, 0.0, True, k_d, False)
             left = max(max_steps - counters[segment.N_STEPS] - counters[segment.N_REJECTED], 0)
-            outcome, t_new, i, _ = painleve.approach(rhs, guards, observe, mode, p, ev, t_new, y, q, t_end, h,
-                                                          tol, left, out, i, mon, counters)
+            outcome, t_new, i = painleve.approach(rhs, guards, observe, mode, p, ev, t_new, y, q, t_end, h, tol,
+                                                  left, out, i, mon, counters)
             if outcome == painleve.ZERO:
                 seg_status, k = segment.EVENT, k_d
             elif outcome == painleve.END:
                 seg_status = segment.REACHED_END
             elif outcome == painleve.OTHER or outcome == painleve.CLEAR:
-                singular = outcome == painleve.CLEAR  # OTHER: locate that guard in t first
-                out.mode[i0:i] = mode
-                out.p[i0:i] = p
-                t = t_new
-                continue
+                seg_status = segment.APPROACH  # go on in t (OTHER: locate that guard there first)
+                singular = outcome == painleve.CLEAR
             else:
                 seg_status = outcome
         out.mode[i0:i] = mode
         out.p[i0:i] = p
+        if seg_status == segment.APPROACH:  # back from the approach, on in t
+            t = t_new
+            continue
         same = same + 1 if t_new - t <= SAME_TIME_ULPS * (np.nextafter(t, np.inf) - t) else 0
         t = t_new
         if seg_status != segment.EVENT:
@@ -376,7 +376,7 @@ def integrate_hybrid(method, rhs, jac, guards, observe, p, tables, t0, y0, quad,
             n_ev = _log(log, n_ev, t, k, mode, -1, y, q)
             status = INCONSISTENT
             break
-        p_left = p.copy()  # the laws in force up to the event: its left limit
+        p_left = p.copy() if kind == G_TRIP or kind == G_LAW else p  # the laws up to the event: its left limit
         if kind == G_TRIP:
             p[tables.guard_latch[k]] = t
         elif kind == G_LAW:

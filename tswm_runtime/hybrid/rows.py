@@ -17,5 +17,7 @@ ROWS_SIG = types.none(GuardsFunction, VECTOR, MATRIX, types.int64[::1], MATRIX, 
 @cache_guard.compile_cached(ROWS_SIG, error_model="numpy", nogil=True)
 def fill_rows(outputs, t, y, mode, p, n_states, out):
     """out[r] = outputs(mode[r], t[r], y[r, :n_states], p[r]) for every row r."""
+    state = np.empty(n_states)
     for r in range(t.size):
-        outputs(mode[r], t[r], np.ascontiguousarray(y[r, :n_states]), p[r], out[r])
+        state[:] = y[r, :n_states]
+        outputs(mode[r], t[r], state, p[r], out[r])

@@ -95,22 +95,20 @@ def _root(rhs, guards, mode, p, k_d, n, z, K0, h, K, z_out, g, y, f, which, targ
     """sigma in (0, h] where component ``which`` of the re-taken step (D for which < 0)
     reaches ``target``, by Illinois; z_out holds the state on the far side of it (far)
     or on the near side. Returns that sigma."""
-    def value(zz, d):
-        return d - target if which < 0 else zz[which] - target
-
-    d0 = K0[0]
-    f_a = value(z, d0)
+    f_a = (K0[0] if which < 0 else z[which]) - target
     d_b = _retake(rhs, guards, mode, p, k_d, n, z, K0, h, K, z_out, g, y, f)
-    state = events.bracket_start(0.0, f_a, h, value(z_out, d_b))
-    z_far = z_out.copy()
+    state = events.bracket_start(0.0, f_a, h, (d_b if which < 0 else z_out[which]) - target)
+    z_far, z_near = z_out.copy(), z.copy()
     while not events.bracket_done(state, tol):
         c = events.bracket_next(state, tol)
         d_c = _retake(rhs, guards, mode, p, k_d, n, z, K0, c, K, z_out, g, y, f)
-        state = events.bracket_update(state, c, value(z_out, d_c))
+        state = events.bracket_update(state, c, (d_c if which < 0 else z_out[which]) - target)
         if state[2] == c:
             z_far[:] = z_out
-    z_out[:] = z_far
-    return state[2]
+        else:
+            z_near[:] = z_out
+    z_out[:] = z_far if far else z_near
+    return state[2] if far else state[0]
 
 
 @njit(cache=True, error_model="numpy")
@@ -120,9 +118,8 @@ def approach(rhs, guards, observe, mode, p, ev, t, y_io, q_io, t_end, h_t, tol, 
 
     ev: the segment's EventSettings (ev.singular is D's guard); tol: Tolerances; h_t:
     the last step in t; out: Outputs, rows from i on. y_io, q_io are updated to the
-    returned state. Returns (outcome, t, next output row, d_last): outcome ZERO, END,
-    OTHER, CLEAR or -1 (step too small), -2 (max steps) as the segment's codes;
-    d_last is D at the last state with D > 0 (the left limit at a Painleve point).
+    returned state. Returns (outcome, t, next output row): outcome ZERO, END, OTHER,
+    CLEAR or -1 (step too small), -2 (max steps) as the segment's codes.
     """
     k_d, directions, rtol, atol = ev.singular, ev.directions, tol.rtol, tol.atol
     t_out, y_out = out.t, out.y
@@ -139,12 +136,10 @@ def approach(rhs, guards, observe, mode, p, ev, t, y_io, q_io, t_end, h_t, tol, 
     for i_q in range(nq):
         scale_atol[1 + n + i_q] = atol[i_q]
     z[0], z[1:1 + n], z[1 + n:] = t, y_io, q_io
-    d = _rate(rhs, guards, mode, p, k_d, n, z, g, y, f, K[0])
+    d = _rate(rhs, guards, mode, p, k_d, n, z, g, y, f, K[0])   # also the guards at z, into g
     counters[2] += 1
-    d_last = d
     if not d > 0.0:
-        return ZERO, t, i, d
-    guards(mode, t, y_io, p, g)
+        return ZERO, t, i
     h = h_t / d
     tol_t = events.time_tolerance(t, 0.0)
     outcome = -2
@@ -181,8 +176,9 @@ def approach(rhs, guards, observe, mode, p, ev, t, y_io, q_io, t_end, h_t, tol, 
                 wanted = directions[k] == 0 or (directions[k] > 0) == (g_new[k] > 0.0)
                 if crossed and wanted:
                     stop = OTHER
-        if stop == ZERO:  # the reactions grow without bound, with the signs they have here
-            observe(mode, z[0], y_io, p, obs)
+        if stop == ZERO:  # the reactions grow without bound, with the signs they have here (D > 0)
+            y[:] = z[1:1 + n]
+            observe(mode, z[0], y, p, obs)
             for k in range(mon.shape[0]):
                 mon[k, 0], mon[k, 1] = np.inf, np.inf if obs[k] >= 0.0 else -np.inf
         if stop == ZERO or stop == END:
@@ -221,14 +217,12 @@ def approach(rhs, guards, observe, mode, p, ev, t, y_io, q_io, t_end, h_t, tol, 
             outcome = END
             break
         d_prev = d
-        d = _rate(rhs, guards, mode, p, k_d, n, z, g, y, f, K[0])
+        d = _rate(rhs, guards, mode, p, k_d, n, z, g, y, f, K[0])   # and the guards at z, into g
         counters[2] += 1
-        d_last = d
-        guards(mode, z[0], y, p, g)
         if d >= d_prev or d > CLEAR_STEPS * (d_prev - d):
             outcome = CLEAR
             break
         h *= factor
     y_io[:] = z[1:1 + n]
     q_io[:] = z[1 + n:]
-    return outcome, z[0], i, d_last
+    return outcome, z[0], i

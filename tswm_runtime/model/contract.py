@@ -25,8 +25,13 @@ CONSTANTS = {
     "MODE_DIRECTION": "sign of v1 in each mode, 0 for stick",
     "MODE_DECLARED": "per mode: whether a run may enter it (False: slide mode the scene does not declare)",
     "PARAM_NAMES": "free parameters, in the order of the vector p",
-    "LATCH_NAMES": "latched event times after the free parameters in p, len(p) = len(PARAM_NAMES) + "
-                   "len(LATCH_NAMES); each is +inf until the runtime sets it to the time its guard fired",
+    "DESCRIPTION": "the scene's description, as written (data only)",
+    "LATCH_NAMES": "the slots of p after the free parameters, len(p) = len(PARAM_NAMES) + len(LATCH_NAMES): "
+                   "latched event times (+inf until their guard fires), then each piecewise law's piece "
+                   "(set by the runtime at the start and at every event of the law)",
+    "GUARD_LATCH": "per guard, the index in p of the latch it sets (a trip time or a law's piece), -1 none",
+    "MODE_D": "per mode, the formula of its denominator D ('' where it has none), for messages",
+    "PARAM_CHECKS": "the scene file's rules that involve a free parameter, as data (tswm_runtime.model.checks)",
     "PARAM_UNITS": "SI unit of each free parameter",
     "PARAM_DEFAULTS": "scene value of each free parameter",
     "FIXED": "fixed parameters folded into the code: name -> value",
