@@ -24,6 +24,7 @@ import sympy as sp
 from sympy.functions.elementary.piecewise import ExprCondPair
 from sympy.printing.pycode import PythonCodePrinter
 
+from derivation import mechanics
 from derivation.mechanics import S1, S2, t
 from derivation.model import Model, compose_laws as _compose, param_symbol
 from derivation.scene import NAME, SceneError
@@ -34,6 +35,7 @@ HEADER_LINES = 5
 STICK_GUARDS = ("cone_forward", "cone_backward", "flank_normal")
 SLIDING_GUARDS = ("phi", "v1", "D", "jam")
 SLIDE_GUARDS = ("slide_exit_a", "slide_exit_b")
+GAP_GUARDS = ("gap_a", "gap_b")   # free flight: the gap to flank a, to flank b
 OBSERVABLES = (S1, S2)
 
 
@@ -112,6 +114,7 @@ class Function:
     result: str
     signature: str = ""          # explicit numba signature name, for the contract functions
     alias: str = ""              # the earlier function with the same body: emitted as name = alias
+    jit: bool = True             # False: plain Python on numpy arrays
 
 
 def module_name(scene_name: str) -> str:
@@ -223,6 +226,8 @@ class _Emitter:
         """A readable identifier for a derived constant: tan_gamma, m1_tan_gamma, ..."""
         if isinstance(expr, sp.Pow) and expr.exp == -1:
             text = "inv_" + sp.sstr(expr.base)
+        elif expr.could_extract_minus_sign():
+            text = "minus_" + sp.sstr(-expr).replace("**", "_pow_")
         else:
             text = sp.sstr(expr).replace("**", "_pow_")
         text = re.sub(r"[^0-9a-zA-Z]+", "_", text).strip("_")
@@ -281,6 +286,9 @@ def _mode_functions(em: _Emitter) -> list[Function]:
     for mode in em.model.modes:
         out.append(em.function(f"accel_{mode.name}", f"a1 in mode {mode.name} ({mode.regime}): "
                                f"{_short(mode.accel)}", [mode.accel]))
+        if mode.gap_accel is not None:
+            out.append(em.function(f"gap_accel_{mode.name}", f"d gap_rate/dt in mode {mode.name}: "
+                                   f"{_short(mode.gap_accel)}", [mode.gap_accel]))
         if mode.slide is not None:
             out.append(em.function(f"reactions_{mode.name}", f"(S1, S2) in mode {mode.name}: Filippov's combination "
                                    "lambda (S1, S2)_fwd_a + (1 - lambda) (S1, S2)_fwd_b, lambda = rate_b / (rate_b - "
@@ -300,10 +308,24 @@ def _mode_functions(em: _Emitter) -> list[Function]:
     return out
 
 
+def state_rates(model: Model, mode) -> list[sp.Expr]:
+    """d(states)/dt in ``mode``: x1' = v1, gap' = gap_rate, gap_rate' = the mode's gap_accel, v1' = a1."""
+    rate = {mechanics.x1: mechanics.v1, mechanics.gap: mechanics.gap_rate, mechanics.gap_rate: mode.gap_accel,
+            mechanics.v1: mode.accel}
+    return [rate[s] for s in model.states]
+
+
+def _rate_sources(model: Model) -> list[str]:
+    """What rhs writes into dy[i], in the template: the velocity states, a1, the gap's acceleration."""
+    index = {s: i for i, s in enumerate(model.states)}
+    source = {mechanics.x1: f"y[{index[mechanics.v1]}]", mechanics.v1: "accel(mode, t, y, p)",
+              mechanics.gap: f"y[{index.get(mechanics.gap_rate)}]", mechanics.gap_rate: "gap_accel(mode, t, y, p)"}
+    return [source[s] for s in model.states]
+
+
 def _jacobian(em: _Emitter, mode) -> Function:
     states = em.model.states
-    accel = mode.accel.subs(em.inlined_laws)
-    f = [states[-1], accel] if len(states) == 2 else [accel]
+    f = [r.subs(em.inlined_laws) for r in state_rates(em.model, mode)]
     entries = [sp.diff(fi, s) for fi in f for s in states] + [sp.diff(fi, t) for fi in f]
     lines, results = em.body(entries)
     n = len(states)
@@ -336,7 +358,7 @@ def guard_names(model: Model) -> tuple[str, ...]:
     sliding = SLIDING_GUARDS if any(m.jam is not None for m in model.modes) else SLIDING_GUARDS[:3]
     slide = SLIDE_GUARDS if any(m.slide is not None for m in model.modes) else ()
     return (sliding + (STICK_GUARDS if model.stick else ()) + tuple(e.name for e in model.events) + slide
-            + tuple(latch.name for latch in model.latches))
+            + tuple(latch.name for latch in model.latches) + (GAP_GUARDS if model.clearance is not None else ()))
 
 
 def _guard_directions(model: Model) -> tuple[tuple[int, ...], ...]:
@@ -352,7 +374,7 @@ def _guard_directions(model: Model) -> tuple[tuple[int, ...], ...]:
                 row.append(-1 if mode.flank == "a" else 1)
             elif name == "v1":
                 row.append(-mode.direction)
-            elif name in ("D", "jam", "cone_forward", "cone_backward", *SLIDE_GUARDS) or name in latches:
+            elif name in ("D", "jam", "cone_forward", "cone_backward", *SLIDE_GUARDS, *GAP_GUARDS) or name in latches:
                 row.append(-1)
             elif name in in_time:
                 row.append(1)
@@ -368,7 +390,12 @@ def _guards(em: _Emitter) -> Function:
     lines = ["for i in range(g.shape[0]):", "    g[i] = 1.0"]
     for index, mode in enumerate(model.modes):
         lines.append(f"{'if' if index == 0 else 'elif'} mode == {index}:  # {mode.name}")
-        if mode.slide is not None:
+        if mode.name == "free":
+            gap = mechanics.gap
+            gap_lines, gaps = em.body([gap, model.clearance - gap])
+            lines += [f"    {line}" for line in gap_lines]
+            lines.append(f"    g[{names.index('gap_a')}], g[{names.index('gap_b')}] = {gaps[0]}, {gaps[1]}")
+        elif mode.slide is not None:
             lines.append(f"    g[{names.index('v1')}] = y[{len(model.states) - 1}]")
             lines.append(f"    g[{names.index(SLIDE_GUARDS[0])}], g[{names.index(SLIDE_GUARDS[1])}] = "
                          "slide_exits(t, y, p)")
@@ -396,6 +423,36 @@ def _guards(em: _Emitter) -> Function:
                     tuple(lines), "", "GUARDS_SIG")
 
 
+IMPACT_FRAME = ("nu", "s", "W_nn", "W_nt", "W_tt", "mu", "e", "dv1_dgap_rate", "dv1_ds")
+
+
+def _impact(em: _Emitter) -> Function:
+    """impact(flank, t, y, p, out): the frame of a collision on flank +1 (a) or -1 (b), in IMPACT_FRAME order."""
+    doc = ("The frame of a collision on `flank` (+1 a, -1 b): out = (nu, s, W_nn, W_nt, W_tt, mu, e, dv1/d gap_rate, "
+           "dv1/ds): nu = f gap_rate and s the slip, W the inverse mass in that frame, mu = tan(rho) of the flank, "
+           "e the restitution, and v1 = dv1/d gap_rate gap_rate + dv1/ds s.")
+    if not em.model.impacts:
+        return Function("impact", "flank, t, y, p, out", "No clearance: the flanks never part, so nothing collides.",
+                        ("out[:] = math.nan",), "", "GUARDS_SIG")
+    lines = []
+    for index, imp in enumerate(em.model.impacts):
+        body, values = em.body(list(imp.frame))
+        lines.append(f"{'if' if index == 0 else 'else:'} {'flank == 1:' if index == 0 else ''}".rstrip()
+                     + f"  # flank {imp.flank}")
+        lines += [f"    {line}" for line in body]
+        lines += [f"    out[{k}] = {v}  # {name}" for k, (name, v) in enumerate(zip(IMPACT_FRAME, values))]
+    return Function("impact", "flank, t, y, p, out", doc, tuple(lines), "", "GUARDS_SIG")
+
+
+def _body2(em: _Emitter) -> Function:
+    """body2(x1, v1, gap, gap_rate, p) -> (x2, v2): plain Python, so it works on whole arrays."""
+    lines, results = em.body(list(em.model.body2))
+    lines = [line for line in lines if not re.fullmatch(r"\w+ = y\[\d+\]", line)]
+    return Function("body2", "x1, v1, gap, gap_rate, p", "(x2, v2), position and speed of body 2 "
+                    f"(x2 = {_short(em.model.body2[0])}, v2 = {_short(em.model.body2[1])}); works on arrays.",
+                    tuple(lines), ", ".join(results), jit=False)
+
+
 def _functions(em: _Emitter) -> list[Function]:
     model = em.model
     fns = [em.function(law_function_name(q.symbol), f"{q.doc}: {q.symbol} = {_short(q.expr)}", [q.expr], q.symbol)
@@ -409,6 +466,7 @@ def _functions(em: _Emitter) -> list[Function]:
                                "stick holds while both cones are >= 0; flank_normal > 0 holds on flank a",
                                [st.cone_forward, st.cone_backward, st.flank_normal]))
     fns += [_jacobian(em, mode) for mode in model.modes]
+    fns.append(_body2(em))
     return fns
 
 
@@ -430,7 +488,7 @@ def generate_module(model: Model, free: tuple[str, ...] | None = None) -> str:
     free = tuple(p.name for p in scene.params() if p.free) if free is None else free
     em = _Emitter(model, free)
     functions = _aliased(_functions(em))
-    guards_function, load_factors = _guards(em), _load_factors(em)
+    guards_function, load_factors, impact = _guards(em), _load_factors(em), _impact(em)
     by_name = {p.name: p for p in scene.params()}
     free_params = [by_name[n] for n in free]
     fixed = [p for p in scene.params() if p.name not in free]
@@ -457,7 +515,8 @@ def generate_module(model: Model, free: tuple[str, ...] | None = None) -> str:
     env.filters["comment"] = _comment
     body = env.get_template("module.py.j2").render(
         scene=scene, model=model, functions=functions, free=free_params, latches=model.latches, fixed=fixed,
-        pieces=model.pieces, derived=em.derived_constants(), guards_function=guards_function,
+        pieces=model.pieces, derived=em.derived_constants(), guards_function=guards_function, impact=impact,
+        rates=_rate_sources(model),
         load_factors=load_factors,
         guards=guard_names(model),
         constants={k: inert(v, k) for k, v in constants.items()}, directions=_guard_directions(model))

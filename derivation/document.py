@@ -40,12 +40,17 @@ class Section:
 _SHORT_NAME = re.compile(r"([A-Za-z]|alpha|beta|gamma|delta|epsilon|mu|phi|psi|rho|tau|omega)(\d*)")
 
 
+STATE_LATEX = {"gap": "g", "gap_rate": "\\dot g"}   # the clearance's states, as the text names them
+
+
 def symbol_latex(name: str) -> str | None:
     """LaTeX for a parameter name with underscores that SymPy would typeset badly, else None.
 
     A name led by one letter or a Greek letter gets a subscript: ``F2_after`` ->
     F_{2,after}, ``gamma_a`` -> gamma_{a}. A name led by a word (``friction_rho``,
     ``load_piece``) is set as the identifier itself, as in the parameter table."""
+    if name in STATE_LATEX:
+        return STATE_LATEX[name]
     if "_" not in name:
         return None
     head, *rest = name.split("_")
@@ -170,6 +175,54 @@ def _stick_section() -> Section:
     return s
 
 
+def _clearance_sections(model: Model) -> list[Section]:
+    """Free flight, separation, the impact law and its energy, for a scene with a clearance."""
+    ff = M.free_flight()
+    fly = Section("Clearance and free flight")
+    fly.text("With a clearance $c$ between the flanks along the normal, the normal gap from flank a, $g$, is a "
+             "state of its own: flank a touches at $g = 0$, flank b at $g = c$. From the positions of both "
+             "bodies, and back:")
+    fly.math(f"g = {_l(M.kinematics().gap)}, \\qquad x_2 = {_l(ff.x2_of)}, \\qquad v_2 = {_l(ff.v2_of)}")
+    fly.text("When neither flank touches, each body moves under its own force:")
+    fly.math(_eq(M.a1, ff.accel1), _eq(M.a2, ff.accel2),
+             f"\\ddot g = {_l(ff.gap_accel)} = {_l(ff.gap_accel_phi)}")
+    fly.text("So the gap's acceleration in free flight is $-\\cos\\gamma$ times the switching function. On a "
+             "flank the normal force is proportional to $\\varphi$ (section on reactions): flank a holds while "
+             "$\\varphi \\ge 0$, which is exactly when free flight would press the bodies together "
+             "($\\ddot g \\le 0$). Separation is therefore the zero crossing of $\\varphi$: the normal force "
+             "reaches 0 and the own accelerations pull the flanks apart with zero relative speed. In contact the "
+             "gap and its rate stay constant ($\\dot g = 0$, $\\ddot g = 0$). A clearance of zero lets the "
+             "flanks part and meet at once: the zero-clearance model.")
+    law = Section("Impact law and energy")
+    frame = M.impact_frame("a")
+    law.text("When the gap closes on flank $f$ with approach speed $\\nu = f\\,\\dot g < 0$, an impulse "
+             "$\\mathbf P = P_n f\\,\\mathbf n + P_t\\,\\mathbf t$ acts on body 2 and $-\\mathbf P$ on body 1; the "
+             "guides take the rest. The velocity jumps, and the relative velocity $u = (\\nu, s)$ in the flank's "
+             "frame ($s$ the slip along $\\mathbf t$) changes by $W\\mathbf P$:")
+    law.math(f"\\Delta v_1 = {_l(frame.jump_v1)}, \\qquad \\Delta v_2 = {_l(frame.jump_v2)}",
+             f"W = {_l(frame.W)}")
+    law.text("(for flank a; flank b flips the sign of $W_{nt}$). The impulse grows with $P_n$ (Routh's process). "
+             "While the slip has a direction $\\sigma$, Coulomb's law gives $dP_t = -\\mu\\sigma\\,dP_n$ with "
+             "$\\mu = \\tan\\rho$ of the flank at the impact; when the slip stops it stays zero if the stick ratio "
+             "$|W_{nt}|/W_{tt} \\le \\mu$ (the impulse stays in the friction cone), else it reverses. Compression "
+             "ends at $\\nu = 0$; restitution ends when the normal impulse has returned $e^2$ of the work done on "
+             "it in compression (the energetic coefficient). While the slip keeps one direction this is Newton's "
+             "law $\\nu^+ = -e\\,\\nu^-$. Where the slip stops inside the impact, Newton's law with a stick impulse "
+             "loses the energy")
+    law.math(f"\\Delta K = {_l(sp.factor(frame.newton_stick_loss))}")
+    law.text("which is negative for some approach: Newton's law would create energy (the test suite shows one at "
+             "the paper gear's masses). The energetic form never does: the normal impulse does "
+             "$(1 - e^2)$ times the compression work ($\\le 0$), and friction works against the slip ($\\le 0$), "
+             "so the kinetic energy lost is never negative; it is reported with each impact. If "
+             "$W_{nn} - \\mu\\sigma W_{nt} \\le 0$ the sliding impulse cannot stop the approach: the impact has "
+             "no solution (the impulsive counterpart of $D \\le 0$) and the run stops as inconsistent.")
+    law.text("After an impact the flanks stay together (persistent contact) when the rebound speed is within the "
+             "velocity tolerance or when the next bounce, under the present free-flight acceleration, would rise "
+             "less than the gap's tolerance above the flank: every later bounce is smaller still, so this ends a "
+             "sequence of bounces at its accumulation point instead of following it into ever smaller steps.")
+    return [fly, law]
+
+
 def _laws_section(model: Model) -> Section:
     s = Section(f"Laws of scene `{model.scene.name}`")
     params = {p.name: p for p in model.scene.params()}
@@ -260,6 +313,7 @@ def build_document(model: Model) -> dict:
     scene = model.scene
     flank_dirs = [(f, d) for d in (1, -1) for f in ("a", "b")]
     sections = [_assumptions(), _kinematics(), *_sliding_sections(flank_dirs), _stick_section(),
+                *(_clearance_sections(model) if model.clearance is not None else []),
                 _load_factor_section(), _laws_section(model), _modes_section(model), _audit_section()]
     params = [[f"`{p.name}`", f"{p.value:.6g}", p.unit,
                "free" if p.free else "fixed"] for p in scene.params()]

@@ -144,3 +144,80 @@ def stick() -> Stick:
     fn, tang = sp.simplify(sol[fN]), sp.simplify(sol[T])
     cone = sp.tan(rho) * sp.Abs(fn)
     return Stick(fn, tang, cone - tang, cone + tang)
+
+
+# Clearance between the flanks (backlash): the relative motion along the flank normal is free.
+gap, gap_rate = sp.symbols("gap gap_rate", real=True)   # normal gap from flank a, and its rate
+Pn, Pt = sp.symbols("P_n P_t", real=True)               # impulse on body 2: normal (into it), tangential
+e_r = sp.Symbol("e", nonnegative=True)                 # Newton's coefficient of restitution
+nu, slip_speed = sp.symbols("nu s", real=True)          # impact frame: f gap_rate and the slip
+
+
+@dataclass(frozen=True)
+class FreeFlight:
+    """Neither flank touches: each body moves under its own force (the "own accelerations")."""
+
+    accel1: sp.Expr              # a1 = F1 / m1
+    accel2: sp.Expr              # a2 = F2 / m2
+    normal_speed: sp.Expr        # d gap/dt in terms of v1, v2
+    slip: sp.Expr                # relative speed of body 2 along the contact line, in v1, v2
+    v2_of: sp.Expr               # v2 in terms of v1 and gap_rate
+    x2_of: sp.Expr               # x2 in terms of x1 and gap
+    gap_accel: sp.Expr           # d gap_rate/dt in free flight
+    gap_accel_phi: sp.Expr       # the same, in terms of the switching function phi
+
+
+@dataclass(frozen=True)
+class ImpactFrame:
+    """A collision on flank f, in the flank's normal/tangent frame (u = (f gap_rate, slip)).
+
+    The impulse P = (P_n, P_t) acts on body 2 along f n and t (and -P on body 1); the guides
+    take the rest. The relative velocity jumps by W P, W the inverse mass in that frame."""
+
+    flank: str
+    W: sp.Matrix                 # [[W_nn, W_nt], [W_nt, W_tt]]
+    jump_v1: sp.Expr             # change of v1 for the impulse (P_n, P_t)
+    jump_v2: sp.Expr             # change of v2
+    v1_of: sp.Expr               # v1 from (gap_rate, slip): the inverse of the frame map
+    kinetic_energy: sp.Expr      # m1 v1^2/2 + m2 v2^2/2
+    energy_in_frame: sp.Expr     # the same in terms of (f gap_rate, slip)
+    newton_stick_loss: sp.Expr   # energy lost by Newton's law ending in stick: can be < 0
+
+
+@lru_cache(maxsize=None)
+def free_flight() -> FreeFlight:
+    """Newton for each body without contact force, and the normal gap's motion."""
+    kin = kinematics()
+    sol = sp.solve([sp.Eq(m1 * a1, F1), sp.Eq(m2 * a2, F2)], [a1, a2], dict=True)[0]
+    X1, X2 = sp.Function("x1")(t), sp.Function("x2")(t)
+    gap_t = (X2 * E2 - X1 * E1).dot(NORMAL)
+    plain = {X1.diff(t, 2): a1, X2.diff(t, 2): a2, X1.diff(t): v1, X2.diff(t): v2}
+    normal_speed = gap_t.diff(t).subs(plain)
+    slip = (v2 * E2 - v1 * E1).dot(TANGENT)
+    accel = gap_t.diff(t, 2).subs(plain).subs(sol)
+    phi_expr = sliding("a", 1).switching
+    gap_accel_phi = sp.simplify((accel / phi_expr).rewrite(sp.cos)) * phi
+    v2_of = sp.solve(sp.Eq(gap_rate, normal_speed), v2)[0]
+    x2_of = sp.solve(sp.Eq(gap, kin.gap), x2)[0]
+    return FreeFlight(sol[a1], sol[a2], normal_speed, slip, v2_of, x2_of, accel, gap_accel_phi)
+
+
+@lru_cache(maxsize=None)
+def impact_frame(flank: str) -> ImpactFrame:
+    """Impulse balance of a collision on ``flank``: velocity jumps, inverse mass, energy."""
+    f = FLANK_SIGN[flank]
+    ff = free_flight()
+    impulse = Pn * f * NORMAL + Pt * TANGENT            # on body 2
+    R1, R2 = _contact_forces(impulse)                    # along the guides
+    jump_v1, jump_v2 = sp.simplify(R1 / m1), sp.simplify(R2 / m2)
+    u = sp.Matrix([f * ff.normal_speed, ff.slip])
+    du = u.subs({v1: v1 + jump_v1, v2: v2 + jump_v2}) - u
+    W = sp.simplify(du.jacobian([Pn, Pt]))
+    s = slip_speed
+    frame = sp.solve([sp.Eq(nu, u[0]), sp.Eq(s, u[1])], [v1, v2], dict=True)[0]
+    kinetic = m1 * v1**2 / 2 + m2 * v2**2 / 2
+    in_frame = sp.simplify(kinetic.subs(frame))
+    # Newton's law with a stick ending: (nu, s) -> (-e nu, 0). The energy it loses:
+    newton_stick = sp.simplify(in_frame - in_frame.subs({nu: -e_r * nu, s: 0}))
+    v1_of = sp.trigsimp(frame[v1].subs(nu, f * gap_rate))
+    return ImpactFrame(flank, W, jump_v1, jump_v2, v1_of, kinetic, in_frame, newton_stick)

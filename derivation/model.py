@@ -7,6 +7,7 @@ read this object, so the document and the code cannot drift apart.
 """
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import sympy as sp
@@ -67,6 +68,7 @@ class Mode:
     jam: sp.Expr | None = None           # cos(gamma + f s rho) (> 0, else the wedge jams)
     slide: Slide | None = None           # the sliding mode along phi = 0 (literal equations only)
     declared: bool = True                # False: generated, but the scene does not let a run enter it
+    gap_accel: sp.Expr | None = None     # d gap_rate/dt with a clearance: 0 in contact, own in free flight
 
 
 @dataclass(frozen=True)
@@ -77,6 +79,14 @@ class StickConditions:
     tangential: sp.Expr          # friction force the stick needs
     cone_forward: sp.Expr        # >= 0 while no breakaway forward
     cone_backward: sp.Expr       # >= 0 while no breakaway backward
+
+
+@dataclass(frozen=True)
+class Impact:
+    """A collision on one flank, in that flank's normal/tangent frame (mechanics.impact_frame)."""
+
+    flank: str
+    frame: tuple[sp.Expr, ...]   # (nu, s, W_nn, W_nt, W_tt, mu, e, dv1/d gap_rate, dv1/ds)
 
 
 @dataclass(frozen=True)
@@ -93,6 +103,9 @@ class Model:
     stick: StickConditions | None
     latches: tuple[Latch, ...] = ()      # p = (free parameters..., latches..., pieces...)
     pieces: tuple[laws.Pieces, ...] = () # latched piece indices of the piecewise laws
+    clearance: sp.Symbol | None = None   # normal clearance (states gap, gap_rate), None: zero
+    body2: tuple[sp.Expr, sp.Expr] = ()  # (x2, v2) in x1, v1 (and gap, gap_rate with a clearance)
+    impacts: tuple[Impact, ...] = ()     # per flank, with a clearance
 
     @property
     def params(self) -> tuple[Param, ...]:
@@ -146,8 +159,12 @@ def _laws(scene: Scene, rho_of: dict[str, sp.Symbol]) -> tuple[tuple[Quantity, .
     drive, doc, latches, drive_pieces = _drive(scene, x2)
     quantities = []
     if x2 in load.free_symbols | drive.free_symbols:
-        x2_expr = mechanics.kinematics().x2_of_x1.subs(mechanics.gamma, slope)
-        quantities.append(Quantity(x2, x2_expr, "position of body 2 (kinematic constraint)"))
+        if scene.clearance is None:
+            x2_expr = mechanics.kinematics().x2_of_x1.subs(mechanics.gamma, slope)
+            quantities.append(Quantity(x2, x2_expr, "position of body 2 (kinematic constraint)"))
+        else:
+            x2_expr = mechanics.free_flight().x2_of.subs(mechanics.gamma, slope)
+            quantities.append(Quantity(x2, x2_expr, "position of body 2 (from x1 and the normal gap)"))
     quantities.append(Quantity(F1, drive, doc))
     quantities.append(Quantity(F2, load, f"load force ({scene.load.kind})"))
     done = set()
@@ -230,6 +247,29 @@ def _slide_mode(scene: Scene, switching: sp.Expr, composed: dict, fwd_a: Mode, f
                 declared="sliding" in scene.modes)
 
 
+def _with_clearance(scene: Scene, rho_of: dict[str, sp.Symbol], modes: list[Mode]) -> tuple[list[Mode],
+                                                                                         tuple[Impact, ...]]:
+    """The contact modes keep the gap (d gap_rate/dt = 0); free flight; the impact frames."""
+    sub = _specialise(scene, "a", rho_of)
+    ff = mechanics.free_flight()
+    contact = [dataclasses.replace(m, gap_accel=sp.Integer(0)) for m in modes]
+    free = Mode(name="free", regime="free flight", flank="", direction=0, accel=ff.accel1.subs(sub),
+                S1=sp.Integer(0), S2=sp.Integer(0), gap_accel=ff.gap_accel.subs(sub))
+    impacts = []
+    v2 = ff.v2_of
+    for flank in scene.flanks:
+        frame = mechanics.impact_frame(flank)
+        f = mechanics.FLANK_SIGN[flank]
+        sub_f = _specialise(scene, flank, rho_of)
+        slip = ff.slip.subs(mechanics.v2, v2)
+        c_w, c_s = (sp.diff(frame.v1_of, mechanics.gap_rate), sp.diff(frame.v1_of, mechanics.slip_speed))
+        values = (f * mechanics.gap_rate, slip, frame.W[0, 0], frame.W[0, 1], frame.W[1, 1],
+                  sp.tan(mechanics.rho), mechanics.e_r, c_w, c_s)
+        restitution = {mechanics.e_r: param_symbol(scene.restitution)}
+        impacts.append(Impact(flank, tuple(sp.simplify(v.subs(sub_f).subs(restitution)) for v in values)))
+    return [*contact, free], tuple(impacts)
+
+
 def build_model(scene: Scene) -> Model:
     """Specialise the mechanics to ``scene``."""
     rho_of = _friction_symbols(scene)
@@ -245,9 +285,21 @@ def build_model(scene: Scene) -> Model:
             stick_mode, stick = _stick(scene, rho_of)
             modes.append(stick_mode)
     reads_x1 = any(x1 in q.expr.free_symbols for q in quantities)
+    states = (x1, v1) if reads_x1 else (v1,)
+    impacts: tuple[Impact, ...] = ()
+    slope = {mechanics.gamma: param_symbol(scene.gamma[scene.flanks[0]])}
+    kin = mechanics.kinematics()
+    body2 = (kin.x2_of_x1.subs(slope), (kin.ratio * v1).subs(slope))
+    if scene.clearance is not None:
+        modes, impacts = _with_clearance(scene, rho_of, modes)
+        states = (x1, mechanics.gap, mechanics.gap_rate, v1)   # x1 too: body 2's position needs it
+        ff = mechanics.free_flight()
+        body2 = (ff.x2_of.subs(slope), ff.v2_of.subs(slope))
     symbols = {p.name: param_symbol(p) for p in scene.params()}
     for q in quantities:     # a parameter may carry a law's name only if it is that law (constant F1, F2)
         assert str(q.symbol) not in symbols or q.expr == q.symbol, f"parameter {q.symbol} shadows the law {q.doc}"
-    return Model(scene=scene, symbols=symbols, states=(x1, v1) if reads_x1 else (v1,),
+    return Model(scene=scene, symbols=symbols, states=states,
                  laws=quantities, events=tuple(e for p in pieces for e in p.events), switching=switching,
-                 modes=tuple(modes), stick=stick, latches=latches, pieces=pieces)
+                 modes=tuple(modes), stick=stick, latches=latches, pieces=pieces,
+                 clearance=param_symbol(scene.clearance) if scene.clearance else None, impacts=impacts,
+                 body2=body2)

@@ -22,7 +22,7 @@ LITERAL_MODES = (("forward",), ("forward", "sliding"))
 EQUATIONS = ("consistent", "literal")
 METHODS = ("dopri5", "rosenbrock23")
 TOP_KEYS = ("name", "description", "equations", "wedge", "friction", "drive", "load",
-            "reference", "modes", "run")
+            "impact", "reference", "modes", "run")
 NAME = re.compile(r"[a-z0-9][a-z0-9-]{0,63}")     # a file name on every system: at most 64 characters
 MAX_DESCRIPTION = 2000                            # characters
 MAX_SCENE_BYTES = 1_000_000                       # a scene file is a page of TOML; refuse anything near this
@@ -66,6 +66,7 @@ class Run:
     t_end: float
     x1: float
     v1: float
+    gap: float                   # normal gap from flank a at t = 0 (scenes with clearance)
     rtol: float
     atol: float
     method: str
@@ -92,6 +93,8 @@ class Scene:
     digest: str
     torque_switch: Param | None = None   # trip threshold S1_trip on S1 ([drive.torque_switch])
     checks: tuple[tuple, ...] = ()       # the rules of every model parameter, as data (see Checks)
+    clearance: Param | None = None       # normal clearance between the flanks (backlash), None: zero
+    restitution: Param | None = None     # coefficient of restitution of a flank impact ([impact])
 
     def params(self) -> tuple[Param, ...]:
         """Every distinct model parameter once: wedge, friction, drive, torque switch, load, reference."""
@@ -100,6 +103,7 @@ class Scene:
             *(p for law in self.friction.values() for p in law.all_params()),
             *self.drive.all_params(), *([self.torque_switch] if self.torque_switch else []),
             *self.load.all_params(), *self.reference.values(),
+            *(p for p in (self.clearance, self.restitution) if p is not None),
         )))
 
     def free_params(self) -> tuple[Param, ...]:
@@ -121,6 +125,8 @@ class Rule:
 
 GAMMA = Rule("angle", 0.0, 90 * DEG)
 WEDGE = {"m1": Rule("mass", 0.0), "m2": Rule("mass", 0.0)}
+CLEARANCE = Rule("length", 0.0, lo_in=True)      # >= 0 (0: the flanks part and meet at once); absent: rigid
+IMPACT = {"restitution": Rule("dimensionless", 0.0, 1.0, lo_in=True, hi_in=True)}
 FRICTION_LAWS = {
     "constant": {"rho": Rule("angle", 0.0, 90 * DEG, lo_in=True)},
     "velocity": {"a": Rule("dimensionless", 0.0, lo_in=True),
@@ -151,6 +157,7 @@ RUN = {
     "t_end": Rule("time", 0.0, default=1.0),
     "x1": Rule("length", default=0.0),
     "v1": Rule("velocity", default=0.0),
+    "gap": Rule("length", 0.0, lo_in=True, default=0.0),
     "rtol": Rule("dimensionless", 1e-13, 1e-1, lo_in=True, hi_in=True, default=1e-6),
     "atol": Rule("dimensionless", 1e-20, 1.0, lo_in=True, hi_in=True, default=1e-9),   # = simulate.ATOL_RANGE
     "max_steps": Rule("dimensionless", 1, 1e9, lo_in=True, hi_in=True, default=100000, integer=True),  # MAX_STEPS
@@ -458,10 +465,10 @@ class _Reader:
             a, b = gamma["a"], gamma["b"]
             if not math.isclose(a.value, b.value, rel_tol=1e-12):
                 self.fail(b.key, f"must equal wedge.gamma_a = {units.show(a.value, 'angle')} "
-                                 "with both flanks modelled: with different slopes the two "
-                                 "flanks cannot both touch with zero clearance, so a flank "
-                                 "change would open a gap (free flight, backlash), which tswm "
-                                 "does not model", units.show(b.value, "angle"))
+                                 "with both flanks modelled: with different slopes the gap "
+                                 "between the flanks would vary along the travel, which tswm "
+                                 "does not model (its wedge.clearance is a constant gap between "
+                                 "parallel flanks)", units.show(b.value, "angle"))
             if a.free or b.free:
                 self.fail((b if b.free else a).key, "a free slope with both flanks modelled "
                           "must be given once as wedge.gamma (the flanks share one slope)")
@@ -526,6 +533,33 @@ class _Reader:
                       "a1 there), so it never slides", _toml(list(modes)))
         return modes
 
+    def clearance(self, doc: dict, wedge: dict, flanks: tuple[str, ...], equations: str,
+                  run: Run) -> tuple[Param | None, Param | None]:
+        """wedge.clearance and [impact] restitution: both or neither; the start gap within the clearance."""
+        impact = self.table(doc, "impact", required=False)
+        if "clearance" not in wedge:
+            if impact is not None:
+                self.fail("impact", "impacts need a clearance between the flanks: give wedge.clearance")
+            if run.gap:
+                self.fail("run.gap", "a start gap needs a clearance between the flanks: give wedge.clearance",
+                          units.show(run.gap, "length"))
+            return None, None
+        if flanks != FLANKS or equations != "consistent":
+            self.fail("wedge.clearance", 'a clearance needs both flanks (wedge.flanks = ["a", "b"]) and '
+                      'equations = "consistent"')
+        value, free = self.number(wedge, "clearance", "wedge", CLEARANCE)
+        clearance = Param("clearance", value, units.si_unit("length"), free, "wedge.clearance")
+        self.rule(clearance, CLEARANCE, None)
+        if impact is None:
+            self.fail("impact", "missing required table: a clearance needs [impact] restitution = e in [0, 1] "
+                      "(0: the flanks stay together after an impact, 1: elastic)")
+        self.keys(impact, "impact", tuple(IMPACT))
+        restitution = self.params(impact, "impact", IMPACT)["restitution"]
+        if run.gap > value:
+            self.fail("run.gap", f"must lie within the clearance, <= wedge.clearance = {units.show(value, 'length')}",
+                      units.show(run.gap, "length"))
+        return clearance, restitution
+
     def run(self, doc: dict) -> Run:
         table = self.table(doc, "run", required=False) or {}
         self.keys(table, "run", (*RUN, "method"))
@@ -541,7 +575,7 @@ class _Reader:
             self.fail("description", f"{len(description)} characters: must be at most {MAX_DESCRIPTION}")
         equations = self.text(doc, "equations", "", EQUATIONS, default="consistent")
         wedge = self.table(doc, "wedge")
-        self.keys(wedge, "wedge", ("flanks", "gamma", "gamma_a", "gamma_b", *WEDGE))
+        self.keys(wedge, "wedge", ("flanks", "gamma", "gamma_a", "gamma_b", "clearance", *WEDGE))
         flanks = self.subset(wedge, "flanks", "wedge", FLANKS)
         gamma = self.slopes(wedge, flanks)
         masses = self.params(wedge, "wedge", WEDGE)
@@ -559,9 +593,11 @@ class _Reader:
         if equations == "literal" and flanks != FLANKS:
             self.fail("wedge.flanks", 'equations = "literal" needs ["a", "b"] (the printed '
                       "model switches between both flanks)", _toml(list(flanks)))
+        run = self.run(doc)
+        clearance, restitution = self.clearance(doc, wedge, flanks, equations, run)
         scene = Scene(name, description, equations, flanks, gamma, masses["m1"], masses["m2"],
-                      friction, drive, load, reference or {}, modes, self.run(doc),
-                      self.source, digest, torque_switch, tuple(dict.fromkeys(self.checks)))
+                      friction, drive, load, reference or {}, modes, run,
+                      self.source, digest, torque_switch, tuple(dict.fromkeys(self.checks)), clearance, restitution)
         names = [p.name for p in scene.params()]
         assert len(set(names)) == len(names) and all(n.isidentifier() for n in names), names
         return scene

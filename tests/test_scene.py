@@ -57,8 +57,8 @@ def test_base_is_valid():
 
 
 def test_shipped_names():
-    assert shipped_scenes() == ("asymmetric", "load-schedule", "one-sided", "paper", "paper-literal", "paper-runup",
-                                "seating", "stiff-drive", "valve-travel")
+    assert shipped_scenes() == ("asymmetric", "backlash", "load-schedule", "one-sided", "paper", "paper-literal",
+                                "paper-runup", "seating", "stiff-drive", "valve-travel")
     for name in shipped_scenes():
         s = load_scene(name)
         assert s.name == name and s.source == f"shipped:{name}"
@@ -241,7 +241,7 @@ def test_value_table_fixed_and_default_step():
 BAD = [
     # unknown, missing, wrong type
     ({"wedge.m_2": '"1 kg"'}, ["wedge.m_2", "unknown key", "did you mean 'm2'",
-                               "allowed here: flanks, gamma, gamma_a, gamma_b, m1, m2"]),
+                               "allowed here: flanks, gamma, gamma_a, gamma_b, clearance, m1, m2"]),
     ({"colour": '"red"'}, ["colour", "unknown key", "allowed here: name"]),
     ({"drive.Vmx": '"6 m/s"'}, ["drive.Vmx", "did you mean 'Vmax'", "Fmax, V0, Vmax"]),
     ({"wedge.m1": None}, ["wedge.m1", "missing required key (mass, > 0 kg)"]),
@@ -298,7 +298,7 @@ BAD = [
     ({"wedge.flanks": '["c"]'}, ["wedge.flanks", '["a", "b"]']),
     ({"wedge.flanks": '"a"'}, ["wedge.flanks = \"a\"", "list"]),
     ({"wedge.gamma": None, "wedge.gamma_a": '"4 deg"', "wedge.gamma_b": '"5 deg"'},
-     ["wedge.gamma_b = 5 deg", "must equal wedge.gamma_a = 4 deg", "gap", "backlash"]),
+     ["wedge.gamma_b = 5 deg", "must equal wedge.gamma_a = 4 deg", "gap", "constant gap between parallel"]),
     ({"wedge.gamma_a": '"4.76 deg"'}, ["wedge.gamma_a", "either wedge.gamma", "not both"]),
     ({"wedge.flanks": '["a"]', "wedge.gamma_b": '"5 deg"', "wedge.gamma": None},
      ["wedge.gamma_b", "flank b is not modelled"]),

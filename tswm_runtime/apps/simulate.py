@@ -19,7 +19,7 @@ from tswm_runtime.integration import segment
 
 from tswm_runtime.model import checks, modes
 from tswm_runtime.model.contract import load_module
-from tswm_runtime.results.result import Event, Result, status_message
+from tswm_runtime.results.result import Event, Jump, Result, status_message
 
 METHODS = {"dopri5": segment.DOPRI5, "rosenbrock23": segment.ROSENBROCK23}
 RTOL_RANGE = (1e-13, 0.1)
@@ -83,27 +83,34 @@ def parameter_vector(module: ModuleType, params: dict | None) -> np.ndarray:
 
 
 def initial_state(module: ModuleType, run: dict) -> tuple[np.ndarray, np.ndarray]:
-    """(y0, quad): the states at t = 0, and x1 as the quadrature's start if it is no state."""
-    n = len(module.STATES)
-    y0 = np.array([run["x1"], run["v1"]][2 - n:], dtype=np.float64)
-    return y0, (np.array([run["x1"]]) if n == 1 else np.empty(0))
+    """(y0, quad): the states at t = 0 (the gap's rate 0: the bodies start together), and x1
+    as the quadrature's start if it is no state."""
+    start = {"x1": run["x1"], "v1": run["v1"], "gap": run.get("gap", 0.0), "gap_rate": 0.0}
+    y0 = np.array([start[name] for name in module.STATES], dtype=np.float64)
+    return y0, (np.array([run["x1"]]) if module.STATES == ("v1",) else np.empty(0))
+
+
+def x1_column(module: ModuleType) -> int:
+    """Where x1 is in a row of states (and their integral): state 0, or the integral of v1."""
+    return 0 if module.STATES[0] == "x1" else len(module.STATES)
 
 
 def settings(module: ModuleType, overrides: dict) -> dict:
     """The run settings: the scene's [run] table with ``overrides`` applied, validated."""
-    run = {**module.RUN, "points": DEFAULT_POINTS, "max_events": DEFAULT_MAX_EVENTS, "hmax": math.inf}
+    run = {"gap": 0.0, **module.RUN, "points": DEFAULT_POINTS, "max_events": DEFAULT_MAX_EVENTS, "hmax": math.inf}
     for key, value in overrides.items():
         _check(key in run, "setting", key, f"one of {', '.join(run)}")
         if value is not None:
             run[key] = value
     _check(run["method"] in METHODS, "method", run["method"], f"one of {', '.join(METHODS)}")
-    for key in ("t_end", "x1", "v1", "rtol", "atol", "hmax"):
+    for key in ("t_end", "x1", "v1", "gap", "rtol", "atol", "hmax"):
         run[key] = float(run[key]) if key == "hmax" else _finite(key, run[key])
     lo, hi = RTOL_RANGE
     _check(lo <= run["rtol"] <= hi, "rtol", run["rtol"], f"in [{lo:g}, {hi:g}]")
     lo, hi = ATOL_RANGE
     _check(lo <= run["atol"] <= hi, "atol", run["atol"], f"in [{lo:g}, {hi:g}] (absolute, in m and m/s)")
     _check(run["t_end"] > 0.0, "t_end", run["t_end"], "> t0 = 0 s")
+    _check(run["gap"] >= 0.0, "gap", run["gap"], ">= 0 m (the gap from flank a)")
     _check(run["hmax"] > 0.0, "hmax", run["hmax"], "> 0 s")
     for key, top in (("max_steps", MAX_STEPS), ("points", MAX_POINTS), ("max_events", MAX_EVENTS)):
         _check(isinstance(run[key], int) and not isinstance(run[key], bool) and 1 <= run[key] <= top, key,
@@ -161,14 +168,16 @@ def simulate(model: str | ModuleType, params: dict | None = None, *, interruptib
     keep = out.mode >= 0
     t_kept, y_kept, p_rows, modes_kept = (np.ascontiguousarray(a[keep]) for a in (t_out, out.y, out.p, out.mode))
     y_stop = log.state[n_ev - 1, :n].copy() if n_ev else y0
-    x1 = y_kept[:, n] if n == 1 else y_kept[:, 0]
+    at = x1_column(module)
+    impacts = {k for k, guard in enumerate(module.GUARDS) if guard in ("gap_a", "gap_b")}
     events = [Event(float(log.t[e]), module.GUARDS[log.index[e, 0]], module.MODES[log.index[e, 1]],
                     module.MODES[log.index[e, 2]] if log.index[e, 2] >= 0 else None,
-                    float(log.state[e, n] if n == 1 else log.state[e, 0]), float(log.state[e, n - 1]))
+                    float(log.state[e, at]), float(log.state[e, n - 1]),
+                    Jump(*map(float, log.jump[e])) if log.index[e, 0] in impacts else None)
               for e in range(n_ev)]
     rows = np.empty((t_kept.size, len(module.OUTPUTS)))
     fill_rows(hybrid.compiled(module.outputs, GUARDS_SIG), t_kept, y_kept, modes_kept, p_rows, n, rows)
-    return Result.build(module, p, p_rows, run, t_kept, x1, y_kept[:, n - 1], modes_kept, rows, events,
+    return Result.build(module, p, p_rows, run, t_kept, y_kept, modes_kept, rows, events, log.state[:n_ev, :n],
                         mon, counters, hybrid_status=status, t_stop=t_stop,
                         first_mode=first, message=status_message(module, status, t_stop, y_stop, last,
                                                                  need, events, p))

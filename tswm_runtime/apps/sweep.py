@@ -21,7 +21,8 @@ One row per case: the free parameters, then
     x1, v1    the state at t_stop (NaN when the run stopped inside a step)
     regimes   the regime code: one letter per phase, in order (REGIME_LETTERS: T tractive,
               I inverse-tractive, S stick, A/B backward on flank a/b, F sliding along
-              phi = 0); e.g. 'ST' = stuck, then broke away into tractive sliding
+              phi = 0, G free flight across the clearance); e.g. 'ST' = stuck, then broke away
+              into tractive sliding
     modes     the same phases as mode indices into the module's MODES, space separated
     n_events, steps, rejected, nfev, njev   events logged, accepted and rejected steps,
               rhs and Jacobian calls
@@ -51,7 +52,7 @@ from tswm_runtime.integration.structures import Tolerances
 from tswm_runtime.apps.simulate import METHODS, initial_state, settings, unknown_parameter, with_latches
 
 REGIME_LETTERS = {"tractive": "T", "inverse-tractive": "I", "stick": "S", "backward on flank a": "A",
-                  "backward on flank b": "B", "sliding along phi = 0": "F"}
+                  "backward on flank b": "B", "sliding along phi = 0": "F", "free flight": "G"}
 SEQ_LEN = 32  # modes kept per case; longer sequences end in '…'
 DEFAULT_CHUNK = 512
 # Size bounds (docs/promises.md): above LARGE_SWEEP cases a sweep states its size and needs --large;
@@ -195,7 +196,7 @@ def run_cases(module: ModuleType, P: np.ndarray, run: dict):
     if valid.any():
         f, i, sq = out_f[valid], out_i[valid], seq[valid]
         batch.run_batch(METHODS[run["method"]], module.rhs, module.jac, module.guards,
-                        module.observe, np.ascontiguousarray(full[valid]), modes.tables(module), y0, quad,
+                        module.observe, module.impact, np.ascontiguousarray(full[valid]), modes.tables(module), y0, quad,
                         run["t_end"], Tolerances(run["rtol"], np.full(y0.size, run["atol"]), 0.0, run["hmax"]),
                         run["max_steps"], run["max_events"], len(module.OBSERVABLES), f, i, sq)
         out_f[valid], out_i[valid], seq[valid] = f, i, sq

@@ -186,14 +186,18 @@ def _print_summary(result, module, origin: str, t_load: float, t_run: float) -> 
     print(f"  events ({len(result.events)}):")
     if result.events:
         shown = result.events[:MAX_EVENT_LINES]
-        rows = [("t [s]", "kind", "from -> to")]
-        rows += [(f"{e.t:.9g}", e.kind, f"{e.from_mode} -> {e.to_mode or '(stop)'}") for e in shown]
+        rows = [("t [s]", "kind", "from -> to", "impact: P_n [N s], energy lost [J]")]
+        rows += [(f"{e.t:.9g}", e.kind, f"{e.from_mode} -> {e.to_mode or '(stop)'}",
+                  f"{e.jump.P_n:.6g}, {e.jump.energy_lost:.6g}" if e.jump else "") for e in shown]
         print("\n".join(_table(rows)))
         if len(result.events) > len(shown):
             print(f"    ... {len(result.events) - len(shown)} more (all in the -o summary JSON)")
     for name, value, t in (("S1", result.S1_max, result.t_S1_max), ("S2", result.S2_max, result.t_S2_max)):
         shown = f"{value:.6g} N" if math.isfinite(value) else f"unbounded ({'+' if value > 0 else '-'}inf)"
         print(f"  {name} max = {shown} at t = {t:.6g} s")
+    if result.impacts:
+        print(f"  impacts: {len(result.impacts)}, kinetic energy lost {result.impact_energy:.6g} J "
+              "(rigid impacts: impulses, not forces; S1, S2 and KD cover the contact phases)")
     if result.KD1 is not None or result.KD2 is not None:
         print(f"  KD1 = {result.KD1:.6g}, KD2 = {result.KD2:.6g}".replace("inf", "unbounded"))
     print(f"  steps {result.n_steps} (rejected {result.n_rejected}), rhs calls {result.nfev}, "

@@ -71,7 +71,7 @@ def _sweep(args: argparse.Namespace) -> int:
     counts = table["status"].value_counts()
     print("  status: " + ", ".join(f"{k} {v}" for k, v in counts.items()))
     regimes = table["regimes"].value_counts().head(8)
-    print("  regime codes (T tractive, I inverse-tractive, S stick, A/B backward, F phi = 0): "
+    print("  regime codes (T tractive, I inverse-tractive, S stick, A/B backward, F phi = 0, G free flight): "
           + ", ".join(f"{k or '-'} {v}" for k, v in regimes.items()))
     if outcome.parquet:
         print(f"  wrote {outcome.parquet}\n  wrote {outcome.csv}\n"

@@ -28,7 +28,7 @@ from tswm_runtime.hybrid import machine as hybrid
 
 from tswm_runtime.integration import cache_guard, segment
 from tswm_runtime.integration.signatures import MATRIX, VECTOR, GuardsFunction, JacFunction, RhsFunction
-from tswm_runtime.integration.structures import MODE_TABLES, TOLERANCES, EventLog, Outputs
+from tswm_runtime.integration.structures import JUMP_WIDTH, MODE_TABLES, TOLERANCES, EventLog, Outputs
 
 F_T_STOP, F_S1M, F_TS1M, F_S2M, F_TS2M, F_X1, F_V1 = range(7)
 N_F = 7
@@ -37,7 +37,7 @@ N_I = 8
 
 BATCH_SIG = types.none(
     types.int64,  # method
-    RhsFunction, JacFunction, GuardsFunction, GuardsFunction,  # rhs, jac, guards, observe
+    RhsFunction, JacFunction, GuardsFunction, GuardsFunction, GuardsFunction,  # rhs, jac, guards, observe, impact
     MATRIX, MODE_TABLES,  # P (cases x parameters, latches included), mode tables
     VECTOR, VECTOR, types.float64,  # y0, quad, t_end
     TOLERANCES, types.int64, types.int64,  # tol, max_steps, max_events
@@ -47,7 +47,7 @@ BATCH_SIG = types.none(
 
 
 @cache_guard.compile_cached(BATCH_SIG, parallel=True, error_model="numpy")
-def run_batch(method, rhs, jac, guards, observe, P, tables, y0, quad, t_end, tol, max_steps, max_events,
+def run_batch(method, rhs, jac, guards, observe, impact, P, tables, y0, quad, t_end, tol, max_steps, max_events,
               n_obs, out_f, out_i, seq):
     """Integrate every row of P from (0, y0) to t_end; results into out_f, out_i, seq."""
     n = y0.size
@@ -57,11 +57,12 @@ def run_batch(method, rhs, jac, guards, observe, P, tables, y0, quad, t_end, tol
         p = P[c].copy()
         out = Outputs(np.full(1, t_end), np.full((1, width), np.nan), np.empty(1, np.int64),
                       np.empty((1, p.size)))  # one output point: the state at t_end
-        log = EventLog(np.empty(max_events), np.empty((max_events, 3), np.int64), np.empty((max_events, width)))
+        log = EventLog(np.empty(max_events), np.empty((max_events, 3), np.int64), np.empty((max_events, width)),
+                       np.zeros((max_events, JUMP_WIDTH)))
         mon = np.zeros((n_obs, 3))
         counters = np.zeros(segment.N_COUNTERS, np.int64)
         status, t_stop, n_ev, last, need, first = hybrid.integrate_hybrid(
-            method, rhs, jac, guards, observe, p, tables, 0.0, y0, quad, -1, t_end, tol, max_steps, out, log,
+            method, rhs, jac, guards, observe, impact, p, tables, 0.0, y0, quad, -1, t_end, tol, max_steps, out, log,
             mon, counters)
         out_f[c, F_T_STOP] = t_stop
         # The state at t_stop: the output point at t_end, else the last event's state

@@ -30,16 +30,18 @@ import numpy as np
 from numba import njit, types
 from numba.core.types.function_type import CompileResultWAP
 
+from tswm_runtime.hybrid import impact as collision
 from tswm_runtime.integration import cache_guard, painleve, segment
 from tswm_runtime.integration.signatures import (GUARDS_SIG, JAC_SIG, MATRIX, RHS_SIG, VECTOR, GuardsFunction,
                                                  JacFunction, RhsFunction)
-from tswm_runtime.integration.structures import (EVENT_LOG, MODE_TABLES, OUTPUTS, TOLERANCES, EventLog, EventSettings,
-                                     Outputs, Tolerances)
+from tswm_runtime.integration.structures import (EVENT_LOG, JUMP_WIDTH, MODE_TABLES, OUTPUTS, TOLERANCES, EventLog,
+                                                 EventSettings, Outputs, Tolerances)
 
 # Guard kinds (modes.GUARD_KINDS maps the generated GUARDS names to these).
-G_PHI, G_V1, G_D, G_JAM, G_CONE_F, G_CONE_B, G_FLANK_N, G_LAW, G_SLIDE_A, G_SLIDE_B, G_TRIP = range(11)
+G_PHI, G_V1, G_D, G_JAM, G_CONE_F, G_CONE_B, G_FLANK_N, G_LAW, G_SLIDE_A, G_SLIDE_B, G_TRIP, G_GAP_A, G_GAP_B = range(13)
 # Mode kinds.
-M_SLIDING, M_STICK, M_FILIPPOV = 0, 1, 2
+M_SLIDING, M_STICK, M_FILIPPOV, M_FREE = 0, 1, 2, 3
+IMPACT_FRAME = 9  # the quantities a model's impact() fills (codegen.IMPACT_FRAME)
 
 # Status codes; the integrator's own failures keep segment's codes.
 FINISHED = 0
@@ -76,7 +78,7 @@ def _mode(kind, flank, direction, tables):
     for m in range(mode_kind.size):
         if mode_kind[m] != kind:
             continue
-        if kind == M_STICK or (mode_dir[m] == direction and (flank == 0 or mode_flank[m] == flank)):
+        if kind == M_STICK or kind == M_FREE or (mode_dir[m] == direction and (flank == 0 or mode_flank[m] == flank)):
             return m
     return -1
 
@@ -107,43 +109,81 @@ def _phi_sign(rhs, guards, mode, t, y, p, tol, k_phi, g, y_tmp, f):
 
 
 @njit(cache=True, error_model="numpy")
-def _sliding(direction, rhs, guards, t, y, p, tol, tables, g, y_tmp, f):
-    """(mode, need) for sliding in ``direction`` from (t, y): the flank from the sign of phi."""
-    m = _mode(M_SLIDING, 0, direction, tables)
+def _part(flank, tables, guards, t, y, p, g):
+    """(mode, need) when the contact on ``flank`` lets go (its normal force reaches 0): free
+    flight, or, where the clearance is zero, contact on the other flank at once."""
+    m_free = _mode(M_FREE, 0, 0, tables)
+    n = y.size
+    y[n - 2] = 0.0  # the flanks part with no normal speed
+    guards(m_free, t, y, p, g)
+    if g[_guard(G_GAP_B if flank == 1 else G_GAP_A, tables.guard_kind)] > 0.0:
+        return m_free, NEED_NOTHING
+    v = y[n - 1]
+    m = _mode(M_STICK, 0, 0, tables) if v == 0.0 else _mode(M_SLIDING, -flank, 1 if v > 0.0 else -1, tables)
+    return m, (NEED_NOTHING if m >= 0 else NEED_STICK if v == 0.0 else NEED_FORWARD if v > 0.0 else NEED_BACKWARD)
+
+
+@njit(cache=True, error_model="numpy")
+def _touching(guards, t, y, p, tables, g):
+    """The flank in contact with a clearance (+1 a, -1 b: the one whose gap is 0), 0 without one."""
+    m_free = _mode(M_FREE, 0, 0, tables)
+    if m_free < 0:
+        return 0
+    guards(m_free, t, y, p, g)
+    if g[_guard(G_GAP_A, tables.guard_kind)] <= 0.0:
+        return 1
+    if g[_guard(G_GAP_B, tables.guard_kind)] <= 0.0:
+        return -1
+    return 0
+
+
+@njit(cache=True, error_model="numpy")
+def _sliding(direction, flank, rhs, guards, t, y, p, tol, tables, g, y_tmp, f):
+    """(mode, need) for sliding in ``direction`` from (t, y): without a clearance (``flank``
+    0) on the flank the sign of phi gives; with one, on ``flank`` while phi keeps its contact
+    force >= 0, else the flanks part."""
+    m = _mode(M_SLIDING, flank, direction, tables)
     if m < 0:
         return -1, (NEED_FORWARD if direction > 0 else NEED_BACKWARD)
     k_phi = _guard(G_PHI, tables.guard_kind)
     if k_phi < 0:
         return m, NEED_NOTHING
-    flank = _phi_sign(rhs, guards, m, t, y, p, tol, k_phi, g, y_tmp, f)
-    m = _mode(M_SLIDING, flank, direction, tables)
+    side = _phi_sign(rhs, guards, m, t, y, p, tol, k_phi, g, y_tmp, f)
+    if flank != 0:
+        return (m, NEED_NOTHING) if side == flank else _part(flank, tables, guards, t, y, p, g)
+    m = _mode(M_SLIDING, side, direction, tables)
     if m < 0:  # one-sided: the contact force on the only flank vanishes (lift-off)
         return -1, NEED_FLANK
     return m, NEED_NOTHING
 
 
 @njit(cache=True, error_model="numpy")
-def _at_rest(rhs, guards, t, y, p, tol, tables, g, y_tmp, f, start):
+def _at_rest(flank, rhs, guards, t, y, p, tol, tables, g, y_tmp, f, start):
     """(mode, need) at v1 = 0: stick inside both friction cones, else sliding off in the
-    direction whose cone is violated. Without a stick mode only a start can go on: in
-    the direction its sliding acceleration points to."""
+    direction whose cone is violated; with a clearance (contact on ``flank`` != 0) the
+    flanks part where the statics press the other flank. Without a stick mode only a start
+    can go on: in the direction its sliding acceleration points to."""
     ms = _mode(M_STICK, 0, 0, tables)
     if ms < 0:
         if not start:
             return -1, NEED_STICK
         for direction in (1, -1):
-            m, need = _sliding(direction, rhs, guards, t, y, p, tol, tables, g, y_tmp, f)
-            if m >= 0:
+            m, need = _sliding(direction, flank, rhs, guards, t, y, p, tol, tables, g, y_tmp, f)
+            if m >= 0 and tables.kind[m] == M_SLIDING:
                 rhs(m, t, y, p, f)
                 if f[y.size - 1] * direction > 0.0:
                     return m, NEED_NOTHING
+            elif m >= 0:
+                return m, need
         return -1, NEED_STICK
     guards(ms, t, y, p, g)
     cone_f, cone_b = g[_guard(G_CONE_F, tables.guard_kind)], g[_guard(G_CONE_B, tables.guard_kind)]
+    if flank != 0 and g[_guard(G_FLANK_N, tables.guard_kind)] * flank < 0.0:
+        return _part(flank, tables, guards, t, y, p, g)
     if cone_f < 0.0:
-        return _sliding(1, rhs, guards, t, y, p, tol, tables, g, y_tmp, f)
+        return _sliding(1, flank, rhs, guards, t, y, p, tol, tables, g, y_tmp, f)
     if cone_b < 0.0:
-        return _sliding(-1, rhs, guards, t, y, p, tol, tables, g, y_tmp, f)
+        return _sliding(-1, flank, rhs, guards, t, y, p, tol, tables, g, y_tmp, f)
     return ms, NEED_NOTHING
 
 
@@ -169,14 +209,19 @@ def _select(mode, kind, rhs, guards, t, y, p, tol, tables, g, y_tmp, f):
     if kind == G_SLIDE_A or kind == G_SLIDE_B:
         m = _mode(M_SLIDING, 1 if kind == G_SLIDE_A else -1, direction, tables)
         return m, FINISHED, NEED_NOTHING
+    if mode_kind[mode] == M_FREE:  # a law event in free flight
+        return mode, FINISHED, NEED_NOTHING
+    flank = tables.flank[mode] if mode_kind[mode] == M_SLIDING else 0
+    if flank == 0 or _mode(M_FREE, 0, 0, tables) < 0:
+        flank = _touching(guards, t, y, p, tables, g)  # 0 without a clearance
     if kind == G_CONE_F or kind == G_CONE_B:  # breakaway from stick
-        m, need = _sliding(1 if kind == G_CONE_F else -1, rhs, guards, t, y, p, tol,
+        m, need = _sliding(1 if kind == G_CONE_F else -1, flank, rhs, guards, t, y, p, tol,
                            tables, g, y_tmp, f)
-    elif kind == G_FLANK_N:  # the pressed flank changes while sticking
-        m, need = mode, NEED_NOTHING
+    elif kind == G_FLANK_N:  # the pressed flank changes while sticking: the flanks part if they can
+        m, need = _part(flank, tables, guards, t, y, p, g) if flank != 0 else (mode, NEED_NOTHING)
     elif kind == G_V1 or mode_kind[mode] == M_STICK:  # came to rest, or a law event in stick
         y[n - 1] = 0.0
-        m, need = _at_rest(rhs, guards, t, y, p, tol, tables, g, y_tmp, f, False)
+        m, need = _at_rest(flank, rhs, guards, t, y, p, tol, tables, g, y_tmp, f, False)
     elif mode_kind[mode] == M_FILIPPOV:  # a law event while sliding along phi = 0
         guards(mode, t, y, p, g)
         m, need = mode, NEED_NOTHING
@@ -184,13 +229,53 @@ def _select(mode, kind, rhs, guards, t, y, p, tol, tables, g, y_tmp, f):
             m = _mode(M_SLIDING, 1, direction, tables)
         elif g[_guard(G_SLIDE_B, tables.guard_kind)] <= 0.0:
             m = _mode(M_SLIDING, -1, direction, tables)
-    else:  # phi, or a law event while sliding: the flank from the sign of phi
-        m, need = _sliding(direction, rhs, guards, t, y, p, tol, tables, g, y_tmp, f)
+    else:  # phi, or a law event while sliding: the flank from the sign of phi (or the flanks part)
+        m, need = _sliding(direction, flank, rhs, guards, t, y, p, tol, tables, g, y_tmp, f)
         ms = _filippov(mode, guards, t, y, p, tables, g) if kind == G_PHI else -1
         if ms >= 0:
             if declared[ms] == 0:
                 return -1, SLIDING, NEED_NOTHING
             m = ms
+    if m < 0:
+        return -1, UNDECLARED, need
+    return m, FINISHED, NEED_NOTHING
+
+
+@njit(cache=True, error_model="numpy")
+def _collide(impact, flank, rhs, guards, t, y, p, tol, tables, g, y_tmp, f, frame, jump):
+    """(next mode, status, need) after the gap closes on ``flank``: the impulse (``impact``
+    module) changes v1 and gap_rate; the flanks stay together where the rebound is within the
+    tolerances (its speed within the velocity tolerance, or the height of the next bounce,
+    and so of every later one, within the gap's tolerance): this ends a sequence of ever
+    smaller bounces at its accumulation point. Else free flight goes on. jump = (P_n, P_t,
+    kinetic energy lost, v1 before); frame[0] on return: the flight time to the next impact
+    on this flank if the free-flight acceleration stays (inf: none)."""
+    n = y.size
+    jump[3] = y[n - 1]
+    impact(flank, t, y, p, frame)
+    p_n, p_t, nu, s, lost, outcome = collision.collide(frame[0], frame[1], frame[2], frame[3], frame[4],
+                                                       frame[5], frame[6])
+    jump[0], jump[1], jump[2] = p_n, p_t, lost
+    if outcome != collision.OK:
+        return -1, INCONSISTENT, NEED_NOTHING
+    m_free = _mode(M_FREE, 0, 0, tables)
+    guards(m_free, t, y, p, g)
+    y[n - 3] += -g[_guard(G_GAP_A, tables.guard_kind)] if flank == 1 else g[_guard(G_GAP_B, tables.guard_kind)]
+    y[n - 2] = flank * nu
+    y[n - 1] = frame[7] * y[n - 2] + frame[8] * s
+    rhs(m_free, t, y, p, f)
+    toward = -flank * f[n - 2]  # the normal acceleration of free flight back onto the flank
+    gap_tol = tol.atol[n - 3] + tol.rtol * abs(y[n - 3])
+    if nu <= tol.atol[n - 2] + tol.rtol * abs(y[n - 1]) or (toward > 0.0 and nu * nu <= 2.0 * toward * gap_tol):
+        # no rebound beyond the tolerances (speed, or height of every later bounce): persistent contact
+        y[n - 2], y[n - 1] = 0.0, frame[8] * s
+        if y[n - 1] == 0.0:
+            m, need = _at_rest(flank, rhs, guards, t, y, p, tol, tables, g, y_tmp, f, False)
+        else:
+            m, need = _sliding(1 if y[n - 1] > 0.0 else -1, flank, rhs, guards, t, y, p, tol, tables, g, y_tmp, f)
+    else:
+        m, need = m_free, NEED_NOTHING
+    frame[0] = 2.0 * nu / toward if toward > 0.0 and m == m_free else np.inf
     if m < 0:
         return -1, UNDECLARED, need
     return m, FINISHED, NEED_NOTHING
@@ -246,9 +331,10 @@ def _observe_max(observe, mode, t, y, p, mon, obs):
 
 
 @njit(cache=True, error_model="numpy")
-def _log(log, n_ev, t, k, mode_from, mode_to, y, quad):
-    """Append an event (time, guard, from, to, state) to the EventLog."""
+def _log(log, n_ev, t, k, mode_from, mode_to, y, quad, jump):
+    """Append an event (time, guard, from, to, state, impact jump) to the EventLog."""
     n = y.size
+    log.jump[n_ev, :] = jump
     log.t[n_ev] = t
     log.index[n_ev, 0], log.index[n_ev, 1], log.index[n_ev, 2] = k, mode_from, mode_to
     log.state[n_ev, :n] = y
@@ -259,7 +345,7 @@ def _log(log, n_ev, t, k, mode_from, mode_to, y, quad):
 HYBRID_SIG = types.Tuple((types.int64, types.float64, types.int64, types.int64, types.int64,
                           types.int64))(
     types.int64,  # method
-    RhsFunction, JacFunction, GuardsFunction, GuardsFunction,  # rhs, jac, guards, observe
+    RhsFunction, JacFunction, GuardsFunction, GuardsFunction, GuardsFunction,  # rhs, jac, guards, observe, impact
     VECTOR, MODE_TABLES,  # p (its latches are written), tables
     types.float64, VECTOR, VECTOR, types.int64, types.float64,  # t0, y0, quad, mode0, t_end
     TOLERANCES, types.int64,  # tol, max_steps
@@ -269,8 +355,8 @@ HYBRID_SIG = types.Tuple((types.int64, types.float64, types.int64, types.int64, 
 
 
 @cache_guard.compile_cached(HYBRID_SIG, error_model="numpy", nogil=True)
-def integrate_hybrid(method, rhs, jac, guards, observe, p, tables, t0, y0, quad, mode0, t_end, tol, max_steps,
-                     out, log, mon, counters):
+def integrate_hybrid(method, rhs, jac, guards, observe, impact, p, tables, t0, y0, quad, mode0, t_end, tol,
+                     max_steps, out, log, mon, counters):
     """Integrate the model from (t0, y0) to t_end through its mode changes.
 
     tables: the ModeTables from ``modes.tables``. p: parameters and latches;
@@ -284,8 +370,9 @@ def integrate_hybrid(method, rhs, jac, guards, observe, p, tables, t0, y0, quad,
         parameter vector with the latches in force (a row at an event time belongs to
         the segment that ends there: its left limit); rows after a stop keep their
         contents, mode -1.
-    log: the EventLog (time; guard, from-mode, to-mode (-1: stop); state), its
-        capacity is log.t.size. mon: (K, 3) running max |observable k|
+    log: the EventLog (time; guard, from-mode, to-mode (-1: stop); state after the event;
+        an impact's (P_n, P_t, energy lost, v1 before)), its capacity is log.t.size. impact: the model's impact frame (a collision
+        when a gap closes, with a clearance). mon: (K, 3) running max |observable k|
         as (|value|, value, t), K = number of observables; pass zeros.
     counters: int64[4] as in segment (steps, rejected, rhs calls, jac calls).
 
@@ -305,6 +392,8 @@ def integrate_hybrid(method, rhs, jac, guards, observe, p, tables, t0, y0, quad,
         return INVALID_INPUT, t0, 0, -1, NEED_NOTHING, -1
     y, q = y0.copy(), quad.copy()
     g, y_tmp, f = np.empty(n_guards), np.empty(n), np.empty(n)
+    frame, jump = np.empty(IMPACT_FRAME), np.zeros(JUMP_WIDTH)
+    m_free = _mode(M_FREE, 0, 0, tables)
     obs = np.empty(mon.shape[0])
     out.mode[:] = -1
     k_d = _guard(G_D, tables.guard_kind)
@@ -312,10 +401,13 @@ def integrate_hybrid(method, rhs, jac, guards, observe, p, tables, t0, y0, quad,
     mode, need, status = mode0, NEED_NOTHING, FINISHED
     if mode < 0:
         v = y[n - 1]
-        if v == 0.0:
-            mode, need = _at_rest(rhs, guards, t0, y, p, tol, tables, g, y_tmp, f, True)
+        flank = _touching(guards, t0, y, p, tables, g)
+        if m_free >= 0 and flank == 0:
+            mode = m_free
+        elif v == 0.0:
+            mode, need = _at_rest(flank, rhs, guards, t0, y, p, tol, tables, g, y_tmp, f, True)
         else:
-            mode, need = _sliding(1 if v > 0.0 else -1, rhs, guards, t0, y, p, tol, tables,
+            mode, need = _sliding(1 if v > 0.0 else -1, flank, rhs, guards, t0, y, p, tol, tables,
                                   g, y_tmp, f)
     if mode < 0:
         return UNDECLARED, t0, 0, -1, need, -1
@@ -373,7 +465,7 @@ def integrate_hybrid(method, rhs, jac, guards, observe, p, tables, t0, y0, quad,
         if kind == G_D or kind == G_JAM:  # D or the jam factor of this mode reached 0
             if mon.shape[0] > 0 and mon[0, 0] != np.inf:  # (the approach marked them already)
                 _unbounded(observe, guards, mode, t, y, p, k_d, mon, obs, g)
-            n_ev = _log(log, n_ev, t, k, mode, -1, y, q)
+            n_ev = _log(log, n_ev, t, k, mode, -1, y, q, jump)
             status = INCONSISTENT
             break
         p_left = p.copy() if kind == G_TRIP or kind == G_LAW else p  # the laws up to the event: its left limit
@@ -381,14 +473,20 @@ def integrate_hybrid(method, rhs, jac, guards, observe, p, tables, t0, y0, quad,
             p[tables.guard_latch[k]] = t
         elif kind == G_LAW:
             _latch_pieces(guards, t, y, p, tables, g)
-        new, status, need = _select(mode, kind, rhs, guards, t, y, p, tol, tables, g,
-                                    y_tmp, f)
+        jump[:] = 0.0
+        if kind == G_GAP_A or kind == G_GAP_B:  # the gap closed: a collision on that flank
+            new, status, need = _collide(impact, 1 if kind == G_GAP_A else -1, rhs, guards, t, y, p, tol,
+                                         tables, g, y_tmp, f, frame, jump)
+            if frame[0] < np.inf:  # a first step inside the bounce, so that the gap's guard is armed again
+                h = 0.25 * frame[0] if h <= 0.0 else min(h, 0.25 * frame[0])
+        else:
+            new, status, need = _select(mode, kind, rhs, guards, t, y, p, tol, tables, g, y_tmp, f)
         if status == FINISHED and not _consistent(new, guards, t, y, p, tables, g):
             status = INCONSISTENT
             _unbounded(observe, guards, mode, t, y, p_left, -1, mon, obs, g)
         if status == FINISHED and new == mode and kind == G_PHI:
             continue  # phi crossed within its noise (the probe keeps the flank): no event
-        n_ev = _log(log, n_ev, t, k, mode, new if status == FINISHED else -1, y, q)
+        n_ev = _log(log, n_ev, t, k, mode, new if status == FINISHED else -1, y, q, jump)
         if status != FINISHED:
             mode = new if status == INCONSISTENT else mode
             break
@@ -426,13 +524,14 @@ def integrate(method, model, p, tables, y0, t_end, *, rtol, atol, t_out, max_eve
     t_out = np.ascontiguousarray(t_out, dtype=np.float64)
     out = Outputs(t_out, np.full((t_out.size, width), np.nan), np.empty(t_out.size, np.int64),
                   np.empty((t_out.size, p.size)))
-    log = EventLog(np.empty(max_events), np.empty((max_events, 3), np.int64), np.empty((max_events, width)))
+    log = EventLog(np.empty(max_events), np.empty((max_events, 3), np.int64), np.empty((max_events, width)),
+                   np.zeros((max_events, JUMP_WIDTH)))
     mon, counters = np.zeros((len(model.OBSERVABLES), 3)), np.zeros(segment.N_COUNTERS, np.int64)
     tol = Tolerances(float(rtol), np.array(np.broadcast_to(np.asarray(atol, np.float64), y0.shape)),
                      float(hmin), float(hmax))
     jac = model.jac  # DOPRI5 calls it only to confirm an equilibrium before holding it (steady)
     args = (method, compiled(model.rhs, RHS_SIG), compiled(jac, JAC_SIG), compiled(model.guards, GUARDS_SIG),
-            compiled(model.observe, GUARDS_SIG), p, tables, float(t0), y0, quad, int(mode0), float(t_end), tol,
+            compiled(model.observe, GUARDS_SIG), compiled(model.impact, GUARDS_SIG), p, tables, float(t0), y0, quad, int(mode0), float(t_end), tol,
             int(max_steps), out, log, mon, counters)
     result = call(integrate_hybrid, args, counters)
     return (*result, out, log, mon, counters)

@@ -31,9 +31,11 @@ EVENT_SETTINGS = types.NamedTuple((INTS, types.float64, types.float64, types.boo
 Outputs = namedtuple("Outputs", "t y mode p")
 OUTPUTS = types.NamedTuple((VECTOR, MATRIX, INTS, MATRIX), Outputs)
 
-#: The event log: time; (guard, from-mode, to-mode or -1 for a stop); state.
-EventLog = namedtuple("EventLog", "t index state")
-EVENT_LOG = types.NamedTuple((VECTOR, types.int64[:, ::1], MATRIX), EventLog)
+#: The event log: time; (guard, from-mode, to-mode or -1 for a stop); state after the event;
+#: for an impact (P_n, P_t, kinetic energy lost, v1 before it), zeros for other events.
+EventLog = namedtuple("EventLog", "t index state jump")
+EVENT_LOG = types.NamedTuple((VECTOR, types.int64[:, ::1], MATRIX, MATRIX), EventLog)
+JUMP_WIDTH = 4
 
 #: A model's modes and guards as integers (``modes.tables``): per mode its kind (sliding,
 #: stick, Filippov), flank, direction, whether the scene declares it; per mode and guard

@@ -32,6 +32,8 @@ class GuardKind(IntEnum):
     SLIDE_EXIT_A = hybrid.G_SLIDE_A
     SLIDE_EXIT_B = hybrid.G_SLIDE_B
     TRIP = hybrid.G_TRIP
+    GAP_A = hybrid.G_GAP_A
+    GAP_B = hybrid.G_GAP_B
 
 
 GUARD_KINDS = {
@@ -39,7 +41,7 @@ GUARD_KINDS = {
     "cone_forward": GuardKind.CONE_FORWARD, "cone_backward": GuardKind.CONE_BACKWARD,
     "flank_normal": GuardKind.FLANK_NORMAL, "load_step": GuardKind.LAW, "load_contact": GuardKind.LAW,
     "slide_exit_a": GuardKind.SLIDE_EXIT_A, "slide_exit_b": GuardKind.SLIDE_EXIT_B,
-    "torque_switch": GuardKind.TRIP,
+    "torque_switch": GuardKind.TRIP, "gap_a": GuardKind.GAP_A, "gap_b": GuardKind.GAP_B,
 }
 GUARD_EVENT_NAMES = {
     "phi": "flank switch (phi = 0)", "v1": "v1 = 0", "D": "D = 0", "jam": "jam factor = 0",
@@ -47,6 +49,7 @@ GUARD_EVENT_NAMES = {
     "flank_normal": "flank change in stick", "load_step": "load step", "load_contact": "load contact",
     "slide_exit_a": "leaves phi = 0 to flank a", "slide_exit_b": "leaves phi = 0 to flank b",
     "torque_switch": "torque switch trips",
+    "gap_a": "impact on flank a", "gap_b": "impact on flank b",
 }
 SCHEDULE_GUARD = re.compile(r"(load|drive)_at([0-9]+)")
 
@@ -65,9 +68,12 @@ def event_name(guard: str) -> str:
 
 
 def mode_kind(name: str) -> int:
-    """hybrid.M_* of a mode name: stick, slide_* (Filippov on phi = 0) or sliding."""
+    """hybrid.M_* of a mode name: stick, free (flight across the clearance), slide_* (Filippov
+    on phi = 0) or sliding."""
     if name == "stick":
         return hybrid.M_STICK
+    if name == "free":
+        return hybrid.M_FREE
     if name.startswith("slide_"):
         return hybrid.M_FILIPPOV
     return hybrid.M_SLIDING

@@ -19,7 +19,9 @@ DPI = 200
 REGIME_COLOURS = {
     "tractive": "tab:blue", "inverse-tractive": "tab:orange", "stick": "tab:gray",
     "backward on flank a": "tab:green", "backward on flank b": "tab:red",
+    "free flight": "white",
 }
+FREE_HATCH = "////"   # free flight (a clearance open) is hatched, not tinted
 SPARE_COLOURS = ("tab:purple", "tab:brown", "tab:pink", "tab:olive", "tab:cyan")
 PANELS = (("a1", "a1 [m/s^2]", None), ("S1", "S1 [N]", ("S1_max", "t_S1_max")),
           ("S2", "S2 [N]", ("S2_max", "t_S2_max")))
@@ -61,19 +63,27 @@ def title(result: Result, module: ModuleType) -> str:
 
 def figure(result: Result, module: ModuleType, *, heading: str | None = None,
            event_labels: bool = False) -> Figure:
-    """Three stacked panels sharing t: a1, S1, S2; phases shaded by regime, events as dashed
-    vertical lines, the maxima of S1 and S2 marked. ``heading`` replaces the title;
+    """Stacked panels sharing t: a1, S1, S2 (and the gap, with a clearance); phases shaded by
+    regime (free flight hatched), events as dashed vertical lines, impacts as red lines with
+    their energy loss, the maxima of S1 and S2 marked. ``heading`` replaces the title;
     ``event_labels`` writes each event's guard and time beside its line in the top panel."""
-    fig = Figure(figsize=(8.0, 8.0), layout="constrained")
+    panels = PANELS + ((("gap", "gap [mm]", None),) if result.gap.size else ())
+    fig = Figure(figsize=(8.0, 2.7 * len(panels)), layout="constrained")
     FigureCanvasAgg(fig)
-    axes = fig.subplots(len(PANELS), 1, sharex=True)
+    axes = fig.subplots(len(panels), 1, sharex=True)
     colours = regime_colours(ph.regime for ph in result.phases)
-    for ax, (name, label, peak) in zip(axes, PANELS):
+    for ax, (name, label, peak) in zip(axes, panels):
         for ph in result.phases:
-            ax.axvspan(ph.t_start, ph.t_end, color=colours[ph.regime], alpha=0.15, linewidth=0)
+            free = ph.regime == "free flight"
+            ax.axvspan(ph.t_start, ph.t_end, facecolor=colours[ph.regime], alpha=0.15 if not free else 0.4,
+                       hatch=FREE_HATCH if free else None, edgecolor="tab:gray" if free else None, linewidth=0)
         for e in result.events:
-            ax.axvline(e.t, color="black", linestyle="--", linewidth=0.6, alpha=0.6)
-        ax.plot(result.t, getattr(result, name), color="black", linewidth=1.0)
+            if e.jump is None:
+                ax.axvline(e.t, color="black", linestyle="--", linewidth=0.6, alpha=0.6)
+            else:
+                ax.axvline(e.t, color="tab:red", linestyle="-", linewidth=0.8, alpha=0.7)
+        values = getattr(result, name) * (1e3 if name == "gap" else 1.0)
+        ax.plot(result.t, values, color="black", linewidth=1.0)
         if peak is not None and result.t.size:
             value, at = getattr(result, peak[0]), getattr(result, peak[1])
             ax.plot([at], [value], marker="o", color="tab:red", markersize=5, linestyle="none")
@@ -87,8 +97,12 @@ def figure(result: Result, module: ModuleType, *, heading: str | None = None,
                              xytext=(3, -3), textcoords="offset points", rotation=90, va="top",
                              fontsize=7)
     axes[-1].set_xlabel("t [s]")
-    handles = [Patch(color=c, alpha=0.3, label=r) for r, c in colours.items()]
-    if result.events:
+    handles = [Patch(facecolor=c, alpha=0.3, label=r, hatch=FREE_HATCH if r == "free flight" else None,
+                     edgecolor="tab:gray" if r == "free flight" else None) for r, c in colours.items()]
+    if result.impacts:
+        handles.append(Line2D([], [], color="tab:red", linewidth=0.8,
+                              label=f"impact ({len(result.impacts)}, {result.impact_energy:.3g} J lost)"))
+    if len(result.events) > len(result.impacts):
         handles.append(Line2D([], [], color="black", linestyle="--", linewidth=0.6, label="event"))
     handles.append(Line2D([], [], color="tab:red", marker="o", linestyle="none", label="largest |S|"))
     fig.legend(handles=handles, loc="outside lower center", ncols=min(len(handles), 4), fontsize=8)

@@ -40,8 +40,20 @@ NEEDED_MODE = {hybrid.NEED_STICK: "stick", hybrid.NEED_FORWARD: "forward",
 
 
 @dataclass(frozen=True)
+class Jump:
+    """What an impact did: the normal and tangential impulse on body 2, the kinetic energy
+    lost (>= 0), and v1 before it (the event's state is the one after)."""
+
+    P_n: float
+    P_t: float
+    energy_lost: float
+    v1_before: float
+
+
+@dataclass(frozen=True)
 class Event:
-    """A mode change: time, the guard that fired, from-mode, to-mode (None: the run stopped)."""
+    """A mode change: time, the guard that fired, from-mode, to-mode (None: the run stopped);
+    x1, v1 just after it; for an impact, its Jump."""
 
     t: float
     guard: str
@@ -49,15 +61,18 @@ class Event:
     to_mode: str | None
     x1: float
     v1: float
+    jump: Jump | None = None
 
     @property
     def kind(self) -> str:
         return event_name(self.guard)
 
     def to_dict(self) -> dict:
-        """t, guard, kind, from_mode, to_mode (None: the run stopped there), x1, v1."""
+        """t, guard, kind, from_mode, to_mode (None: the run stopped there), x1, v1; an impact's
+        P_n, P_t, energy_lost, v1_before."""
+        jump = vars(self.jump) if self.jump else {}
         return {"t": self.t, "guard": self.guard, "kind": self.kind, "from_mode": self.from_mode,
-                "to_mode": self.to_mode, "x1": self.x1, "v1": self.v1}
+                "to_mode": self.to_mode, "x1": self.x1, "v1": self.v1, **jump}
 
 
 @dataclass(frozen=True)
@@ -108,6 +123,18 @@ class Result:
     model: dict = field(default_factory=dict)    # equations, param_units, fixed_params, mode_regime
     event_a1: np.ndarray = field(default_factory=lambda: np.empty(0))  # a1 just after each event (NaN: stop)
     extras: dict = field(default_factory=dict)
+    gap: np.ndarray = field(default_factory=lambda: np.empty(0))       # normal gap from flank a (with a clearance)
+    gap_rate: np.ndarray = field(default_factory=lambda: np.empty(0))
+
+    @property
+    def impacts(self) -> list[Event]:
+        """The events that were impacts (gap closed on a flank)."""
+        return [e for e in self.events if e.jump is not None]
+
+    @property
+    def impact_energy(self) -> float:
+        """Kinetic energy lost in all impacts [J]."""
+        return float(sum(e.jump.energy_lost for e in self.impacts))
 
     @property
     def success(self) -> bool:
@@ -179,27 +206,32 @@ class Result:
         return out
 
     @classmethod
-    def build(cls, module: ModuleType, p: np.ndarray, p_rows: np.ndarray, run: dict, t, x1, v1, mode, rows,
-              events, mon, counters, *, hybrid_status: int, t_stop: float, first_mode: int,
+    def build(cls, module: ModuleType, p: np.ndarray, p_rows: np.ndarray, run: dict, t, y, mode, rows,
+              events, event_states, mon, counters, *, hybrid_status: int, t_stop: float, first_mode: int,
               message: str) -> Result:
-        """Assemble the result; ``rows``: (a1, S1, S2, F1, F2) at each output point, each
-        evaluated with the mode and the latched laws in force there (``p_rows``)."""
-        n = len(module.STATES)
+        """Assemble the result; ``y``: states (and their integral) at each output point; ``rows``:
+        (a1, S1, S2, F1, F2) there, each evaluated with the mode and the latched laws in force
+        there (``p_rows``); ``event_states``: the states at each event (before an impact)."""
+        states = {name: np.ascontiguousarray(y[:, k]) for k, name in enumerate(module.STATES)}
+        x1 = states.get("x1", y[:, len(module.STATES)] if y.shape[1] > len(module.STATES) else np.empty(0))
+        v1 = states["v1"]
+        gap, gap_rate = states.get("gap", np.empty(0)), states.get("gap_rate", np.empty(0))
         a1, S1, S2, F1, F2 = (np.ascontiguousarray(rows[:, k]) for k in range(5))
         event_a1 = np.full(len(events), np.nan)
         for e, event in enumerate(events):
             if event.to_mode is not None:
                 after = np.searchsorted(t, event.t, side="right")
                 pr = p_rows[after] if after < t.size else p
-                y = np.array([event.x1, event.v1][2 - n:])
-                event_a1[e] = module.accel(module.MODES.index(event.to_mode), event.t, y, pr)
-        slope = math.tan(_value(module, p, "gamma"))
+                ye = np.ascontiguousarray(event_states[e], dtype=np.float64)
+                event_a1[e] = module.accel(module.MODES.index(event.to_mode), event.t, ye, pr)
+        x2, v2 = module.body2(x1, v1, gap if gap.size else 0.0, gap_rate if gap_rate.size else 0.0, p)
         KD1 = KD2 = None
         if module.HAS_LOAD_FACTORS:
             KD1, KD2 = module.load_factors(mon[0, 1], mon[1, 1], p)
         return cls(
             scene=module.SCENE, params=dict(zip(module.PARAM_NAMES, p.tolist())), settings=dict(run),
-            t=t, x1=x1, v1=v1, a1=a1, x2=x1 * slope, v2=v1 * slope, S1=S1, S2=S2, F1=F1, F2=F2,
+            t=t, x1=x1, v1=v1, a1=a1, x2=np.asarray(x2 + 0.0 * x1), v2=np.asarray(v2 + 0.0 * v1), S1=S1, S2=S2,
+            F1=F1, F2=F2, gap=gap, gap_rate=gap_rate,
             mode=mode, mode_names=tuple(module.MODES), events=events,
             phases=_phases(module, first_mode, events, t_stop),
             S1_max=float(mon[0, 1]), t_S1_max=float(mon[0, 2]), S2_max=float(mon[1, 1]),
@@ -235,6 +267,12 @@ def _phases(module: ModuleType, first: int, events: list[Event], t_stop: float) 
 def _inconsistent(module: ModuleType, t_stop: float, y_stop: np.ndarray, last: int, events: list[Event],
                   p: np.ndarray) -> str:
     """Where and why no finite contact force exists: the mode, D's formula and value."""
+    if events and events[-1].jump is not None and events[-1].to_mode is None:
+        flank = events[-1].guard[-1]
+        return (f"inconsistent at t = {t_stop:.9g} s: the impact on flank {flank} jams: with the friction angle "
+                f"there, the sliding impulse (friction against the slip) cannot stop the flanks' approach "
+                f"(W_nn - mu sigma W_nt <= 0 in the flank's frame: the impact counterpart of D <= 0), so no "
+                f"impulse satisfies Coulomb's law; lower the friction or change the masses")
     name = module.MODES[last]
     g = np.empty(len(module.GUARDS))
     module.guards(last, t_stop, np.ascontiguousarray(y_stop, dtype=np.float64), p, g)
