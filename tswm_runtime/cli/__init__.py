@@ -307,6 +307,9 @@ def _parser() -> argparse.ArgumentParser:
     from tswm_runtime.cli import sweep as sweep_cli  # sweep and bench: argument parsing only, work imported lazily
 
     sweep_cli.add_parsers(sub)
+    from tswm_runtime.cli import fit as fit_cli
+
+    fit_cli.add_parser(sub)
     paper = sub.add_parser("paper", help="the paper's Table 3 and Figure 2 against tswm: a Markdown/HTML report",
                            description="Run the paper's cases in three readings (consistent, printed equations, "
                                        "run-up then load) and write DIR/paper-report.{md,html,json}, the Figure 2 "

@@ -1,0 +1,91 @@
+"""The ``tswm fit`` subcommand (argument parsing only; the work is imported when it runs)."""
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+import time
+
+FIT_SETTINGS = ("t_end", "rtol", "atol", "method", "max_steps", "max_events", "points")
+
+
+def _fit(args: argparse.Namespace) -> int:
+    start = time.perf_counter()
+    from tswm_runtime.cli import UsageError, _load_model, output_directory, setting_error, setting_overrides
+    from tswm_runtime.apps.fit import FitInputError, fit, write_outputs
+    from tswm_runtime.apps.simulate import SimulationInputError
+
+    output_directory(args.output)
+    try:
+        import pandas  # noqa: F401  (reads the measured file)
+    except ModuleNotFoundError:
+        raise UsageError("tswm fit reads CSV and Parquet with pandas and pyarrow: pip install -e '.[sweep]'") from None
+    module = _load_model(args.scene)
+    overrides = setting_overrides(args, FIT_SETTINGS)
+    try:
+        result = fit(module, args.measured, args.free, overrides=overrides, starts=args.starts,
+                     sampler=args.sampler, seed=args.seed, magnitude=args.magnitude, confidence=args.confidence,
+                     grid_points=args.grid_points, progress=not args.no_progress, misfit=not args.no_plot)
+    except KeyboardInterrupt:
+        print(f"tswm fit {args.scene}: interrupted (Ctrl-C) after {time.perf_counter() - start:.3g} s; "
+              "nothing written", file=sys.stderr)
+        return 130
+    except FitInputError as error:
+        raise UsageError(str(error)) from None
+    except SimulationInputError as error:
+        raise setting_error(error, overrides) from None
+    print(f"scene {result.scene}: {result.measured['form']} of {result.measured['cases']} case(s) from "
+          f"{args.measured}; {len(result.starts)} start(s), {result.fit_settings['model_runs']} model runs, "
+          f"{time.perf_counter() - start:.3g} s")
+    for name, unit in zip(result.names, result.units):
+        lo, hi = result.ci[name]
+        ci = ("no CI" if math.isnan(lo) else "CI unbounded" if not (math.isfinite(lo) and math.isfinite(hi))
+              else f"{result.confidence:.0%} CI [{lo:.6g}, {hi:.6g}]")
+        print(f"  {name} = {result.estimate[name]:.8g} {unit}  ({ci}; bounds {result.bounds[name][0]:g} to "
+              f"{result.bounds[name][1]:g})")
+    print(f"  cost {result.cost:.6g}, {result.dof} degrees of freedom, condition {result.condition:.4g}")
+    for k, s in enumerate(result.starts):
+        print(f"  start {k + 1}{' (best)' if k == result.best_start else ''}: "
+              f"{', '.join(f'{v:.6g}' for v in s.x0)} -> {', '.join(f'{v:.8g}' for v in s.x)}, cost {s.cost:.6g}, "
+              f"{s.nfev} evaluations")
+    for note in result.notes:
+        print(f"  note: {note}")
+    for path in write_outputs(result, args.output, plot=not args.no_plot):
+        print(f"  wrote {path}")
+    return 0 if result.success else 1
+
+
+def add_parser(sub) -> None:
+    """Add ``fit`` to the ``tswm`` subparsers."""
+    from tswm_runtime.cli import add_setting_options
+
+    fit = sub.add_parser(
+        "fit", help="identify free parameters from measured peaks or time histories (least squares)",
+        description="Fit free parameters of a scene to measured values: peaks (one row per case: known "
+                    "parameters, S1m, S2m, KD1, KD2) or a time history (columns t, case, S1, S2, v1), from a "
+                    "CSV or Parquet file, with scipy.optimize.least_squares from several starts. Writes "
+                    "DIR/fit-report.md, fit.json and misfit.png (see docs/fit.md). Exit status: 0 fitted, 1 "
+                    "fitted but a case does not finish at the optimum (or no start converged), 2 bad input, "
+                    "130 interrupted.")
+    fit.add_argument("scene", help="a shipped scene name, a scene file (.toml) or a generated module's .py path")
+    fit.add_argument("--measured", required=True, metavar="FILE",
+                     help="the measured table, .csv or .parquet (docs/fit.md)")
+    fit.add_argument("--free", action="append", default=[], required=True, metavar="NAME[=LO:HI]",
+                     help="a free parameter to fit, within LO..HI (bare NAME: the scene's range, where it "
+                          "gives one); repeatable")
+    fit.add_argument("--starts", type=int, default=4, metavar="K", help="starting points (default 4, at most 64)")
+    fit.add_argument("--sampler", choices=("sobol", "lhs"), default="sobol",
+                     help="how the starts are spread in the bounds (scipy.stats.qmc; default sobol)")
+    fit.add_argument("--seed", type=int, default=0, help="seed of the starts (default 0)")
+    fit.add_argument("--magnitude", action="store_true", help="compare |S1m| and |S2m| (default: signed values "
+                     "as the sweep reports them)")
+    fit.add_argument("--confidence", type=float, default=0.95, help="confidence level of the intervals "
+                     "(default 0.95)")
+    fit.add_argument("--grid-points", type=int, metavar="N",
+                     help="misfit plot: points per axis (default 41 for one parameter, 15 for two)")
+    add_setting_options(fit, FIT_SETTINGS)
+    fit.add_argument("-o", "--output", default="tswm-report/fit", metavar="DIR",
+                     help="write DIR/fit-report.md, fit.json, misfit.png (default tswm-report/fit)")
+    fit.add_argument("--no-plot", action="store_true", help="no misfit grid and no misfit.png")
+    fit.add_argument("--no-progress", action="store_true", help="no progress bars")
+    fit.set_defaults(run=_fit)
