@@ -300,6 +300,11 @@ def _mode_functions(em: _Emitter) -> list[Function]:
             continue
         out.append(em.function(f"reactions_{mode.name}", f"(S1, S2) in mode {mode.name}: "
                                f"S1 = {_short(mode.S1)}, S2 = {_short(mode.S2)}", [mode.S1, mode.S2]))
+        if mode.mesh:
+            what = "(N, slip)" if mode.direction else "(N, cone_forward, cone_backward)"
+            out.append(em.function(f"contact_{mode.name}", f"{what} of the compliant contact in mode {mode.name}: "
+                                   f"N = {_short(mode.normal)}; the mode holds while each is >= 0 (the slip "
+                                   "keeps its sign)", list(mode.mesh)))
         if mode.denominator is not None:
             outs = [mode.denominator] + ([mode.jam] if mode.jam is not None else [])
             out.append(em.function(f"consistency_{mode.name}", f"(D{', jam' if mode.jam is not None else ''}) "
@@ -354,7 +359,14 @@ def _parameter_checks(model: Model, free: tuple[str, ...]) -> tuple[tuple, ...]:
     return tuple(c for c in model.scene.checks if names & {c[1], *(c[3:4] if c[0] != "range" else ())})
 
 
+MESH_GUARDS = ("mesh_normal", "slip")   # compliant contact: its normal force, the slip
+
+
 def guard_names(model: Model) -> tuple[str, ...]:
+    if any(m.mesh for m in model.modes):
+        cones = STICK_GUARDS[:2] if any(m.mesh and not m.direction for m in model.modes) else ()
+        return (MESH_GUARDS + cones + tuple(e.name for e in model.events) + tuple(latch.name for latch in model.latches)
+                + GAP_GUARDS)
     sliding = SLIDING_GUARDS if any(m.jam is not None for m in model.modes) else SLIDING_GUARDS[:3]
     slide = SLIDE_GUARDS if any(m.slide is not None for m in model.modes) else ()
     return (sliding + (STICK_GUARDS if model.stick else ()) + tuple(e.name for e in model.events) + slide
@@ -372,9 +384,10 @@ def _guard_directions(model: Model) -> tuple[tuple[int, ...], ...]:
         for name in names:
             if name == "phi":
                 row.append(-1 if mode.flank == "a" else 1)
-            elif name == "v1":
+            elif name in ("v1", "slip"):
                 row.append(-mode.direction)
-            elif name in ("D", "jam", "cone_forward", "cone_backward", *SLIDE_GUARDS, *GAP_GUARDS) or name in latches:
+            elif name in ("D", "jam", "cone_forward", "cone_backward", "mesh_normal", *SLIDE_GUARDS, *GAP_GUARDS) \
+                    or name in latches:
                 row.append(-1)
             elif name in in_time:
                 row.append(1)
@@ -395,6 +408,9 @@ def _guards(em: _Emitter) -> Function:
             gap_lines, gaps = em.body([gap, model.clearance - gap])
             lines += [f"    {line}" for line in gap_lines]
             lines.append(f"    g[{names.index('gap_a')}], g[{names.index('gap_b')}] = {gaps[0]}, {gaps[1]}")
+        elif mode.mesh:
+            targets = ("mesh_normal", "slip") if mode.direction else ("mesh_normal", *STICK_GUARDS[:2])
+            lines.append(f"    {', '.join(f'g[{names.index(n)}]' for n in targets)} = contact_{mode.name}(t, y, p)")
         elif mode.slide is not None:
             lines.append(f"    g[{names.index('v1')}] = y[{len(model.states) - 1}]")
             lines.append(f"    g[{names.index(SLIDE_GUARDS[0])}], g[{names.index(SLIDE_GUARDS[1])}] = "

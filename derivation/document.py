@@ -193,6 +193,8 @@ def _clearance_sections(model: Model) -> list[Section]:
              "reaches 0 and the own accelerations pull the flanks apart with zero relative speed. In contact the "
              "gap and its rate stay constant ($\\dot g = 0$, $\\ddot g = 0$). A clearance of zero lets the "
              "flanks part and meet at once: the zero-clearance model.")
+    if any(m.mesh for m in model.modes):
+        return [fly, _mesh_section()]
     law = Section("Impact law and energy")
     frame = M.impact_frame("a")
     law.text("When the gap closes on flank $f$ with approach speed $\\nu = f\\,\\dot g < 0$, an impulse "
@@ -221,6 +223,26 @@ def _clearance_sections(model: Model) -> list[Section]:
              "less than the gap's tolerance above the flank: every later bounce is smaller still, so this ends a "
              "sequence of bounces at its accumulation point instead of following it into ever smaller steps.")
     return [fly, law]
+
+
+def _mesh_section() -> Section:
+    """Compliant flanks: the spring-damper normal force, sliding and stick in contact."""
+    slide, stick = M.mesh_contact("a", 1), M.mesh_contact("a", 0)
+    s = Section("Compliant flanks")
+    s.text("The flanks may overlap; on flank a the overlap is $-g$ (on flank b, $g - c$) and the mesh pushes "
+           "back along the normal like a spring and damper, with Coulomb friction against the slip "
+           "$s = v_1\\cos\\gamma + v_2\\sin\\gamma$ (sliding forward, flank a):")
+    s.math(f"N = {_l(slide.normal)}, \\qquad T = {_l(slide.tangential)}",
+           _eq(M.a1, slide.accel1), f"\\ddot g = {_l(slide.gap_accel)}")
+    s.text("In stick the slip stays zero and the tangential force follows from the balance; the stick holds "
+           "while it stays inside the friction cone:")
+    s.math(f"T = {_l(stick.tangential)}", f"{_l(stick.cone_forward)} \\ge 0, \\qquad "
+           f"{_l(stick.cone_backward)} \\ge 0")
+    s.text("A contact ends where $N$ falls to zero (with damping before the overlap does) and begins where the "
+           "gap closes, without an impulse. As the stiffness grows with the damping ratio held, the contact "
+           "time shrinks like $1/\\sqrt{k}$ and the motion tends to that of rigid impacts with the "
+           "spring-damper's restitution, while the peak force grows like $\\sqrt{k}$.")
+    return s
 
 
 def _laws_section(model: Model) -> Section:

@@ -221,3 +221,49 @@ def impact_frame(flank: str) -> ImpactFrame:
     newton_stick = sp.simplify(in_frame - in_frame.subs({nu: -e_r * nu, s: 0}))
     v1_of = sp.trigsimp(frame[v1].subs(nu, f * gap_rate))
     return ImpactFrame(flank, W, jump_v1, jump_v2, v1_of, kinetic, in_frame, newton_stick)
+
+
+# Mesh compliance: the flanks may overlap; the overlap pushes them apart like a spring and damper.
+k_mesh, c_mesh = sp.symbols("k_mesh c_mesh", nonnegative=True)   # stiffness, damping along the normal
+clearance = sp.Symbol("clearance", nonnegative=True)
+
+
+@dataclass(frozen=True)
+class MeshContact:
+    """A compliant flank contact: N = k overlap + c d(overlap)/dt, Coulomb friction against the
+    slip (direction +-1), or stick (direction 0: the slip stays 0, T from the balance)."""
+
+    flank: str
+    direction: int
+    overlap: sp.Expr             # penetration along the flank normal, in gap (and clearance)
+    normal: sp.Expr              # N in terms of the states
+    tangential: sp.Expr          # T, force on body 2 along t (stick: from the balance; slide: -s mu N)
+    accel1: sp.Expr
+    accel2: sp.Expr
+    gap_accel: sp.Expr
+    cone_forward: sp.Expr        # stick: mu N + T >= 0 while no slip forward
+    cone_backward: sp.Expr       # stick: mu N - T >= 0 while no slip backward
+    friction_power: sp.Expr      # power the contact's friction absorbs (>= 0)
+
+
+@lru_cache(maxsize=None)
+def mesh_contact(flank: str, direction: int) -> MeshContact:
+    """Newton for both bodies under a spring-damper normal force and Coulomb friction."""
+    f = FLANK_SIGN[flank]
+    ff = free_flight()
+    overlap = -gap if f == 1 else gap - clearance
+    normal = k_mesh * overlap + c_mesh * sp.diff(overlap, gap) * gap_rate
+    mu = sp.tan(rho)
+    T_ = T if direction == 0 else -direction * mu * normal
+    force = normal * f * NORMAL + T_ * TANGENT                      # on body 2
+    R1, R2 = _contact_forces(force)
+    acc = {a1: (F1 + R1) / m1, a2: (F2 + R2) / m2}
+    if direction == 0:
+        slip_accel = ff.slip.subs({v1: a1, v2: a2})
+        T_ = sp.solve(sp.Eq(slip_accel.subs(acc), 0), T)[0]
+        acc = {k: sp.simplify(v.subs(T, T_)) for k, v in acc.items()}
+    gap_accel = sp.simplify(ff.normal_speed.subs({v1: a1, v2: a2}).subs(acc))
+    slip = ff.slip.subs(v2, ff.v2_of)
+    power = -T_ * slip if direction else sp.Integer(0)
+    return MeshContact(flank, direction, overlap, normal, sp.simplify(T_), acc[a1], acc[a2], gap_accel,
+                       sp.simplify(mu * normal + T_), sp.simplify(mu * normal - T_), power)

@@ -69,6 +69,7 @@ class Mode:
     slide: Slide | None = None           # the sliding mode along phi = 0 (literal equations only)
     declared: bool = True                # False: generated, but the scene does not let a run enter it
     gap_accel: sp.Expr | None = None     # d gap_rate/dt with a clearance: 0 in contact, own in free flight
+    mesh: tuple[sp.Expr, ...] = ()       # compliant contact's guards: (N, slip) sliding, (N, cones) stick
 
 
 @dataclass(frozen=True)
@@ -158,7 +159,8 @@ def _laws(scene: Scene, rho_of: dict[str, sp.Symbol]) -> tuple[tuple[Quantity, .
     load, load_pieces = laws.load_force(scene.load, param_symbol, x2)
     drive, doc, latches, drive_pieces = _drive(scene, x2)
     quantities = []
-    if x2 in load.free_symbols | drive.free_symbols:
+    breakpoints = [e.expr for p in (load_pieces, drive_pieces) if p is not None for e in p.events]
+    if x2 in set().union(load.free_symbols, drive.free_symbols, *(e.free_symbols for e in breakpoints)):
         if scene.clearance is None:
             x2_expr = mechanics.kinematics().x2_of_x1.subs(mechanics.gamma, slope)
             quantities.append(Quantity(x2, x2_expr, "position of body 2 (kinematic constraint)"))
@@ -270,6 +272,34 @@ def _with_clearance(scene: Scene, rho_of: dict[str, sp.Symbol], modes: list[Mode
     return [*contact, free], tuple(impacts)
 
 
+def _mesh_modes(scene: Scene, rho_of: dict[str, sp.Symbol]) -> list[Mode]:
+    """Free flight and compliant contact on each flank: sliding with the slip's sign, or stick."""
+    ff = mechanics.free_flight()
+    sub = _specialise(scene, "a", rho_of)
+    sub.update({mechanics.k_mesh: param_symbol(scene.mesh["stiffness"]),
+                mechanics.c_mesh: param_symbol(scene.mesh["damping"]),
+                mechanics.clearance: param_symbol(scene.clearance)})
+    modes = [Mode(name="free", regime="free flight", flank="", direction=0, accel=ff.accel1.subs(sub),
+                  S1=sp.Integer(0), S2=sp.Integer(0), gap_accel=ff.gap_accel.subs(sub))]
+    wanted = [(word, d) for word, (_, d) in DIRECTIONS.items() if word in scene.modes]
+    wanted += [("stick", 0)] if "stick" in scene.modes else []
+    slip = ff.slip.subs(mechanics.v2, ff.v2_of).subs(sub)
+    for word, direction in wanted:
+        for flank in scene.flanks:
+            c = mechanics.mesh_contact(flank, direction)
+            sub_f = {**sub, mechanics.rho: rho_of[flank]}
+            a1_, a2_ = c.accel1.subs(sub_f), c.accel2.subs(sub_f)
+            prefix = DIRECTIONS[word][0] if direction else "stick"
+            guards = (c.normal, slip) if direction else (c.normal, c.cone_forward, c.cone_backward)
+            modes.append(Mode(name=f"mesh_{prefix}_{flank}", regime=REGIMES[direction, flank] if direction else "stick",
+                              flank=flank, direction=direction, accel=sp.simplify(a1_),
+                              S1=sp.simplify(F1 - sub[mechanics.m1] * a1_),
+                              S2=sp.simplify(F2 - sub[mechanics.m2] * a2_), normal=c.normal.subs(sub_f),
+                              gap_accel=sp.simplify(c.gap_accel.subs(sub_f)),
+                              mesh=tuple(g.subs(sub_f) for g in guards)))
+    return modes
+
+
 def build_model(scene: Scene) -> Model:
     """Specialise the mechanics to ``scene``."""
     rho_of = _friction_symbols(scene)
@@ -291,7 +321,10 @@ def build_model(scene: Scene) -> Model:
     kin = mechanics.kinematics()
     body2 = (kin.x2_of_x1.subs(slope), (kin.ratio * v1).subs(slope))
     if scene.clearance is not None:
-        modes, impacts = _with_clearance(scene, rho_of, modes)
+        if scene.mesh is not None:
+            modes, stick = _mesh_modes(scene, rho_of), None
+        else:
+            modes, impacts = _with_clearance(scene, rho_of, modes)
         states = (x1, mechanics.gap, mechanics.gap_rate, v1)   # x1 too: body 2's position needs it
         ff = mechanics.free_flight()
         body2 = (ff.x2_of.subs(slope), ff.v2_of.subs(slope))

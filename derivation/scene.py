@@ -22,7 +22,7 @@ LITERAL_MODES = (("forward",), ("forward", "sliding"))
 EQUATIONS = ("consistent", "literal")
 METHODS = ("dopri5", "rosenbrock23")
 TOP_KEYS = ("name", "description", "equations", "wedge", "friction", "drive", "load",
-            "impact", "reference", "modes", "run")
+            "impact", "mesh", "reference", "modes", "run")
 NAME = re.compile(r"[a-z0-9][a-z0-9-]{0,63}")     # a file name on every system: at most 64 characters
 MAX_DESCRIPTION = 2000                            # characters
 MAX_SCENE_BYTES = 1_000_000                       # a scene file is a page of TOML; refuse anything near this
@@ -95,6 +95,7 @@ class Scene:
     checks: tuple[tuple, ...] = ()       # the rules of every model parameter, as data (see Checks)
     clearance: Param | None = None       # normal clearance between the flanks (backlash), None: zero
     restitution: Param | None = None     # coefficient of restitution of a flank impact ([impact])
+    mesh: dict[str, Param] | None = None # compliant flanks: stiffness, damping ([mesh]), None: rigid
 
     def params(self) -> tuple[Param, ...]:
         """Every distinct model parameter once: wedge, friction, drive, torque switch, load, reference."""
@@ -103,7 +104,7 @@ class Scene:
             *(p for law in self.friction.values() for p in law.all_params()),
             *self.drive.all_params(), *([self.torque_switch] if self.torque_switch else []),
             *self.load.all_params(), *self.reference.values(),
-            *(p for p in (self.clearance, self.restitution) if p is not None),
+            *(p for p in (self.clearance, self.restitution) if p is not None), *(self.mesh or {}).values(),
         )))
 
     def free_params(self) -> tuple[Param, ...]:
@@ -127,6 +128,7 @@ GAMMA = Rule("angle", 0.0, 90 * DEG)
 WEDGE = {"m1": Rule("mass", 0.0), "m2": Rule("mass", 0.0)}
 CLEARANCE = Rule("length", 0.0, lo_in=True)      # >= 0 (0: the flanks part and meet at once); absent: rigid
 IMPACT = {"restitution": Rule("dimensionless", 0.0, 1.0, lo_in=True, hi_in=True)}
+MESH = {"stiffness": Rule("stiffness", 0.0), "damping": Rule("damping", 0.0, lo_in=True, default=0.0)}
 FRICTION_LAWS = {
     "constant": {"rho": Rule("angle", 0.0, 90 * DEG, lo_in=True)},
     "velocity": {"a": Rule("dimensionless", 0.0, lo_in=True),
@@ -534,31 +536,41 @@ class _Reader:
         return modes
 
     def clearance(self, doc: dict, wedge: dict, flanks: tuple[str, ...], equations: str,
-                  run: Run) -> tuple[Param | None, Param | None]:
-        """wedge.clearance and [impact] restitution: both or neither; the start gap within the clearance."""
+                  run: Run) -> tuple[Param | None, Param | None, dict[str, Param] | None]:
+        """wedge.clearance with [impact] restitution (rigid flanks) or [mesh] stiffness and damping
+        (compliant flanks), or none of them; the start gap within the clearance."""
         impact = self.table(doc, "impact", required=False)
+        mesh_table = self.table(doc, "mesh", required=False)
         if "clearance" not in wedge:
-            if impact is not None:
-                self.fail("impact", "impacts need a clearance between the flanks: give wedge.clearance")
+            for name, table in (("impact", impact), ("mesh", mesh_table)):
+                if table is not None:
+                    self.fail(name, f"[{name}] needs a clearance between the flanks: give wedge.clearance")
             if run.gap:
                 self.fail("run.gap", "a start gap needs a clearance between the flanks: give wedge.clearance",
                           units.show(run.gap, "length"))
-            return None, None
+            return None, None, None
         if flanks != FLANKS or equations != "consistent":
             self.fail("wedge.clearance", 'a clearance needs both flanks (wedge.flanks = ["a", "b"]) and '
                       'equations = "consistent"')
         value, free = self.number(wedge, "clearance", "wedge", CLEARANCE)
         clearance = Param("clearance", value, units.si_unit("length"), free, "wedge.clearance")
         self.rule(clearance, CLEARANCE, None)
-        if impact is None:
-            self.fail("impact", "missing required table: a clearance needs [impact] restitution = e in [0, 1] "
-                      "(0: the flanks stay together after an impact, 1: elastic)")
-        self.keys(impact, "impact", tuple(IMPACT))
-        restitution = self.params(impact, "impact", IMPACT)["restitution"]
         if run.gap > value:
             self.fail("run.gap", f"must lie within the clearance, <= wedge.clearance = {units.show(value, 'length')}",
                       units.show(run.gap, "length"))
-        return clearance, restitution
+        if mesh_table is not None:
+            if impact is not None:
+                self.fail("impact", "give [impact] (rigid flanks that collide) or [mesh] (compliant flanks), "
+                          "not both")
+            self.keys(mesh_table, "mesh", tuple(MESH))
+            return clearance, None, self.params(mesh_table, "mesh", MESH, "mesh_")
+        if impact is None:
+            self.fail("impact", "missing required table: a clearance needs [impact] restitution = e in [0, 1] "
+                      "(0: the flanks stay together after an impact, 1: elastic), or [mesh] stiffness (and "
+                      "damping) for compliant flanks")
+        self.keys(impact, "impact", tuple(IMPACT))
+        restitution = self.params(impact, "impact", IMPACT)["restitution"]
+        return clearance, restitution, None
 
     def run(self, doc: dict) -> Run:
         table = self.table(doc, "run", required=False) or {}
@@ -594,10 +606,10 @@ class _Reader:
             self.fail("wedge.flanks", 'equations = "literal" needs ["a", "b"] (the printed '
                       "model switches between both flanks)", _toml(list(flanks)))
         run = self.run(doc)
-        clearance, restitution = self.clearance(doc, wedge, flanks, equations, run)
+        clearance, restitution, mesh = self.clearance(doc, wedge, flanks, equations, run)
         scene = Scene(name, description, equations, flanks, gamma, masses["m1"], masses["m2"],
                       friction, drive, load, reference or {}, modes, run,
-                      self.source, digest, torque_switch, tuple(dict.fromkeys(self.checks)), clearance, restitution)
+                      self.source, digest, torque_switch, tuple(dict.fromkeys(self.checks)), clearance, restitution, mesh)
         names = [p.name for p in scene.params()]
         assert len(set(names)) == len(names) and all(n.isidentifier() for n in names), names
         return scene

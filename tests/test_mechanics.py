@@ -167,3 +167,24 @@ def test_newton_with_stick_loses_negative_energy_somewhere():
     point = {M.m1: 11.8, M.m2: 200.0, M.gamma: np.radians(4.76), M.e_r: 1.0, M.nu: -1.0, M.slip_speed: 0.5}
     assert float(loss.subs(point)) < 0.0
     assert float(loss.subs({**point, M.slip_speed: 0.0, M.e_r: 0.5})) > 0.0
+
+
+@pytest.mark.parametrize("flank", ["a", "b"])
+@pytest.mark.parametrize("direction", [1, -1, 0])
+def test_mesh_contact_by_hand(flank, direction):
+    """Compliant flank: N = k overlap + c overlap' along f n on body 2, friction -s mu N along t
+    (or the T that keeps the slip's rate 0 in stick); Newton for each body written by hand."""
+    mc = M.mesh_contact(flank, direction)
+    f = M.FLANK_SIGN[flank]
+    sn, cs = sp.sin(M.gamma), sp.cos(M.gamma)
+    overlap = -M.gap if f == 1 else M.gap - M.clearance
+    N = M.k_mesh * overlap + M.c_mesh * sp.diff(overlap, M.gap) * M.gap_rate
+    assert zero(mc.normal - N)
+    T = -direction * sp.tan(M.rho) * N if direction else mc.tangential
+    a1 = (M.F1 - (N * f * sn - T * cs)) / M.m1                      # -(force on body 2) . e1
+    a2 = (M.F2 + (N * f * cs + T * sn)) / M.m2
+    assert zero(mc.accel1 - a1) and zero(mc.accel2 - a2)
+    assert zero(mc.gap_accel - (a2 * cs - a1 * sn))
+    if direction == 0:
+        assert zero(a1 * cs + a2 * sn)                              # the slip's rate is 0 in stick
+        assert zero(mc.cone_forward - (sp.tan(M.rho) * N + T)) and zero(mc.cone_backward - (sp.tan(M.rho) * N - T))

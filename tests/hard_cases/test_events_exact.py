@@ -301,3 +301,48 @@ def test_a_held_state_still_meets_its_scheduled_load_times():
     r = simulate("load-schedule", rtol=1e-9, atol=1e-12)
     assert r.njev > 0  # dopri5 looked up J only to confirm the equilibrium it held
     assert [e.guard for e in r.events][0] == "load_at1" and r.events[0].t == pytest.approx(0.3, abs=1e-15)
+
+
+X2_STEPS = """
+name = "x2-steps"
+[wedge]
+flanks = ["a", "b"]
+gamma = "10 deg"
+m1 = "10 kg"
+m2 = "100 kg"
+[friction]
+law = "constant"
+rho = "5 deg"
+[drive]
+law = "constant"
+F1 = "300 N"
+[load]
+law = "schedule"
+variable = "x2"
+shape = "steps"
+at = [{ value = "1 mm", free = true }]
+values = ["0 N", "-100 N"]
+[modes]
+include = ["forward", "stick"]
+[run]
+t_end = "0.2 s"
+v1 = "0.1 m/s"
+rtol = 1e-10
+atol = 1e-13
+"""
+
+
+def test_steps_in_x2_are_located_where_body_2_reaches_them(scene_module):
+    """A load stepped on at x2 = 1 mm (the law reads only its latched piece, the breakpoint's
+    guard reads x2): reached at the closed-form time of uniform acceleration on flank a."""
+    from hard_cases.test_impacts import sliding_a_accel
+    module = scene_module(X2_STEPS)
+    a1 = sliding_a_accel(300.0, 0.0, 10.0, 100.0, math.tan(math.radians(5.0)))
+    # x2 = x1 tan(gamma) = (0.1 t + a1 t^2 / 2) tan(gamma) = 1 mm
+    x1_step = 1e-3 / math.tan(math.radians(10.0))
+    t_step = (-0.1 + math.sqrt(0.01 + 2.0 * a1 * x1_step)) / a1
+    r = simulate(module, t_end=0.2, rtol=1e-10, atol=1e-13)
+    assert r.status == "finished", r.message
+    step = next(e for e in r.events if e.guard == "load_at1")
+    assert step.t == pytest.approx(t_step, rel=1e-9)
+    assert step.x1 == pytest.approx(x1_step, rel=1e-9)

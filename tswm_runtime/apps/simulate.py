@@ -169,11 +169,13 @@ def simulate(model: str | ModuleType, params: dict | None = None, *, interruptib
     t_kept, y_kept, p_rows, modes_kept = (np.ascontiguousarray(a[keep]) for a in (t_out, out.y, out.p, out.mode))
     y_stop = log.state[n_ev - 1, :n].copy() if n_ev else y0
     at = x1_column(module)
-    impacts = {k for k, guard in enumerate(module.GUARDS) if guard in ("gap_a", "gap_b")}
+    rigid = "mesh_normal" not in module.GUARDS   # compliant flanks overlap instead of colliding
+    impacts = {k for k, guard in enumerate(module.GUARDS) if guard in ("gap_a", "gap_b") and rigid}
     events = [Event(float(log.t[e]), module.GUARDS[log.index[e, 0]], module.MODES[log.index[e, 1]],
                     module.MODES[log.index[e, 2]] if log.index[e, 2] >= 0 else None,
                     float(log.state[e, at]), float(log.state[e, n - 1]),
-                    Jump(*map(float, log.jump[e])) if log.index[e, 0] in impacts else None)
+                    Jump(*map(float, log.jump[e])) if log.index[e, 0] in impacts else None,
+                    dict(zip(module.STATES, map(float, log.state[e, :n]))))
               for e in range(n_ev)]
     rows = np.empty((t_kept.size, len(module.OUTPUTS)))
     fill_rows(hybrid.compiled(module.outputs, GUARDS_SIG), t_kept, y_kept, modes_kept, p_rows, n, rows)

@@ -12,6 +12,7 @@ UNITS: dict[str, dict[str, float]] = {
     "velocity": {"m/s": 1.0, "mm/s": 1e-3},
     "time": {"s": 1.0, "ms": 1e-3},
     "stiffness": {"N/m": 1.0, "N/mm": 1e3, "kN/mm": 1e6},
+    "damping": {"N s/m": 1.0, "kN s/m": 1e3},
     "dimensionless": {"": 1.0},
 }
 DISPLAY = {"angle": "deg"}  # unit used in messages where it is not the SI unit

@@ -38,9 +38,10 @@ from tswm_runtime.integration.structures import (EVENT_LOG, JUMP_WIDTH, MODE_TAB
                                                  EventSettings, Outputs, Tolerances)
 
 # Guard kinds (modes.GUARD_KINDS maps the generated GUARDS names to these).
-G_PHI, G_V1, G_D, G_JAM, G_CONE_F, G_CONE_B, G_FLANK_N, G_LAW, G_SLIDE_A, G_SLIDE_B, G_TRIP, G_GAP_A, G_GAP_B = range(13)
-# Mode kinds.
-M_SLIDING, M_STICK, M_FILIPPOV, M_FREE = 0, 1, 2, 3
+(G_PHI, G_V1, G_D, G_JAM, G_CONE_F, G_CONE_B, G_FLANK_N, G_LAW, G_SLIDE_A, G_SLIDE_B, G_TRIP, G_GAP_A, G_GAP_B,
+ G_MESH_N, G_SLIP) = range(15)
+# Mode kinds: rigid sliding, rigid stick, Filippov sliding on phi = 0, free flight, compliant contact.
+M_SLIDING, M_STICK, M_FILIPPOV, M_FREE, M_MESH = 0, 1, 2, 3, 4
 IMPACT_FRAME = 9  # the quantities a model's impact() fills (codegen.IMPACT_FRAME)
 
 # Status codes; the integrator's own failures keep segment's codes.
@@ -211,6 +212,9 @@ def _select(mode, kind, rhs, guards, t, y, p, tol, tables, g, y_tmp, f):
         return m, FINISHED, NEED_NOTHING
     if mode_kind[mode] == M_FREE:  # a law event in free flight
         return mode, FINISHED, NEED_NOTHING
+    if mode_kind[mode] == M_MESH:
+        m, need = _mesh_select(mode, kind, guards, t, y, p, tables, g)
+        return (m, FINISHED, NEED_NOTHING) if m >= 0 else (-1, UNDECLARED, need)
     flank = tables.flank[mode] if mode_kind[mode] == M_SLIDING else 0
     if flank == 0 or _mode(M_FREE, 0, 0, tables) < 0:
         flank = _touching(guards, t, y, p, tables, g)  # 0 without a clearance
@@ -279,6 +283,69 @@ def _collide(impact, flank, rhs, guards, t, y, p, tol, tables, g, y_tmp, f, fram
     if m < 0:
         return -1, UNDECLARED, need
     return m, FINISHED, NEED_NOTHING
+
+
+@njit(cache=True, error_model="numpy")
+def _mesh_rest(flank, guards, t, y, p, tables, g):
+    """(mode, need) where the slip of a compliant contact on ``flank`` is 0: stick while both
+    friction cones hold, else sliding the way the violated cone points."""
+    ms = _mode(M_MESH, flank, 0, tables)
+    if ms < 0:
+        return -1, NEED_STICK
+    guards(ms, t, y, p, g)
+    direction = 1 if g[_guard(G_CONE_F, tables.guard_kind)] < 0.0 else (
+        -1 if g[_guard(G_CONE_B, tables.guard_kind)] < 0.0 else 0)
+    if direction == 0:
+        return ms, NEED_NOTHING
+    m = _mode(M_MESH, flank, direction, tables)
+    return m, (NEED_NOTHING if m >= 0 else NEED_FORWARD if direction > 0 else NEED_BACKWARD)
+
+
+@njit(cache=True, error_model="numpy")
+def _mesh_enter(flank, guards, t, y, p, tables, g):
+    """(mode, need) for compliant contact on ``flank``: sliding with the sign of the slip, or
+    as at rest (``_mesh_rest``) where the slip is 0."""
+    m = _mode(M_MESH, flank, 1, tables)
+    if m < 0:
+        m = _mode(M_MESH, flank, -1, tables)
+    if m < 0:
+        return _mesh_rest(flank, guards, t, y, p, tables, g)
+    guards(m, t, y, p, g)
+    slip = g[_guard(G_SLIP, tables.guard_kind)]
+    if slip == 0.0:
+        return _mesh_rest(flank, guards, t, y, p, tables, g)
+    direction = 1 if slip > 0.0 else -1
+    m = _mode(M_MESH, flank, direction, tables)
+    return m, (NEED_NOTHING if m >= 0 else NEED_FORWARD if direction > 0 else NEED_BACKWARD)
+
+
+@njit(cache=True, error_model="numpy")
+def _mesh_select(mode, kind, guards, t, y, p, tables, g):
+    """(next mode, need) after guard ``kind`` fired in compliant contact ``mode``: the normal
+    force reached 0 (free flight), the slip stopped, a cone broke, or a law event."""
+    flank = tables.flank[mode]
+    if kind == G_MESH_N:
+        return _mode(M_FREE, 0, 0, tables), NEED_NOTHING
+    if kind == G_SLIP:
+        return _mesh_rest(flank, guards, t, y, p, tables, g)
+    if kind == G_CONE_F or kind == G_CONE_B:
+        direction = 1 if kind == G_CONE_F else -1
+        m = _mode(M_MESH, flank, direction, tables)
+        return m, (NEED_NOTHING if m >= 0 else NEED_FORWARD if direction > 0 else NEED_BACKWARD)
+    guards(mode, t, y, p, g)  # a law event: the contact may open, a stick may break
+    if g[_guard(G_MESH_N, tables.guard_kind)] < 0.0:
+        return _mode(M_FREE, 0, 0, tables), NEED_NOTHING
+    if tables.direction[mode] == 0:
+        return _mesh_rest(flank, guards, t, y, p, tables, g)
+    return mode, NEED_NOTHING
+
+
+@njit(cache=True, error_model="numpy")
+def _pressed(flank, rhs, t, y, p, tables, f):
+    """Whether free flight would press the bodies onto ``flank`` (its normal acceleration)."""
+    n = y.size
+    rhs(_mode(M_FREE, 0, 0, tables), t, y, p, f)
+    return -flank * f[n - 2] > 0.0
 
 
 @njit(cache=True, error_model="numpy")
@@ -394,6 +461,7 @@ def integrate_hybrid(method, rhs, jac, guards, observe, impact, p, tables, t0, y
     g, y_tmp, f = np.empty(n_guards), np.empty(n), np.empty(n)
     frame, jump = np.empty(IMPACT_FRAME), np.zeros(JUMP_WIDTH)
     m_free = _mode(M_FREE, 0, 0, tables)
+    mesh = _guard(G_MESH_N, tables.guard_kind) >= 0  # compliant flanks: no impacts, contact by overlap
     obs = np.empty(mon.shape[0])
     out.mode[:] = -1
     k_d = _guard(G_D, tables.guard_kind)
@@ -404,6 +472,9 @@ def integrate_hybrid(method, rhs, jac, guards, observe, impact, p, tables, t0, y
         flank = _touching(guards, t0, y, p, tables, g)
         if m_free >= 0 and flank == 0:
             mode = m_free
+        elif mesh:
+            mode, need = (_mesh_enter(flank, guards, t0, y, p, tables, g) if _pressed(flank, rhs, t0, y, p, tables, f)
+                          else (m_free, NEED_NOTHING))
         elif v == 0.0:
             mode, need = _at_rest(flank, rhs, guards, t0, y, p, tol, tables, g, y_tmp, f, True)
         else:
@@ -474,7 +545,10 @@ def integrate_hybrid(method, rhs, jac, guards, observe, impact, p, tables, t0, y
         elif kind == G_LAW:
             _latch_pieces(guards, t, y, p, tables, g)
         jump[:] = 0.0
-        if kind == G_GAP_A or kind == G_GAP_B:  # the gap closed: a collision on that flank
+        if (kind == G_GAP_A or kind == G_GAP_B) and mesh:  # the flanks begin to overlap
+            new, need = _mesh_enter(1 if kind == G_GAP_A else -1, guards, t, y, p, tables, g)
+            status = FINISHED if new >= 0 else UNDECLARED
+        elif kind == G_GAP_A or kind == G_GAP_B:  # the gap closed: a collision on that flank
             new, status, need = _collide(impact, 1 if kind == G_GAP_A else -1, rhs, guards, t, y, p, tol,
                                          tables, g, y_tmp, f, frame, jump)
             if frame[0] < np.inf:  # a first step inside the bounce, so that the gap's guard is armed again

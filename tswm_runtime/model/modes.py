@@ -34,6 +34,8 @@ class GuardKind(IntEnum):
     TRIP = hybrid.G_TRIP
     GAP_A = hybrid.G_GAP_A
     GAP_B = hybrid.G_GAP_B
+    MESH_NORMAL = hybrid.G_MESH_N
+    SLIP = hybrid.G_SLIP
 
 
 GUARD_KINDS = {
@@ -42,6 +44,7 @@ GUARD_KINDS = {
     "flank_normal": GuardKind.FLANK_NORMAL, "load_step": GuardKind.LAW, "load_contact": GuardKind.LAW,
     "slide_exit_a": GuardKind.SLIDE_EXIT_A, "slide_exit_b": GuardKind.SLIDE_EXIT_B,
     "torque_switch": GuardKind.TRIP, "gap_a": GuardKind.GAP_A, "gap_b": GuardKind.GAP_B,
+    "mesh_normal": GuardKind.MESH_NORMAL, "slip": GuardKind.SLIP,
 }
 GUARD_EVENT_NAMES = {
     "phi": "flank switch (phi = 0)", "v1": "v1 = 0", "D": "D = 0", "jam": "jam factor = 0",
@@ -49,7 +52,8 @@ GUARD_EVENT_NAMES = {
     "flank_normal": "flank change in stick", "load_step": "load step", "load_contact": "load contact",
     "slide_exit_a": "leaves phi = 0 to flank a", "slide_exit_b": "leaves phi = 0 to flank b",
     "torque_switch": "torque switch trips",
-    "gap_a": "impact on flank a", "gap_b": "impact on flank b",
+    "gap_a": "gap closes on flank a", "gap_b": "gap closes on flank b",
+    "mesh_normal": "flanks part (mesh force 0)", "slip": "slip stops",
 }
 SCHEDULE_GUARD = re.compile(r"(load|drive)_at([0-9]+)")
 
@@ -74,6 +78,8 @@ def mode_kind(name: str) -> int:
         return hybrid.M_STICK
     if name == "free":
         return hybrid.M_FREE
+    if name.startswith("mesh_"):
+        return hybrid.M_MESH
     if name.startswith("slide_"):
         return hybrid.M_FILIPPOV
     return hybrid.M_SLIDING

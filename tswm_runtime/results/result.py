@@ -62,6 +62,7 @@ class Event:
     x1: float
     v1: float
     jump: Jump | None = None
+    state: dict = field(default_factory=dict)   # every state after the event, by name
 
     @property
     def kind(self) -> str:
@@ -238,7 +239,8 @@ class Result:
             t_S2_max=float(mon[1, 2]), KD1=KD1, KD2=KD2, status=STATUS_NAMES[hybrid_status],
             message=message, t_stop=float(t_stop), n_steps=int(counters[0]), n_rejected=int(counters[1]),
             nfev=int(counters[2]), njev=int(counters[3]),
-            model={"equations": module.EQUATIONS, "param_units": dict(zip(module.PARAM_NAMES, module.PARAM_UNITS)),
+            model={"equations": module.EQUATIONS, "states": tuple(module.STATES),
+                   "param_units": dict(zip(module.PARAM_NAMES, module.PARAM_UNITS)),
                    "fixed_params": dict(module.FIXED), "mode_regime": tuple(module.MODE_REGIME)},
             event_a1=event_a1,
             extras={name: float(v) for name, v in zip(getattr(module, "LATCH_NAMES", ()),
