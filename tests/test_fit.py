@@ -13,7 +13,8 @@ import pandas as pd
 import pytest
 
 from tswm_runtime.apps import quadrature as q
-from tswm_runtime.apps.fit import PENALTY, FitInputError, fit, read_measured, write_outputs
+from tswm_runtime.apps.fit import PENALTY, FitInputError, fit, read_measured
+from tswm_runtime.apps.fit_report import write_outputs
 from tswm_runtime.cli import main
 from tswm_runtime.model.contract import load_module
 

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 import sys
 from pathlib import Path
 
@@ -340,7 +341,11 @@ def _bad_input() -> tuple[type[Exception], ...]:
 def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
     try:
-        return args.run(args)
+        status = args.run(args)
+        sys.stdout.flush()  # a reader that went away shows here at the latest, not at exit
+        return status
+    except BrokenPipeError:
+        return _stdout_closed()
     except Exception as error:
         if not isinstance(error, _bad_input()):
             if isinstance(error, OSError):
@@ -348,6 +353,22 @@ def main(argv: list[str] | None = None) -> int:
             raise
         print(f"tswm {args.command}: error: {error}", file=sys.stderr)
         return 2
+
+
+SIGPIPE_EXIT = 141  # 128 + SIGPIPE (13): what a shell reports for a Unix tool whose reader went away
+
+
+def _stdout_closed() -> int:
+    """stdout's reader went away (``tswm ... | head``): stop quietly as a Unix tool stopped by
+    SIGPIPE does (no message, exit 141). stdout is pointed at the null device, so that
+    Python's flush at exit finds no broken pipe either."""
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        os.close(devnull)
+    except (OSError, ValueError):  # stdout replaced by an object without a file (in-process callers)
+        pass
+    return SIGPIPE_EXIT
 
 
 def _os_error(args: argparse.Namespace, error: OSError) -> int:

@@ -12,7 +12,8 @@ FIT_SETTINGS = ("t_end", "rtol", "atol", "method", "max_steps", "max_events", "p
 def _fit(args: argparse.Namespace) -> int:
     start = time.perf_counter()
     from tswm_runtime.cli import UsageError, _load_model, output_directory, setting_error, setting_overrides
-    from tswm_runtime.apps.fit import FitInputError, fit, write_outputs
+    from tswm_runtime.apps.fit import FitInputError, fit
+    from tswm_runtime.apps.fit_report import write_outputs
     from tswm_runtime.apps.simulate import SimulationInputError
 
     output_directory(args.output)
