@@ -8,10 +8,11 @@ import struct
 import subprocess
 import sys
 
+import numpy as np
 import pytest
 
 from tswm_runtime.apps import paper_report as pr
-from tswm_runtime.apps.paper_data import FIGURE2, printed
+from tswm_runtime.apps.paper_data import FIGURE2, TABLE3_PRINTED, printed
 from tswm_runtime.apps.simulate import simulate
 
 NEED_CHROMIUM = os.environ.get("CI") == "true"   # CI installs chromium and must render the report
@@ -195,7 +196,8 @@ def test_html_renders_in_headless_chromium(report, tmp_path):
     flags = ["--headless", "--no-sandbox", "--disable-gpu", "--virtual-time-budget=5000"]
     dom = subprocess.run([CHROMIUM, *flags, "--dump-dom", url], capture_output=True, text=True, timeout=60).stdout
     title = re.search(r"<title>([^<]*)</title>", dom).group(1)
-    assert title == f"ok 3/3 images, {len(CASES)} rows", title
+    images = len(re.findall(r"<img", html))
+    assert images == 5 and title == f"ok {images}/{images} images, {len(CASES)} rows", title
     shot = tmp_path / "shot.png"
     subprocess.run([CHROMIUM, *flags, f"--screenshot={shot}", "--window-size=1400,4000", url],
                    capture_output=True, timeout=60)
@@ -206,3 +208,135 @@ def test_html_renders_in_headless_chromium(report, tmp_path):
     pixels = imread(shot)
     assert pixels[:, :, :3].std() > 0.05                # not blank
     assert (pixels[:2000, :, :3].mean(axis=2) < 0.5).mean() > 0.01   # text and tables drawn at the top
+
+
+# ---------------------------------------------------------------- reading (d): lost motion fitted to Table 3
+
+def test_lostmotion_fit_uses_table3_and_stays_in_its_bounds(report):
+    result, out = report
+    lost = result["data"]["lostmotion"]
+    lo, hi = lost["bounds"]
+    assert lo < lost["L"] < hi and lost["fit"]["bounds"]["load_at1"] == [lo, hi]
+    assert lost["fit"]["estimate"]["load_at1"] == lost["L"]
+    # the fit saw Table 3's printed S1m and S2m of all six tests, whatever cases the report runs
+    fitted = {c["case"]: c for c in lost["fit"]["cases"]}
+    assert sorted(fitted) == sorted(f"test{c.test}" for c in TABLE3_PRINTED)
+    for c in TABLE3_PRINTED:
+        entry = fitted[f"test{c.test}"]
+        assert entry["known"] == {"m2": c.m2, "F2_1": c.F2}
+        assert {q: v["measured"] for q, v in entry["quantities"].items()} == {"S1m": c.S1m, "S2m": c.S2m}
+    assert (out / "lostmotion" / "fit.json").exists() and (out / "lostmotion" / "misfit.png").exists()
+    # both intervals are reported; the profile interval holds the estimate and is recomputed here
+    # from the fit's misfit grid with the F quantile
+    from scipy import stats
+
+    prof = lost["profile"]
+    grid_L = np.array(lost["fit"]["misfit"]["axes"][0])
+    grid_cost = np.array(lost["fit"]["misfit"]["cost"])
+    best = min(lost["cost"], grid_cost.min())
+    threshold = best * (1 + stats.f.ppf(0.95, 1, lost["dof"]) / lost["dof"])
+    inside = grid_L[grid_cost <= threshold]
+    assert prof["threshold"] == pytest.approx(threshold, rel=1e-12)
+    assert (prof["lo"], prof["hi"]) == (inside.min(), inside.max()) and prof["lo"] <= lost["L"] <= prof["hi"]
+    md = (out / "paper-report.md").read_text()
+    a, b = lost["ci_linear"]
+    assert f"linearised interval {a * 1e3:.4f}-{b * 1e3:.4f} mm" in md
+    assert f"profile interval {prof['lo'] * 1e3:.2f}-{prof['hi'] * 1e3:.2f} mm" in md
+    assert f"**Fitted: L = {lost['L'] * 1e3:.3f} mm**" in md
+
+
+def test_lostmotion_cells_are_simulate_at_the_fitted_L(report):
+    result, out = report
+    data = result["data"]
+    lost = data["lostmotion"]
+    L, tol = lost["L"], {k: lost["fit"]["settings"][k] for k in ("rtol", "atol")}
+    assert tol == {"rtol": 1e-9, "atol": 1e-12}
+    table = pr.read_markdown_table((out / "paper-report.md").read_text(), "Test")
+    header, rows = table[0], table[1:]
+    for case, row in zip(data["cases"], rows):
+        m2, F2 = case["m2"], case["F2"]
+        r = simulate("paper-lostmotion", {"m2": m2, "F2_1": F2, "load_at1": L}, **tol)   # independently
+        cell = case["lostmotion"]
+        assert cell["values"] == {"S1m": r.S1_max, "KD1": r.KD1, "S2m": r.S2_max, "KD2": r.KD2}
+        assert cell["params"] == {"m2": m2, "load_at1": L, "F2_1": F2}
+        cells = dict(zip(header, row))
+        for q, attr, _ in pr.QUANTITIES:
+            assert cells[f"{q} (d)"].replace("✓", "").strip() == pr.fmt(getattr(r, attr))
+        # the load acts from x2 = L on and not before (k = 1 N/m stands for zero)
+        before, after = r.x2 < L - 1e-9, r.x2 > L + 1e-9
+        assert np.all(r.F2[before] == 0.0) and np.all(np.abs(r.F2[after] - F2) < 1.0)
+    # the fit's own model values at L are the same numbers
+    for c in lost["fit"]["cases"]:
+        row = next(x for x in data["cases"] if x["test"] == int(c["case"][4:])) if any(
+            x["test"] == int(c["case"][4:]) for x in data["cases"]) else None
+        if row:
+            assert c["quantities"]["S1m"]["model"] == pytest.approx(row["lostmotion"]["values"]["S1m"], rel=1e-9)
+
+
+def test_lostmotion_residuals_are_printed_minus_computed(report):
+    result, out = report
+    table = pr.read_markdown_table((out / "paper-report.md").read_text(), "Test")
+    header, rows = table[0], table[1:]
+    for case, row in zip(result["data"]["cases"], rows):
+        cells = dict(zip(header, row))
+        paper = printed(case["m2"], case["F2"])
+        for q, attr, _ in pr.QUANTITIES:
+            computed = case["lostmotion"]["values"][q]
+            if paper is None:
+                assert case["lostmotion"]["residual"][q] is None and cells[f"{q} paper − (d)"] == "–"
+                continue
+            assert case["lostmotion"]["residual"][q] == getattr(paper, q) - computed
+            assert cells[f"{q} paper − (d)"] == pr.residual_text(getattr(paper, q) - computed, q)
+    # the residual table of the section: every printed test and quantity, printed - computed
+    res_table = pr.read_markdown_table((out / "paper-report.md").read_text(), "test")
+    header, rows = res_table[0], res_table[1:]
+    assert len(rows) == 4 * len(TABLE3_PRINTED)
+    cells = {c["test"]: c for c in result["data"]["lostmotion"]["table3_cells"]}
+    for row in rows:
+        r = dict(zip(header, row))
+        c = cells[int(r["test"])]
+        p, v = c["printed"][r["quantity"]], c["lostmotion"]["values"][r["quantity"]]
+        assert c["lostmotion"]["residual"][r["quantity"]] == p - v
+        assert r["printed − computed"] == pr.residual_text(p - v, r["quantity"]) and r["computed (d)"] == pr.fmt(v)
+        assert r["fitted"] == ("yes" if r["quantity"] in ("S1m", "S2m") else "no")
+    # one of them recomputed independently with simulate at the fitted L and the fit's tolerances
+    lost = result["data"]["lostmotion"]
+    r = simulate("paper-lostmotion", {"m2": 100.0, "F2_1": -5000.0, "load_at1": lost["L"]}, rtol=1e-9, atol=1e-12)
+    assert cells[1]["lostmotion"]["values"]["S2m"] == r.S2_max and cells[1]["lostmotion"]["residual"]["S2m"] == -6300.0 - r.S2_max
+
+
+def test_lostmotion_full_runup_is_reading_c():
+    # a lost motion past the free run-up meets the motor at no-load speed, like the step at 0.3 s
+    for m2, F2 in ((100.0, -5000.0), (200.0, -15000.0)):
+        d = simulate("paper-lostmotion", {"m2": m2, "F2_1": F2, "load_at1": 0.05})
+        c = simulate("paper-runup", {"m2": m2, "F2_after": F2})
+        assert d.S1_max == pytest.approx(c.S1_max, rel=1e-3) and d.S2_max == pytest.approx(c.S2_max, rel=1e-3)
+
+
+def test_verdict_says_a_fit_is_not_a_reproduction(report):
+    result, out = report
+    md = (out / "paper-report.md").read_text()
+    verdict = md[md.index("## Verdict"):md.index("## The readings")]
+    assert "a fit, not a reproduction" in verdict and "A fitted parameter is a fit, not a reproduction" in verdict
+    html = (out / "paper-report.html").read_text()
+    assert "a fit, not a reproduction" in html[:html.index("<h2>The readings</h2>")]
+    lost, v = result["data"]["lostmotion"], result["data"]["verdict"]
+    assert f"L = {lost['L'] * 1e3:.2f} mm of x2" in verdict
+    # does the fitted L explain the table? the verdict says which, with the numbers
+    score = v["scores"]["lostmotion"]
+    assert v["lostmotion_explains"] == (score["agree"] == score["cells"])
+    assert ("no plausible L explains the table" in verdict) == (not v["lostmotion_explains"])
+    # the fitted reading is not ranked with the readings that take nothing from the table
+    assert v["best"] in ("consistent", "literal", "runup")
+    for words in ("massless", "no impact", "wedge.clearance"):
+        assert words in md
+
+
+def test_report_without_the_fit(tmp_path, monkeypatch):
+    monkeypatch.setattr(pr.lostmotion, "available", lambda: "the fit needs pandas: pip install -e '.[sweep]'")
+    result = pr.build_report(tmp_path, [(200.0, -15000.0)], derivation=False, progress=False)
+    data = result["data"]
+    assert [r["key"] for r in data["readings"]] == ["consistent", "literal", "runup"]
+    assert "lostmotion" not in data["cases"][0] and data["lostmotion"]["L"] is None
+    md = (tmp_path / "paper-report.md").read_text()
+    assert "not computed in this run: the fit needs pandas" in md and "paper − (d)" not in md

@@ -312,8 +312,9 @@ def _parser() -> argparse.ArgumentParser:
 
     fit_cli.add_parser(sub)
     paper = sub.add_parser("paper", help="the paper's Table 3 and Figure 2 against tswm: a Markdown/HTML report",
-                           description="Run the paper's cases in three readings (consistent, printed equations, "
-                                       "run-up then load) and write DIR/paper-report.{md,html,json}, the Figure 2 "
+                           description="Run the paper's cases in four readings (consistent, printed equations, "
+                                       "run-up then load, lost motion fitted to Table 3 with tswm fit) and write "
+                                       "DIR/paper-report.{md,html,json}, DIR/lostmotion/ (the fit), the Figure 2 "
                                        "PNGs and the derivation document.")
     paper.add_argument("-o", "--output", default="tswm-report", metavar="DIR",
                        help="directory for the report (default: tswm-report)")
