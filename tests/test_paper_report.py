@@ -330,13 +330,3 @@ def test_verdict_says_a_fit_is_not_a_reproduction(report):
     assert v["best"] in ("consistent", "literal", "runup")
     for words in ("massless", "no impact", "wedge.clearance"):
         assert words in md
-
-
-def test_report_without_the_fit(tmp_path, monkeypatch):
-    monkeypatch.setattr(pr.lostmotion, "available", lambda: "the fit needs pandas: pip install -e '.[sweep]'")
-    result = pr.build_report(tmp_path, [(200.0, -15000.0)], derivation=False, progress=False)
-    data = result["data"]
-    assert [r["key"] for r in data["readings"]] == ["consistent", "literal", "runup"]
-    assert "lostmotion" not in data["cases"][0] and data["lostmotion"]["L"] is None
-    md = (tmp_path / "paper-report.md").read_text()
-    assert "not computed in this run: the fit needs pandas" in md and "paper − (d)" not in md

@@ -25,7 +25,6 @@ from __future__ import annotations
 
 import base64
 import csv
-import importlib.util
 import io
 import math
 from pathlib import Path
@@ -48,13 +47,6 @@ R2 = 0.080                    # m, d2 / 2 (paper: d2 = 160 mm)
 DIRECTORY = "lostmotion"      # the fit's own report, beside the paper report
 TITLE = ("consistent derivation with lost motion: F2 acts from x2 = L on, one L for all tests fitted to "
          "Table 3's S1m and S2m")
-
-
-def available() -> str | None:
-    """None when the fit can run here, else why not (it reads its table with pandas)."""
-    if importlib.util.find_spec("pandas") is None:
-        return "the fit needs pandas: pip install -e '.[sweep]'"
-    return None
 
 
 def params(L: float):

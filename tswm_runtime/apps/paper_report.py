@@ -252,8 +252,7 @@ def _statements(rows: list[dict], checks: dict, cases_printed: int, readings: tu
                            and run["negative_fraction"] == 0 else ": negative dissipation, check the run.")
                         + (f" Cells within {TOLERANCE:.0%} of the paper: {', '.join(near)}." if near else
                            f" No cell is within {TOLERANCE:.0%} of the paper.")})
-    if lost and lost.get("L") is not None:
-        out.append({"title": "(d) lost motion, L fitted to Table 3", "text": lostmotion_statement(rows, checks, lost)})
+    out.append({"title": "(d) lost motion, L fitted to Table 3", "text": lostmotion_statement(rows, checks, lost)})
     return out
 
 
@@ -385,8 +384,6 @@ def verdict(rows: list[dict], checks: dict, readings: tuple = READINGS, lost: di
                else "."))
     if fitted and printed_rows:
         points.append(lostmotion_point(printed_rows, scores[fitted.key], scores[best.key], best, fitted, lost))
-    elif lost and lost.get("unavailable"):
-        points.append(f"(d) lost motion fitted to Table 3: not computed in this run ({lost['unavailable']}).")
     return {"best": best.key, "headline": headline, "points": points, "scores": scores,
             "fitted": fitted.key if fitted else None,
             "lostmotion_explains": bool(fitted and printed_rows and scores[fitted.key]["agree"]
@@ -496,21 +493,17 @@ def build_report(out_dir: str | Path = "tswm-report", cases: list[tuple[float, f
     out_dir = Path(out_dir)
     cases = list(cases) if cases is not None else all_cases()
     fig_case = (FIGURE2["m2"], FIGURE2["F2"])
-    unavailable = lostmotion.available()
-    readings = READINGS if unavailable else READINGS + (lostmotion_reading(math.nan),)
+    readings = READINGS + (lostmotion_reading(math.nan),)
     modules = {r.key: load_module(r.scene) for r in readings}
-    steps = (len(cases) * len(readings) + len(readings) + len(cases) + (1 if derivation else 0) + 1
-             + (0 if unavailable else 1))
+    steps = len(cases) * len(readings) + len(readings) + len(cases) + (1 if derivation else 0) + 2
     bar = tqdm(total=steps, desc="tswm paper", unit="step", disable=not progress, file=sys.stderr)
 
-    lost = {"unavailable": unavailable, "L": None}
-    if not unavailable:
-        bar.set_postfix_str(f"fit L of {lostmotion.SCENE} to Table 3")
-        lost = {"unavailable": None, **lostmotion.fit_table3(out_dir)}
-        lost["Vmax"] = float(modules["lostmotion"].FIXED["Vmax"])
-        tolerances = {k: lost["fit"]["settings"][k] for k in ("rtol", "atol")}
-        readings = READINGS + (lostmotion_reading(lost["L"], tolerances),)
-        bar.update()
+    bar.set_postfix_str(f"fit L of {lostmotion.SCENE} to Table 3")
+    lost = lostmotion.fit_table3(out_dir)
+    lost["Vmax"] = float(modules["lostmotion"].FIXED["Vmax"])
+    tolerances = {k: lost["fit"]["settings"][k] for k in ("rtol", "atol")}
+    readings = READINGS + (lostmotion_reading(lost["L"], tolerances),)
+    bar.update()
 
     rows, results = [], {}
     for test_index, (m2, F2) in enumerate(cases):
@@ -524,30 +517,29 @@ def build_report(out_dir: str | Path = "tswm-report", cases: list[tuple[float, f
             row[reading.key] = _cell(reading, result, paper)
             bar.update()
         rows.append(row)
-    if not unavailable:
-        # the same cells at the scene's own tolerances: does any case change its course?
-        own, fitted = lostmotion_reading(lost["L"]), readings[-1]
-        lost["scene_tolerances"], lost["table3_cells"] = [], []
-        for c in TABLE3_PRINTED:
-            r, f = run(own, c.m2, c.F2), run(fitted, c.m2, c.F2)
-            lost["table3_cells"].append({"test": c.test, "m2": c.m2, "F2": c.F2,
-                                         "printed": {q: getattr(c, q) for q, _, _ in QUANTITIES},
-                                         "lostmotion": _cell(fitted, f, c)})
-            lost["scene_tolerances"].append({"test": c.test, "rtol": r.settings["rtol"], "atol": r.settings["atol"],
-                                             "drive": drive_word(r), "S1m": r.S1_max, "S2m": r.S2_max,
-                                             "drive_fit_tolerances": drive_word(f), "S1m_fit_tolerances": f.S1_max,
-                                             "S2m_fit_tolerances": f.S2_max})
-        changed = [s for s in lost["scene_tolerances"] if s["drive"] != s["drive_fit_tolerances"]]
-        if changed:
-            lost["notes"].append(
-                "The fitted L lies within the integrator's error of that edge: at the scene's own tolerances (rtol "
-                f"{changed[0]['rtol']:g}, atol {changed[0]['atol']:g}) instead of the fit's, "
-                + "; ".join(f"test {s['test']} {s['drive']} (S1m = {s['S1m']:.0f} N, S2m = {s['S2m']:.0f} N) where at "
-                            f"the fit's it {s['drive_fit_tolerances']} (S1m = {s['S1m_fit_tolerances']:.0f} N, "
-                            f"S2m = {s['S2m_fit_tolerances']:.0f} N)" for s in changed)
-                + ". The cells of (d) are therefore run with the fit's tolerances; any L a little longer, inside the "
-                "flat range, gives the same peaks without this sensitivity.")
-    if not unavailable and lost["profile"]["below"] is not None:
+    # the same cells at the scene's own tolerances: does any case change its course?
+    own, fitted = lostmotion_reading(lost["L"]), readings[-1]
+    lost["scene_tolerances"], lost["table3_cells"] = [], []
+    for c in TABLE3_PRINTED:
+        r, f = run(own, c.m2, c.F2), run(fitted, c.m2, c.F2)
+        lost["table3_cells"].append({"test": c.test, "m2": c.m2, "F2": c.F2,
+                                     "printed": {q: getattr(c, q) for q, _, _ in QUANTITIES},
+                                     "lostmotion": _cell(fitted, f, c)})
+        lost["scene_tolerances"].append({"test": c.test, "rtol": r.settings["rtol"], "atol": r.settings["atol"],
+                                         "drive": drive_word(r), "S1m": r.S1_max, "S2m": r.S2_max,
+                                         "drive_fit_tolerances": drive_word(f), "S1m_fit_tolerances": f.S1_max,
+                                         "S2m_fit_tolerances": f.S2_max})
+    changed = [s for s in lost["scene_tolerances"] if s["drive"] != s["drive_fit_tolerances"]]
+    if changed:
+        lost["notes"].append(
+            "The fitted L lies within the integrator's error of that edge: at the scene's own tolerances (rtol "
+            f"{changed[0]['rtol']:g}, atol {changed[0]['atol']:g}) instead of the fit's, "
+            + "; ".join(f"test {s['test']} {s['drive']} (S1m = {s['S1m']:.0f} N, S2m = {s['S2m']:.0f} N) where at "
+                        f"the fit's it {s['drive_fit_tolerances']} (S1m = {s['S1m_fit_tolerances']:.0f} N, "
+                        f"S2m = {s['S2m_fit_tolerances']:.0f} N)" for s in changed)
+            + ". The cells of (d) are therefore run with the fit's tolerances; any L a little longer, inside the "
+            "flat range, gives the same peaks without this sensitivity.")
+    if lost["profile"]["below"] is not None:
         below = lostmotion_reading(lost["profile"]["below"], tolerances)
         lost["stall_below"] = [f"test {c.test} (m2 = {c.m2:g} kg, F2 = {c.F2:g} N)" for c in TABLE3_PRINTED
                                if drive_word(run(below, c.m2, c.F2)).startswith(("stalls", "does not start"))]
@@ -599,8 +591,7 @@ def build_report(out_dir: str | Path = "tswm-report", cases: list[tuple[float, f
             settings[r.scene] = {k: first.settings[k] for k in ("method", "rtol", "atol", "t_end", "points",
                                                                   "max_steps", "max_events")}
     misfit_png = lost.pop("misfit_png", None)
-    if lost.get("L") is not None:
-        lost["fit_vs_simulate"] = _fit_vs_simulate(rows, lost)
+    lost["fit_vs_simulate"] = _fit_vs_simulate(rows, lost)
     data = {
         "source": SOURCE, "tolerance": TOLERANCE, "figure_case": {"m2": fig_case[0], "F2": fig_case[1]},
         "readings": [{"key": r.key, "label": r.label, "scene": r.scene, "title": r.title} for r in readings],
@@ -703,7 +694,7 @@ def _context(data: dict, figures: list[dict], readings: tuple = READINGS, misfit
                       str(s["max_steps"])] for scene, s in data["settings"].items()]
     lost = data["lostmotion"]
     return {"data": data, "figures": figures, "readings": readings, "lost": lost,
-            "lost_tables": lostmotion_tables(data) if lost.get("L") is not None else None, "misfit_png": misfit_png,
+            "lost_tables": lostmotion_tables(data), "misfit_png": misfit_png,
             "table3": (header, rows), "regimes": (regime_header, regime_rows),
             "statics": (statics_header, statics_rows), "energy": (energy_header, energy_rows),
             "settings": (["scene", "integrator", "rtol", "atol", "t_end", "output points", "max steps"],
