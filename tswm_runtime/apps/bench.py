@@ -325,7 +325,7 @@ def _markdown(info, refs, t_ref, rows, verdicts, thr, flat, cold, empty, tols, r
                              [k for k in empty[0] if k != "message"],
                              {"message_s": "{:.2f}", "first_result_s": "{:.1f}", "over_target_s": "{:.1f}",
                               "process_s": "{:.1f}"})
-           + "\n\nThe message: " + "; ".join(f"`{r['message']}`" for r in empty[:1])) if empty
+           + "\n\nThe message: " + "; ".join(f"`` {r['message']} ``" for r in empty[:1])) if empty
           else "not measured (--quick; the full bench measures it)", "",
           "## All runs", "",
           report.md_table(rows, ["case", "solver", "rtol", "err_S1", "err_v1", "err_x1", "err_t", "err", "t_med",
