@@ -83,6 +83,12 @@ def test_a_warm_cache_is_found_and_a_stale_kernel_marker_is_not():
     assert json.loads(run.stdout.splitlines()[-1]) == [[], False, True, False]
 
 
+def test_the_model_entries_are_the_functions_compiled_with_a_signature():
+    source = coldstart.model_source("paper-runup")[0] if "generated.paper_runup" not in sys.modules \
+        else Path(sys.modules["generated.paper_runup"].__file__)
+    assert coldstart.model_entries(source) == ["rhs", "jac", "guards", "observe", "outputs"]
+
+
 def test_the_message_names_what_is_compiled_and_a_measured_time():
     text = coldstart.message(["integrate", "batch"], "paper", coldstart.estimate(["integrate", "batch"], "paper"))
     assert "integration kernels" in text and "sweep kernel" in text and "`paper`" in text

@@ -60,7 +60,6 @@ GROUPS = {
                    ("hybrid/rows.py", "fill_rows", True)]),
     "batch": ("the parallel sweep kernel", [("hybrid/batch.py", "run_batch", True)]),
 }
-MODEL_ENTRIES = ("rhs", "jac", "guards", "observe", "outputs")
 
 _announced: set = set()
 _lock = threading.Lock()
@@ -155,10 +154,26 @@ def model_source(model) -> tuple[Path, str] | None:
     return (Path(spec.origin), name) if spec and spec.origin else None
 
 
+def model_entries(source: Path) -> list[str]:
+    """The functions of a generated module compiled eagerly on import: ``@njit(<X>_SIG, ...)``
+    (rhs, jac, guards, observe, outputs, ...: whatever the template gives a signature)."""
+    st = source.stat()
+    lines = _lines(source, (st.st_mtime_ns, st.st_size))
+    names = []
+    for i, line in enumerate(lines[:-1]):
+        head = line.removeprefix("@njit(").split(",")[0]
+        if line.startswith("@njit(") and head.endswith("_SIG") and head.isidentifier():
+            j = i + 1
+            while j < len(lines) and lines[j].startswith("@"):
+                j += 1
+            if j < len(lines) and lines[j].startswith("def "):
+                names.append(lines[j][4:].split("(")[0])
+    return names
+
+
 def model_cold(source: Path, module: str) -> bool:
     """Whether an entry function of the generated module at ``source`` is not in numba's cache."""
-    return not all(is_cached(source, name, module) for name in MODEL_ENTRIES
-                   if _first_line(source, name) is not None)
+    return not all(is_cached(source, name, module) for name in model_entries(source))
 
 
 @lru_cache(maxsize=1)
