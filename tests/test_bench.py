@@ -104,3 +104,27 @@ def test_bench_full_run(tmp_path):
     assert (runs["status"] == "finished").all() and set(runs["case"]) == set(CASES)
     verdicts = pd.read_csv(tmp_path / "verdicts.csv")
     assert len(verdicts) == 2 * len(CASES) and verdicts["verdict"].str.match("(met|missed|tswm|no peer)").all()
+
+
+def test_empty_cache_rows_time_the_message_and_the_first_result(monkeypatch, tmp_path):
+    """The empty-cache measurement's mechanics on a stand-in command (the real one compiles for
+    minutes: test_bench_full_run): the stderr message and the result line are timed from the
+    process start, the targets get verdicts, and the report shows them."""
+    fake = ("import sys, time; print('tswm: compiling the stand-in', file=sys.stderr, flush=True); "
+            "time.sleep(0.2); print('  status: finished', flush=True)")
+    monkeypatch.setattr(bench, "EMPTY_CACHE", {"stand-in": (["-c", fake], "status:")})
+    (row,) = bench.empty_cache(log=lambda *a: None)
+    assert row["exit"] == 0 and row["message"] == "tswm: compiling the stand-in"
+    assert 0 < row["message_s"] < row["first_result_s"] <= row["process_s"]
+    assert row["message_verdict"].startswith(("met", "missed")) and row["result_verdict"].startswith("met")
+    assert row["over_target_s"] == 0.0
+    assert bench.main(quick=True, output=tmp_path, case_names=["decelerate-and-stick"], peers=("RK45",),
+                      tols=(1e-5, 1e-8), repeats=1, sweep_n=2, cases=16, cold=True, log=lambda *a: None) == 0
+    md = (tmp_path / "work-precision.md").read_text()
+    assert "First run with an empty numba cache" in md and "stand-in" in md and "tswm: compiling the stand-in" in md
+
+
+def test_an_empty_cache_that_prints_nothing_is_reported_as_such(monkeypatch):
+    monkeypatch.setattr(bench, "EMPTY_CACHE", {"silent": (["-c", "print('status: x')"], "status:")})
+    (row,) = bench.empty_cache(log=lambda *a: None)
+    assert row["message_verdict"] == "none printed" and math.isnan(row["message_s"])

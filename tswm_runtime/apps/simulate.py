@@ -6,20 +6,27 @@
 """
 from __future__ import annotations
 
+import functools
 import math
+import sys
 from types import ModuleType
 
 import numpy as np
 
-from tswm_runtime.hybrid import machine as hybrid
-from tswm_runtime.hybrid.rows import fill_rows
-from tswm_runtime.integration.signatures import GUARDS_SIG
+from tswm_runtime.apps import coldstart
 
-from tswm_runtime.integration import segment
+coldstart.announce(("integrate",))  # before the next imports compile the kernels, if not cached
+from tswm_runtime.hybrid import machine as hybrid  # noqa: E402
+from tswm_runtime.hybrid.rows import fill_rows  # noqa: E402
+from tswm_runtime.integration.signatures import GUARDS_SIG  # noqa: E402
 
-from tswm_runtime.model import checks, modes
-from tswm_runtime.model.contract import load_module
-from tswm_runtime.results.result import Event, Jump, Result, status_message
+from tswm_runtime.integration import segment  # noqa: E402
+
+from tswm_runtime.model import checks, modes  # noqa: E402
+from tswm_runtime.model.contract import load_module  # noqa: E402
+from tswm_runtime.results.result import Event, Jump, Result, status_message  # noqa: E402
+
+coldstart.done()
 
 METHODS = {"dopri5": segment.DOPRI5, "rosenbrock23": segment.ROSENBROCK23}
 RTOL_RANGE = (1e-13, 0.1)
@@ -40,9 +47,11 @@ class SimulationInputError(ValueError):
     """An input to ``simulate`` that is out of its allowed range; the message names it."""
 
 
-def _check(ok: bool, field: str, value, allowed: str) -> None:
+def _check(ok: bool, field: str, value, allowed) -> None:
+    """Raise naming ``field`` unless ``ok``; ``allowed``: the rule, or a callable that words it
+    (built only on failure: formatting every rule on every call cost ~8 us of a simulate())."""
     if not ok:
-        raise SimulationInputError(f"{field} = {value!r}: must be {allowed}")
+        raise SimulationInputError(f"{field} = {value!r}: must be {allowed() if callable(allowed) else allowed}")
 
 
 def _finite(field: str, value) -> float:
@@ -76,10 +85,21 @@ def parameter_vector(module: ModuleType, params: dict | None) -> np.ndarray:
         if name not in values:
             raise SimulationInputError(f"parameter {name!r}: {unknown_parameter(module, name)}")
         values[name] = _finite(f"parameter {name}", value)
-    problem = checks.violations(module, [list(values.values())])[0]
-    if problem:
-        raise SimulationInputError(problem)
-    return with_latches(module, list(values.values()))[0]
+    row = tuple(values.values())
+    if (module, row) not in _VALID_ROWS:
+        problem = checks.violations(module, [list(row)])[0]
+        if problem:
+            raise SimulationInputError(problem)
+        if len(_VALID_ROWS) >= 1024:
+            _VALID_ROWS.clear()
+        _VALID_ROWS.add((module, row))
+    # = with_latches(module, [row])[0], built directly (one array instead of four)
+    return np.array(row + (math.inf,) * len(getattr(module, "LATCH_NAMES", ())), dtype=np.float64)
+
+
+# (module, free values) that passed the scene file's rules: repeated calls with the same values
+# (the defaults, most often) skip re-checking them (numpy on one row costs ~15 us a call).
+_VALID_ROWS: set = set()
 
 
 def initial_state(module: ModuleType, run: dict) -> tuple[np.ndarray, np.ndarray]:
@@ -99,25 +119,30 @@ def settings(module: ModuleType, overrides: dict) -> dict:
     """The run settings: the scene's [run] table with ``overrides`` applied, validated."""
     run = {"gap": 0.0, **module.RUN, "points": DEFAULT_POINTS, "max_events": DEFAULT_MAX_EVENTS, "hmax": math.inf}
     for key, value in overrides.items():
-        _check(key in run, "setting", key, f"one of {', '.join(run)}")
+        _check(key in run, "setting", key, lambda: f"one of {', '.join(run)}")
         if value is not None:
             run[key] = value
-    _check(run["method"] in METHODS, "method", run["method"], f"one of {', '.join(METHODS)}")
+    _check(run["method"] in METHODS, "method", run["method"], lambda: f"one of {', '.join(METHODS)}")
     for key in ("t_end", "x1", "v1", "gap", "rtol", "atol", "hmax"):
         run[key] = float(run[key]) if key == "hmax" else _finite(key, run[key])
     lo, hi = RTOL_RANGE
-    _check(lo <= run["rtol"] <= hi, "rtol", run["rtol"], f"in [{lo:g}, {hi:g}]")
-    lo, hi = ATOL_RANGE
-    _check(lo <= run["atol"] <= hi, "atol", run["atol"], f"in [{lo:g}, {hi:g}] (absolute, in m and m/s)")
+    _check(lo <= run["rtol"] <= hi, "rtol", run["rtol"], lambda: f"in [{lo:g}, {hi:g}]")
+    lo_a, hi_a = ATOL_RANGE
+    _check(lo_a <= run["atol"] <= hi_a, "atol", run["atol"],
+           lambda: f"in [{lo_a:g}, {hi_a:g}] (absolute, in m and m/s)")
     _check(run["t_end"] > 0.0, "t_end", run["t_end"], "> t0 = 0 s")
     _check(run["gap"] >= 0.0, "gap", run["gap"], ">= 0 m (the gap from flank a)")
     _check(run["hmax"] > 0.0, "hmax", run["hmax"], "> 0 s")
     for key, top in (("max_steps", MAX_STEPS), ("points", MAX_POINTS), ("max_events", MAX_EVENTS)):
         _check(isinstance(run[key], int) and not isinstance(run[key], bool) and 1 <= run[key] <= top, key,
-               run[key], f"an integer in [1, {top:.0e}]".replace("e+0", "e").replace("e+", "e")
-               + (f" (it sizes memory up front: about {memory_estimate(key, top) / 1e6:.0f} MB at the limit)"
-                  if key != "max_steps" else ""))
+               run[key], lambda: _integer_rule(key, top))
     return run
+
+
+def _integer_rule(key: str, top: int) -> str:
+    return (f"an integer in [1, {top:.0e}]".replace("e+0", "e").replace("e+", "e")
+            + (f" (it sizes memory up front: about {memory_estimate(key, top) / 1e6:.0f} MB at the limit)"
+               if key != "max_steps" else ""))
 
 
 def memory_estimate(key: str, count: int) -> float:
@@ -149,24 +174,97 @@ def _in_a_thread(kernel, args: tuple, counters: np.ndarray):
     return box["out"]
 
 
+_LOADED: dict = {}
+
+
+def _load(model: str):
+    """``load_module(model)``, remembered for a shipped scene name while its module stays the one
+    imported (load_module's import lookup and contract check cost ~8 us a call). A .py path is
+    loaded afresh on every call, as load_module does."""
+    module = _LOADED.get(model)
+    if module is not None and sys.modules.get(module.__name__) is module:
+        return module
+    coldstart.announce((), model)
+    module = load_module(model)
+    coldstart.done()
+    if not str(model).endswith(".py"):
+        _LOADED[model] = module
+    return module
+
+
+@functools.lru_cache(maxsize=32)
+def _time_grid(t_end: float, points: int) -> np.ndarray:
+    return np.linspace(0.0, t_end, points)
+
+
+def _output_times(t_end: float, points: int) -> np.ndarray:
+    """np.linspace(0, t_end, points) as a new array (a copy of a remembered one: the same values)."""
+    return _time_grid(t_end, points).copy()
+
+
+_OUTPUTS: dict = {}
+
+
+def _outputs_function(module: ModuleType):
+    """The module's ``outputs`` as the first-class function value fill_rows takes (hybrid.compiled,
+    whose lookup hashes numba's signature object: ~3.5 us), remembered per function object."""
+    function = module.outputs
+    known = _OUTPUTS.get(id(function))
+    if known is None or known[0] is not function:
+        known = _OUTPUTS[id(function)] = (function, hybrid.compiled(function, GUARDS_SIG))
+    return known[1]
+
+
+_ENTRY_POINTS: dict = {}
+
+
+def _entry_point(kernel):
+    """The compiled code of a kernel that ``compile_cached`` compiled for exactly one signature.
+    Calling it skips the dispatcher, which types every argument on every call to pick the
+    overload (about 40 us for integrate_hybrid's 19 arguments, most of it the four function
+    arguments); that is safe only because ``hybrid.integrate`` and ``simulate`` build every
+    argument with the signature's exact types. The dispatcher itself if there is no single one."""
+    entry = _ENTRY_POINTS.get(id(kernel))
+    if entry is None:
+        try:
+            (signature,) = kernel.signatures
+            entry = kernel.overloads[signature].entry_point
+        except (AttributeError, KeyError, ValueError):
+            entry = kernel
+        _ENTRY_POINTS[id(kernel)] = entry
+    return entry
+
+
+def _direct(kernel, args: tuple, counters: np.ndarray):
+    return _entry_point(kernel)(*args)
+
+
+def _direct_in_a_thread(kernel, args: tuple, counters: np.ndarray):
+    return _in_a_thread(_entry_point(kernel), args, counters)
+
+
 def simulate(model: str | ModuleType, params: dict | None = None, *, interruptible: bool = False,
              **overrides) -> Result:
     """Run a scene. ``model``: a shipped scene name, a path to a generated module, or the
     module; ``params``: free parameters by name; ``overrides``: run settings (t_end,
     x1, v1, rtol, atol, method, max_steps, points, max_events, hmax). ``interruptible``:
     run the kernel in a thread so that Ctrl-C stops a long run at once (the CLI does)."""
-    module = model if isinstance(model, ModuleType) else load_module(model)
+    module = model if isinstance(model, ModuleType) else _load(model)
     p = parameter_vector(module, params)
     run = settings(module, overrides)
     n = len(module.STATES)
     y0, quad = initial_state(module, run)
-    t_out = np.linspace(0.0, run["t_end"], run["points"])
+    t_out = _output_times(run["t_end"], run["points"])
     status, t_stop, n_ev, last, need, first, out, log, mon, counters = hybrid.integrate(
         METHODS[run["method"]], module, p, modes.tables(module), y0, run["t_end"], rtol=run["rtol"],
         atol=run["atol"], t_out=t_out, max_events=run["max_events"], quad=quad, hmax=run["hmax"],
-        max_steps=run["max_steps"], call=_in_a_thread if interruptible else hybrid._call)
+        max_steps=run["max_steps"], call=_direct_in_a_thread if interruptible else _direct)
     keep = out.mode >= 0
-    t_kept, y_kept, p_rows, modes_kept = (np.ascontiguousarray(a[keep]) for a in (t_out, out.y, out.p, out.mode))
+    if keep.all():  # the run reached t_end: every row is filled (and every array C-contiguous already)
+        t_kept, y_kept, p_rows, modes_kept = t_out, out.y, out.p, out.mode
+    else:
+        t_kept, y_kept, p_rows, modes_kept = (np.ascontiguousarray(a[keep])
+                                              for a in (t_out, out.y, out.p, out.mode))
     y_stop = log.state[n_ev - 1, :n].copy() if n_ev else y0
     at = x1_column(module)
     rigid = "mesh_normal" not in module.GUARDS   # compliant flanks overlap instead of colliding
@@ -178,7 +276,7 @@ def simulate(model: str | ModuleType, params: dict | None = None, *, interruptib
                     dict(zip(module.STATES, map(float, log.state[e, :n]))))
               for e in range(n_ev)]
     rows = np.empty((t_kept.size, len(module.OUTPUTS)))
-    fill_rows(hybrid.compiled(module.outputs, GUARDS_SIG), t_kept, y_kept, modes_kept, p_rows, n, rows)
+    _entry_point(fill_rows)(_outputs_function(module), t_kept, y_kept, modes_kept, p_rows, n, rows)
     return Result.build(module, p, p_rows, run, t_kept, y_kept, modes_kept, rows, events, log.state[:n_ev, :n],
                         mon, counters, hybrid_status=status, t_stop=t_stop,
                         first_mode=first, message=status_message(module, status, t_stop, y_stop, last,

@@ -40,16 +40,19 @@ import numpy as np
 
 from tswm_runtime import __version__
 
-from tswm_runtime.apps import chunks
+from tswm_runtime.apps import chunks, coldstart
 
-from tswm_runtime.hybrid import batch
+coldstart.announce(("integrate", "batch"))  # before the next imports compile the kernels, if not cached
+from tswm_runtime.hybrid import batch  # noqa: E402
 
-from tswm_runtime.model import checks, modes
-from tswm_runtime.model.contract import load_module
-from tswm_runtime.common.files import write_atomic
-from tswm_runtime.results.result import STATUS_NAMES
-from tswm_runtime.integration.structures import Tolerances
-from tswm_runtime.apps.simulate import METHODS, initial_state, settings, unknown_parameter, with_latches
+from tswm_runtime.model import checks, modes  # noqa: E402
+from tswm_runtime.model.contract import load_module  # noqa: E402
+from tswm_runtime.common.files import write_atomic  # noqa: E402
+from tswm_runtime.results.result import STATUS_NAMES  # noqa: E402
+from tswm_runtime.integration.structures import Tolerances  # noqa: E402
+from tswm_runtime.apps.simulate import METHODS, initial_state, settings, unknown_parameter, with_latches  # noqa: E402
+
+coldstart.done()
 
 REGIME_LETTERS = {"tractive": "T", "inverse-tractive": "I", "stick": "S", "backward on flank a": "A",
                   "backward on flank b": "B", "sliding along phi = 0": "F", "free flight": "G"}
@@ -272,6 +275,8 @@ def sweep(model: str | ModuleType, P: np.ndarray, overrides: dict | None = None,
     import time
 
     start = time.perf_counter()
+    if not isinstance(model, ModuleType):
+        coldstart.announce((), model)
     module = model if isinstance(model, ModuleType) else load_module(model)
     scene_spec = scene_spec or (model if isinstance(model, str) else module.SCENE)
     run = settings(module, overrides or {})

@@ -87,18 +87,35 @@ def _shipped_modules() -> list[str]:
     return sorted(m.name.replace("_", "-") for m in pkgutil.iter_modules(generated.__path__))
 
 
+def _model_spec(scene: str) -> str:
+    """A shipped scene name or a generated module's .py path, as ``load_module`` takes it (a
+    scene file, .toml, is generated into the user cache on first use: derivation.model_cache)."""
+    if Path(scene).suffix == ".toml":
+        from derivation.model_cache import module_for_scene
+
+        return str(module_for_scene(scene))
+    if Path(scene).suffix != ".py" and ("/" in scene or "\\" in scene or Path(scene).suffix):
+        raise UsageError(f"scene {scene!r}: expected a shipped scene name, a scene file (.toml) or a "
+                         "generated module (.py)")
+    return scene
+
+
+def announce_compile(scene: str, groups) -> str:
+    """Resolve the scene (``_model_spec``) and, before anything compiles, say on stderr what numba
+    will compile and about how long (``coldstart``); returns the spec for ``_load_model``."""
+    from tswm_runtime.apps import coldstart
+
+    spec = _model_spec(scene)
+    coldstart.announce(groups, spec)
+    return spec
+
+
 def _load_model(scene: str):
     """The generated module of a shipped scene name, a scene file (.toml: generated into the
     user cache on first use, see derivation.model_cache) or a module's .py path."""
     from tswm_runtime.model.contract import ContractError, load_module
 
-    if Path(scene).suffix == ".toml":
-        from derivation.model_cache import module_for_scene
-
-        scene = str(module_for_scene(scene))
-    elif Path(scene).suffix != ".py" and ("/" in scene or "\\" in scene or Path(scene).suffix):
-        raise UsageError(f"scene {scene!r}: expected a shipped scene name, a scene file (.toml) or a "
-                         "generated module (.py)")
+    scene = _model_spec(scene)
     try:
         return load_module(scene)
     except ModuleNotFoundError as error:
@@ -210,11 +227,12 @@ def _simulate(args: argparse.Namespace) -> int:
     import time
 
     start = time.perf_counter()
+    output_directory(args.output)
+    spec = announce_compile(args.scene, ("integrate",))
     from tswm_runtime.model.contract import ContractError
     from tswm_runtime.apps.simulate import SimulationInputError, simulate
 
-    output_directory(args.output)
-    module = _load_model(args.scene)
+    module = _load_model(spec)
     t_load = time.perf_counter() - start
     params = _parse_sets(args.set, module)
     overrides = setting_overrides(args, SETTING_OPTIONS)

@@ -10,13 +10,16 @@ SWEEP_SETTINGS = ("t_end", "rtol", "atol", "method", "max_steps", "max_events")
 
 
 def _sweep(args: argparse.Namespace) -> int:
-    from tswm_runtime.cli import UsageError, _load_model, output_directory, setting_error, setting_overrides
+    from tswm_runtime.cli import (UsageError, _load_model, announce_compile, output_directory, setting_error,
+                                  setting_overrides)
+
+    output_directory(args.output)
+    spec = announce_compile(args.scene, ("integrate", "batch"))
     from tswm_runtime.apps.simulate import SimulationInputError
     from tswm_runtime.apps.sweep import (SweepInputError, SweepInterrupted, check_size, grid_cases, grid_size,
                                     parse_grid, parse_ranges, sample_cases, sweep)
 
-    output_directory(args.output)
-    module = _load_model(args.scene)
+    module = _load_model(spec)
     overrides = setting_overrides(args, SWEEP_SETTINGS)
     try:
         if args.grid and args.samples is not None:
