@@ -18,10 +18,8 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def _empty_cache(cache: Path) -> dict:
-    """The environment of a process with ``cache`` as its empty numba cache. The kernel markers
-    are seeded (``seed_kernel_markers``): otherwise cache_guard would purge the kernels' default
-    cache in the source tree, and the rest of the test session would compile them again."""
-    coldstart.seed_kernel_markers(cache)
+    """The environment of a process with ``cache`` as its empty numba cache (cache_guard purges
+    and marks only the cache directories numba uses, so the checkout's default cache stays)."""
     return {**os.environ, "NUMBA_CACHE_DIR": str(cache)}
 
 
@@ -75,8 +73,8 @@ def test_a_warm_cache_is_found_and_a_stale_kernel_marker_is_not():
     """Once a process has imported (compiled or loaded) the kernels and the model, numba's
     cache holds them: the check must see that through numba's own locator, file names and
     freshness test (a check that never finds the cache would announce every run). A
-    kernel-sha256 marker that differs from the kernel sources' digest makes compile_cached
-    flush the kernel: that is cold. In a subprocess: other tests purge the kernel caches
+    kernel marker that differs from the kernel sources' digest makes compile_cached purge
+    the kernel caches: that is cold. In a subprocess: other tests purge the kernel caches
     (cache_guard) after this process has loaded them."""
     run = subprocess.run([sys.executable, "-c", WARM_CHECK], capture_output=True, text=True, cwd=ROOT, timeout=900)
     assert run.returncode == 0, run.stderr
@@ -86,7 +84,7 @@ def test_a_warm_cache_is_found_and_a_stale_kernel_marker_is_not():
 def test_the_model_entries_are_the_functions_compiled_with_a_signature():
     source = coldstart.model_source("paper-runup")[0] if "generated.paper_runup" not in sys.modules \
         else Path(sys.modules["generated.paper_runup"].__file__)
-    assert coldstart.model_entries(source) == ["rhs", "jac", "guards", "observe", "outputs"]
+    assert coldstart.model_entries(source) == ["rhs", "jac", "guards", "impact", "observe", "outputs"]
 
 
 def test_the_message_names_what_is_compiled_and_a_measured_time():

@@ -25,16 +25,36 @@ def _python(code: str, cwd: Path) -> str:
     return done.stdout
 
 
-def test_a_stale_kernel_digest_flushes_the_cache_and_is_renewed(tmp_path):
-    """The marker beside the cache holds the kernel digest; a stale one (as after an edit
-    of dopri5.py, rosenbrock.py or events.py) makes the next import flush and renew it."""
+def _python_cached(code: str, cwd: Path, cache: Path) -> str:
+    done = subprocess.run([sys.executable, "-c", code], cwd=cwd, capture_output=True, text=True,
+                          env={"PYTHONPATH": f"{ROOT}:{cwd}", "PATH": "", "NUMBA_CACHE_DIR": str(cache)})
+    assert done.returncode == 0, done.stderr
+    return done.stdout
+
+
+def test_a_stale_kernel_digest_purges_the_kernel_caches_once_and_only_there(tmp_path):
+    """Each directory of kernel caches holds the kernel digest; a stale one (as after an edit of
+    dopri5.py or events.py) makes the next compile purge that directory's kernel caches and
+    renew it. A right one purges nothing, and under NUMBA_CACHE_DIR only that cache is touched,
+    never the checkout's __pycache__."""
+    cache = tmp_path / "cache"
     (tmp_path / "kernel_user.py").write_text(KERNEL_USER)
-    assert _python("import kernel_user", tmp_path).strip() == "42.0"
-    [marker] = tmp_path.rglob("*.kernel-sha256")
-    assert marker.read_text() == cache_guard.kernel_digest()
-    marker.write_text("an older kernel")
-    assert _python("import kernel_user", tmp_path).strip() == "42.0"
-    assert marker.read_text() == cache_guard.kernel_digest()
+    checkout = sorted((ROOT / "tswm_runtime").glob("*/__pycache__/*.nb[ic]"))
+    assert _python_cached("import kernel_user", tmp_path, cache).strip() == "42.0"
+    markers = {("integration" if "integration" in str(m) else "hybrid"): m for m in cache.rglob(cache_guard.MARKER)}
+    assert set(markers) == {"integration", "hybrid"}
+    assert all(m.read_text() == cache_guard.kernel_digest() for m in markers.values())
+    old = {key: m.parent / f"{'segment' if key == 'integration' else 'machine'}.kernel-7.py311.1.nbi"
+           for key, m in markers.items()}
+    for path in old.values():
+        path.write_text("compiled from older kernels")
+    assert _python_cached("import kernel_user", tmp_path, cache).strip() == "42.0"
+    assert all(path.exists() for path in old.values()), "a right marker purges nothing"
+    markers["integration"].write_text("an older kernel")
+    assert _python_cached("import kernel_user", tmp_path, cache).strip() == "42.0"
+    assert not old["integration"].exists() and old["hybrid"].exists()
+    assert markers["integration"].read_text() == cache_guard.kernel_digest()
+    assert sorted((ROOT / "tswm_runtime").glob("*/__pycache__/*.nb[ic]")) == checkout
 
 
 def test_a_module_loaded_by_path_runs_again_from_its_cache(tmp_path):

@@ -33,9 +33,6 @@ OUT = ROOT / "tswm_runtime" / "apps" / "compile_times.json"
 def timed(code: str, cache_dir: str, setup: str = "") -> float:
     """Seconds ``code`` takes in a fresh interpreter (after ``setup``) with NUMBA_CACHE_DIR=cache_dir."""
     prog = f"{setup}\nimport time\nt0 = time.perf_counter()\n{code}\nprint(time.perf_counter() - t0)"
-    from tswm_runtime.apps.coldstart import seed_kernel_markers
-
-    seed_kernel_markers(cache_dir)  # compile everything, but leave the checkout's default cache alone
     env = {**os.environ, "NUMBA_CACHE_DIR": cache_dir}
     run = subprocess.run([sys.executable, "-c", prog], capture_output=True, text=True, env=env, cwd=ROOT)
     if run.returncode:

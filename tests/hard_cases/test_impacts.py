@@ -332,3 +332,28 @@ def test_energy_audit_over_a_run_with_impacts():
         # the rows are dt apart: the smooth change over dt is bounded by |power| dt
         slack = np.max(np.abs(power_in - absorbed)) * (r.t[1] - r.t[0]) * 2
         assert jump == pytest.approx(ev.jump.energy_lost, abs=slack)
+
+
+def test_a_sweep_counts_the_impacts_and_their_energy(lab):
+    """The sweep's impacts and impact_energy columns, per case, against the closed forms of the
+    first test: e = 0 takes one impact and ends the normal motion (the lost energy is that
+    impact's); e = 1 loses nothing however often it bounces."""
+    from tswm_runtime.apps.simulate import settings
+    from tswm_runtime.apps.sweep import run_cases
+
+    m1, m2, F1, c = 10.0, 100.0, 50.0, 1e-4
+    names = lab.PARAM_NAMES
+    rows = [[params(F1=F1, restitution=e, load_at2=0.04)[n] for n in names] for e in (0.0, 1.0)]
+    table = run_cases(lab, np.array(rows), settings(lab, {"t_end": 0.03, **TIGHT}))
+    a1 = sliding_a_accel(F1, -100.0, m1, m2, 0.0)
+    v1_s = 1.0 + a1 * 0.01
+    a_n = normal_accel(F1, 2000.0, m1, m2)
+    tau = math.sqrt(2.0 * c / a_n)
+    v1_b, v2_b = v1_s + F1 / m1 * tau, v1_s * SIN / COS + 2000.0 / m2 * tau
+    nu = -(v2_b * COS - v1_b * SIN)
+    P = frictionless_impulse(nu, m1, m2, 0.0)
+    v1_a, v2_a = v1_b + P * SIN / m1, v2_b - P * COS / m2
+    lost = 0.5 * (m1 * (v1_b**2 - v1_a**2) + m2 * (v2_b**2 - v2_a**2))
+    assert list(table["status"]) == ["finished", "finished"]
+    assert table["impacts"][0] == 1 and table["impact_energy"][0] == pytest.approx(lost, rel=1e-6)
+    assert table["impacts"][1] >= 3 and abs(table["impact_energy"][1]) < 1e-9 * lost

@@ -169,7 +169,6 @@ def empty_cache(log=print) -> list[dict]:
     out = []
     for name, (argv, result_mark) in EMPTY_CACHE.items():
         with tempfile.TemporaryDirectory() as cache:
-            coldstart.seed_kernel_markers(cache)  # compile everything, but leave the default cache alone
             seen: dict = {}
             load = os.getloadavg()[0]
             t0 = time.perf_counter()

@@ -17,8 +17,9 @@ of them would load from disk, without compiling anything:
   only if it was written by this numba version for the source file's current content, and
   an entry only if it was compiled for this CPU (``codegen.magic_tuple()``) and its object
   file exists.
-* ``cache_guard.compile_cached`` additionally flushes a kernel whose ``kernel-sha256``
-  marker differs from the digest of the kernel sources: such a kernel is cold too.
+* ``cache_guard.compile_cached`` additionally purges the kernel caches of a directory whose
+  marker (``tswm-kernels.sha256``) differs from the digest of the kernel sources: such a
+  kernel is cold too.
 
 If anything is cold the message goes to the ``tswm_runtime.compile`` logger at WARNING
 (without logging configuration Python prints it to stderr as it is; silence it with
@@ -44,6 +45,8 @@ import threading
 import types
 from functools import lru_cache
 from pathlib import Path
+
+from tswm_runtime.integration.cache_guard import MARKER
 
 LOG = logging.getLogger("tswm_runtime.compile")
 RUNTIME = Path(__file__).parents[1]  # tswm_runtime/
@@ -112,7 +115,7 @@ def is_cached(source: Path, name: str, module: str, guarded: bool = False, diges
         return False
     cache = caching.FunctionCache(_stand_in(source, name, module, line))
     if guarded:
-        marker = Path(cache.cache_path) / f"{module}.{name}.kernel-sha256"
+        marker = Path(cache.cache_path) / MARKER
         if not marker.exists() or marker.read_text() != digest:
             return False
     index = cache._cache_file  # numba has no public accessor for the index; see the module docstring
@@ -229,27 +232,6 @@ def announce(groups=(), model=None) -> str | None:
         text = message(cold, name, estimate(cold, name))
         LOG.warning(text)
         return text
-
-
-def seed_kernel_markers(cache_dir) -> None:
-    """Write cache_guard's kernel markers (the current kernel digest) into ``cache_dir``, an
-    empty directory meant as NUMBA_CACHE_DIR of a fresh process, for measurements and tests of
-    an empty cache: numba still compiles every kernel (no index), but ``compile_cached`` then
-    sees no kernel change and does not purge. Its purge deletes the kernel caches in the
-    source tree's ``__pycache__`` whatever NUMBA_CACHE_DIR says, so without this every
-    empty-cache run would also empty the default cache of the checkout it runs from."""
-    from numba.core import caching
-
-    from tswm_runtime.integration.cache_guard import kernel_digest
-
-    digest = kernel_digest()
-    for _, kernels in GROUPS.values():
-        for rel, name, guarded in kernels:
-            if guarded:
-                source = RUNTIME / rel
-                directory = Path(cache_dir) / caching._CacheLocator.get_suitable_cache_subpath(str(source))
-                directory.mkdir(parents=True, exist_ok=True)
-                (directory / f"{_runtime_module(rel)}.{name}.kernel-sha256").write_text(digest)
 
 
 def _watchdog(groups, model) -> None:

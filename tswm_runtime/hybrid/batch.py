@@ -13,10 +13,11 @@ unboxing the function-typed arguments; inside this loop a case costs only its
 integration.
 
 Per case the result rows hold:
-    out_f[c] = (t_stop, S1m, tS1m, S2m, tS2m, x1, v1)   (x1, v1 at t_stop; NaN when the
-                run stopped inside a step (max-steps, step-too-small, not-finite))
+    out_f[c] = (t_stop, S1m, tS1m, S2m, tS2m, x1, v1, impact energy)   (x1, v1 at t_stop;
+                NaN when the run stopped inside a step (max-steps, step-too-small,
+                not-finite); the kinetic energy lost in impacts)
     out_i[c] = (status, n_events, steps, rejected, rhs calls, jac calls, first mode,
-                n_modes)
+                n_modes, impacts (events with a normal impulse))
     seq[c, :n_modes] = the sequence of modes visited (the first mode, then every
                 event's to-mode that differs from the mode before; at most
                 seq.shape[1], the rest is cut off and n_modes counts them all).
@@ -30,10 +31,10 @@ from tswm_runtime.integration import cache_guard, segment
 from tswm_runtime.integration.signatures import MATRIX, VECTOR, GuardsFunction, JacFunction, RhsFunction
 from tswm_runtime.integration.structures import JUMP_WIDTH, MODE_TABLES, TOLERANCES, EventLog, Outputs
 
-F_T_STOP, F_S1M, F_TS1M, F_S2M, F_TS2M, F_X1, F_V1 = range(7)
-N_F = 7
-I_STATUS, I_EVENTS, I_STEPS, I_REJECTED, I_RHS, I_JAC, I_FIRST, I_NMODES = range(8)
-N_I = 8
+F_T_STOP, F_S1M, F_TS1M, F_S2M, F_TS2M, F_X1, F_V1, F_IMPACT_E = range(8)
+N_F = 8
+I_STATUS, I_EVENTS, I_STEPS, I_REJECTED, I_RHS, I_JAC, I_FIRST, I_NMODES, I_IMPACTS = range(9)
+N_I = 9
 
 BATCH_SIG = types.none(
     types.int64,  # method
@@ -100,3 +101,9 @@ def run_batch(method, rhs, jac, guards, observe, impact, P, tables, y0, quad, t_
                 n_modes += 1
                 prev = to
         out_i[c, I_NMODES] = n_modes
+        impacts, lost = 0, 0.0
+        for e in range(n_ev):
+            if log.jump[e, 0] > 0.0:
+                impacts += 1
+                lost += log.jump[e, 2]
+        out_i[c, I_IMPACTS], out_f[c, F_IMPACT_E] = impacts, lost

@@ -2,13 +2,14 @@
 
 numba keys a function's on-disk cache on its own source file only (dependencies are
 not tracked, as numba's caching docs say), while the compiled integrators inline
-dopri5, rosenbrock, events and segment. ``compile_cached`` stores a sha256 over all
-kernel sources beside the function's cache and flushes that cache when it differs,
-so an edited kernel can never run as stale machine code.
+dopri5, rosenbrock, events and segment. ``compile_cached`` keeps a sha256 over all
+kernel sources in each directory of kernel caches and purges those caches when it
+differs, so an edited kernel can never run as stale machine code.
 """
 from __future__ import annotations
 
 import contextlib
+import functools
 import hashlib
 import warnings
 from pathlib import Path
@@ -50,35 +51,51 @@ def kernel_digest() -> str:
     return h.hexdigest()
 
 
-def _purge_kernel_caches() -> None:
-    """Delete numba's cache files of every function in the kernel sources: a kernel links its
-    callees' cached machine code, and numba would keep a callee whose own file did not change
-    but whose callee (in another file) did."""
+MARKER = "tswm-kernels.sha256"   # in each directory of kernel caches: the digest they were compiled from
+
+
+def cache_directory(source: Path) -> Path | None:
+    """numba's cache directory for the functions defined in ``source``: the first of numba's
+    cache locators that accepts the file (NUMBA_CACHE_DIR, else __pycache__ beside it, ...)."""
+    for locator_class in caching.CacheImpl._locator_classes:   # numba has no public accessor
+        locator = locator_class.from_function(cache_directory, str(source))
+        if locator is not None:
+            return Path(locator.get_cache_path())
+    return None
+
+
+@functools.lru_cache(maxsize=1)
+def check_kernel_caches() -> None:
+    """Once per process, before the first kernel compiles: in every directory holding kernel
+    caches whose marker is not the kernel digest, delete the caches of every function in the
+    kernel sources (a kernel links its callees' cached machine code, and numba would keep a
+    callee whose own file did not change but whose callee, in another file, did), then write
+    the marker. A directory with the right marker is left alone: compiling a kernel for the
+    first time, or under another NUMBA_CACHE_DIR, purges nothing."""
+    digest = kernel_digest()
     here = Path(__file__).parents[1]
+    directories: dict[Path, list[str]] = {}
     for name in KERNEL_SOURCES:
-        source = here / name
-        for cached in (source.parent / "__pycache__").glob(f"{source.stem}.*.nb[ic]"):
-            try:
-                cached.unlink()
-            except OSError:  # gone already (another process), or read-only: numba recompiles anyway
-                pass
+        directory = cache_directory(here / name)
+        if directory is not None:
+            directories.setdefault(directory, []).append(Path(name).stem)
+    for directory, stems in directories.items():
+        marker = directory / MARKER
+        if marker.exists() and marker.read_text() == digest:
+            continue
+        for stem in stems:
+            for cached in directory.glob(f"{stem}.*.nb[ic]"):
+                with contextlib.suppress(OSError):  # gone already (another process), or read-only
+                    cached.unlink()
+        with contextlib.suppress(OSError):  # a read-only cache directory: numba compiles in memory anyway
+            write_atomic(marker, digest)
 
 
 def compile_cached(signature, **options):
     """Like ``njit(signature, cache=True, **options)``, with the kernel check above."""
     def decorate(py_func):
+        check_kernel_caches()
         dispatcher = njit(cache=True, **options)(py_func)
-        cache = dispatcher._cache  # numba has no public accessor; cache_path and flush() are public
-        marker = Path(cache.cache_path) / f"{py_func.__module__}.{py_func.__qualname__}.kernel-sha256"
-        digest = kernel_digest()
-        known = marker.read_text() if marker.exists() else ""
-        if known != digest:
-            cache.flush()
-            _purge_kernel_caches()
-            try:
-                write_atomic(marker, digest)
-            except OSError:  # a read-only cache directory: numba then compiles in memory anyway
-                pass
         dispatcher.compile(signature)
         dispatcher.disable_compile()
         return dispatcher
