@@ -119,7 +119,8 @@ def test_stiff_mesh_converges_to_the_rigid_impact(mesh_lab, rigid_lab):
         assert abs(r.S2_max) == pytest.approx(peaks[-1] * COS, rel=1e-3)
     # the load's own push during the contact is what separates the two: it fades like 1/sqrt(k)
     assert all(b < a for a, b in zip(rebound, rebound[1:])) and rebound[-1] < 0.02
-    assert all(b < a for a, b in zip(errors, errors[1:])) and errors[-1] < 2e-3 * abs(v_rigid)
+    # v1 later on: from 0.28 m/s apart at k = 1e8 to the level the rigid run's bounce tolerance sets
+    assert errors[0] > 1e4 * errors[-1] and max(errors[1:]) < 1e-5 * abs(v_rigid)
     scaled = np.array(durations) * np.sqrt(stiffness)      # contact time x sqrt(k) settles
     assert np.all(np.diff(scaled) < 0) and scaled[-2] == pytest.approx(scaled[-1], rel=0.05)
     ratio = np.array(peaks) / np.sqrt(stiffness)           # peak force / sqrt(k) settles: it grows
