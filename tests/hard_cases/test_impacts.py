@@ -357,3 +357,18 @@ def test_a_sweep_counts_the_impacts_and_their_energy(lab):
     assert list(table["status"]) == ["finished", "finished"]
     assert table["impacts"][0] == 1 and table["impact_energy"][0] == pytest.approx(lost, rel=1e-6)
     assert table["impacts"][1] >= 3 and abs(table["impact_energy"][1]) < 1e-9 * lost
+
+
+def test_exports_carry_the_gap(lab):
+    """With a clearance the CSV and the DataFrame have the gap and its rate (round-trip exact)."""
+    import io
+
+    import pandas as pd
+
+    from tswm_runtime.results.export import csv_text
+
+    r = simulate(lab, params(F1=50.0, load_at2=0.04), t_end=0.02, points=101, **TIGHT)
+    table = pd.read_csv(io.StringIO(csv_text(r, lab.MODE_REGIME)))
+    assert {"gap [m]", "gap_rate [m/s]"} <= set(table.columns)
+    assert np.array_equal(table["gap [m]"].to_numpy(), r.gap) and r.gap.max() > 0.0
+    assert np.array_equal(r.to_dataframe()["gap_rate"].to_numpy(), r.gap_rate)

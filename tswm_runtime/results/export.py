@@ -20,9 +20,9 @@ from tswm_runtime.results.result import SERIES, Result
 SCALARS = ("S1_max", "t_S1_max", "S2_max", "t_S2_max", "t_stop", "n_steps", "n_rejected", "nfev", "njev")
 
 
-def csv_header() -> list[str]:
+def csv_header(series=SERIES) -> list[str]:
     """Column names with their units, e.g. ``t [s]``; mode and regime are names."""
-    return [f"{name} [{unit}]" for name, unit in SERIES] + ["mode", "regime"]
+    return [f"{name} [{unit}]" for name, unit in series] + ["mode", "regime"]
 
 
 def csv_text(result: Result, mode_regime) -> str:
@@ -33,8 +33,8 @@ def csv_text(result: Result, mode_regime) -> str:
     """
     buffer = io.StringIO()
     writer = csv.writer(buffer, lineterminator="\n")
-    writer.writerow(csv_header())
-    columns = [getattr(result, name) for name, _ in SERIES]
+    writer.writerow(csv_header(result.series))
+    columns = [getattr(result, name) for name, _ in result.series]
     for row, mode in enumerate(result.mode):
         writer.writerow([repr(float(column[row])) for column in columns]
                         + [result.mode_names[mode], mode_regime[mode]])
@@ -71,7 +71,7 @@ def npz_bytes(result: Result, module: ModuleType) -> bytes:
     mode_regime, events and phases (structured), params, scalars (0-d arrays), status,
     message, settings (as JSON text). KD1, KD2 only when the scene has them."""
     arrays: dict[str, np.ndarray] = {name: np.asarray(getattr(result, name), dtype=np.float64)
-                                     for name, _ in SERIES}
+                                     for name, _ in result.series}
     arrays["mode"] = np.asarray(result.mode, dtype=np.int64)
     arrays["mode_names"] = _text_array(result.mode_names)
     arrays["mode_regime"] = _text_array(module.MODE_REGIME)

@@ -35,6 +35,7 @@ STATUS_NAMES = {int(status): status.label for status in Status}
 # (name, SI unit) of the per-point series of a Result, in table order.
 SERIES = (("t", "s"), ("x1", "m"), ("v1", "m/s"), ("a1", "m/s^2"), ("x2", "m"), ("v2", "m/s"),
           ("S1", "N"), ("S2", "N"), ("F1", "N"), ("F2", "N"))
+GAP_SERIES = (("gap", "m"), ("gap_rate", "m/s"))   # with a clearance only
 NEEDED_MODE = {hybrid.NEED_STICK: "stick", hybrid.NEED_FORWARD: "forward",
                hybrid.NEED_BACKWARD: "backward"}
 
@@ -128,6 +129,11 @@ class Result:
     gap_rate: np.ndarray = field(default_factory=lambda: np.empty(0))
 
     @property
+    def series(self) -> tuple[tuple[str, str], ...]:
+        """(name, SI unit) of this result's per-point series: SERIES, and the gap's with a clearance."""
+        return SERIES + (GAP_SERIES if self.gap.size else ())
+
+    @property
     def impacts(self) -> list[Event]:
         """The events that were impacts (gap closed on a flank)."""
         return [e for e in self.events if e.jump is not None]
@@ -162,7 +168,7 @@ class Result:
             "events": [e.to_dict() for e in self.events],
             "counts": {"n_steps": self.n_steps, "n_rejected": self.n_rejected, "nfev": self.nfev,
                        "njev": self.njev, "n_events": len(self.events), "n_points": int(self.t.size)},
-            "extras": dict(self.extras), "units": dict(SERIES),
+            "extras": dict(self.extras), "units": dict(self.series),
         }
 
     def to_dataframe(self):
@@ -171,7 +177,7 @@ class Result:
         import pandas as pd
 
         regime = self.model.get("mode_regime", self.mode_names)
-        df = pd.DataFrame({name: getattr(self, name) for name, _ in SERIES})
+        df = pd.DataFrame({name: getattr(self, name) for name, _ in self.series})
         df["mode"] = [self.mode_names[m] for m in self.mode]
         df["regime"] = [regime[m] for m in self.mode]
         df.attrs.update(self.to_dict())
