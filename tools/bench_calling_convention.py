@@ -84,10 +84,10 @@ def _arguments(np, seg, model, method, rtol, n_guards):
                 counters=np.zeros(4, np.int64))
 
 
-def _call(seg, variant, kw):
+def _call(seg, single, variant, kw):
     kw["counters"][:] = 0
     if variant == "signature":
-        return seg.integrate_segment(**kw)
+        return single.integrate_segment(**kw)
     args = {k: v for k, v in kw.items() if k not in ("y0", "y_stop", "i_out")}
     return seg._run(**args, i=kw["i_out"], y=kw["y0"].copy())
 
@@ -99,6 +99,7 @@ def phase(variant):
     importlib.import_module("numba")      # timed: the import alone
     t_numba = time.perf_counter()
     from tswm_runtime.integration import segment as seg
+    from tswm_runtime.integration import single
     import bench_model as model
     t_import = time.perf_counter()
     out = {"import_numba_s": t_numba - t0, "import_runtime_and_model_s": t_import - t_numba}
@@ -114,13 +115,13 @@ def phase(variant):
                                     (0, seg.ROSENBROCK23, "rosenbrock23")):
         kw = _arguments(np, seg, model, method, RTOL[label.split("_")[0]], n_guards)
         t1 = time.perf_counter()
-        result = _call(seg, variant, kw)
+        result = _call(seg, single, variant, kw)
         out[f"{label}_first_call_s"] = time.perf_counter() - t1
-        out[f"{label}_run_s"] = _best(lambda: _call(seg, variant, kw))
+        out[f"{label}_run_s"] = _best(lambda: _call(seg, single, variant, kw))
         out[f"{label}_rhs_calls"] = int(kw["counters"][2])
         out[f"{label}_steps"] = int(kw["counters"][0])
         assert result[0] == seg.REACHED_END, result
-    disp = seg.integrate_segment if variant == "signature" else seg._run
+    disp = single.integrate_segment if variant == "signature" else seg._run
     out["cache_hits"] = sum(disp.stats.cache_hits.values())
     out["cache_misses"] = sum(disp.stats.cache_misses.values())
     return out

@@ -4,8 +4,8 @@ Writes tswm_runtime/apps/compile_times.json (read by ``tswm_runtime.apps.coldsta
 for each group of kernels and each shipped model, each measured in a fresh process with a
 fresh NUMBA_CACHE_DIR:
 
-    integrate     import hybrid.machine and hybrid.rows (compiles integrate_segment,
-                  integrate_hybrid, fill_rows and no_jacobian), everything cold
+    integrate     import hybrid.machine and hybrid.rows (compiles integrate_hybrid, fill_rows
+                  and no_jacobian), everything cold
     batch         import hybrid.batch (run_batch, parallel) with the integrate group cached
     model:SCENE   load_module(SCENE) and a first simulate(points=2) with the kernels cached
 

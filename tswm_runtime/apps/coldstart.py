@@ -2,7 +2,7 @@
 compiling them takes (issue 13: "with an empty cache, a message within 1 s that says what is
 being compiled and about how long").
 
-The integrators (``integrate_segment``, ``integrate_hybrid``, ``fill_rows``; for sweeps
+The integrators (``integrate_hybrid``, ``fill_rows``; for sweeps
 ``run_batch``) and a generated model's entry functions (``rhs``, ``jac``, ``guards``,
 ``observe``, ``outputs``) are compiled eagerly, with explicit signatures, when their modules
 are imported. Before that import, ``announce`` asks numba's own cache machinery whether each
@@ -58,7 +58,6 @@ WATCHDOG_S = 0.5
 GROUPS = {
     "integrate": ("the integration kernels (dopri5 and rosenbrock23, the hybrid mode machine, output rows)",
                   [("integration/segment.py", "no_jacobian", False),
-                   ("integration/segment.py", "integrate_segment", True),
                    ("hybrid/machine.py", "integrate_hybrid", True),
                    ("hybrid/rows.py", "fill_rows", True)]),
     "batch": ("the parallel sweep kernel", [("hybrid/batch.py", "run_batch", True)]),

@@ -20,7 +20,7 @@ from numba.core import caching
 from tswm_runtime.common.files import write_atomic
 
 KERNEL_SOURCES = ("integration/structures.py", "integration/control.py", "integration/dopri5.py",
-                  "integration/rosenbrock.py", "integration/events.py", "integration/segment.py",
+                  "integration/rosenbrock.py", "integration/events.py", "integration/segment.py", "integration/single.py",
                   "integration/painleve.py", "integration/steady.py", "hybrid/machine.py", "hybrid/batch.py", "hybrid/rows.py")
 
 

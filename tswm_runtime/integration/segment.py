@@ -1,10 +1,10 @@
 """Integrate one segment of a hybrid trajectory: fixed mode, until t_end or an event.
 
-``integrate_segment`` is compiled once, eagerly, with an explicit signature in
-which the model functions are numba first-class function types (see
-``signatures``), and cached on disk: every model in every process reuses it.
-The method is chosen by a code (``DOPRI5`` explicit, ``ROSENBROCK23`` stiff);
-both share the step loop, step-size control and event location below.
+The step loop ``run`` is compiled into the mode machine (``hybrid.machine``),
+whose explicit signature takes the model functions as numba first-class function
+types (see ``signatures``). The method is chosen by a code (``DOPRI5`` explicit,
+``ROSENBROCK23`` stiff); both share the step loop, step-size control and event
+location below.
 
 Per accepted step [t_a, t_b]: guards are sampled on the dense output and a
 crossing is located on it (``events``); the state AT the event is then obtained
@@ -18,26 +18,26 @@ Conventions: forward integration (t_end >= t0); the last step is clipped to land
 exactly on t_end; the mode never changes inside a segment (error estimators are
 not valid across a switch, scipy issue 18039), the caller restarts after events.
 
-``integrate_segment`` is the single-segment entry point (no noise band, no
-quadrature, no monitored observables); the hybrid driver (``hybrid``) calls the
-step loop ``run`` with all three. Arguments travel in the named structures of
+``single.integrate_segment`` calls ``run`` for one segment from Python (no noise
+band, no quadrature, no monitored observables; for tests and tools, and compiled
+only where they import it); the hybrid driver (``hybrid``) calls it with all three. Arguments travel in the named structures of
 ``structures`` (Tolerances, EventSettings, Outputs, Step, StepWork); the method
 is dispatched in one place, ``_attempt``.
 """
 from collections import namedtuple
 
 import numpy as np
-from numba import njit, types
+from numba import njit
 
-from tswm_runtime.integration import cache_guard, control, dopri5, events, painleve, rosenbrock, steady
-from tswm_runtime.integration.signatures import JAC_SIG, MATRIX, VECTOR, GuardsFunction, JacFunction, RhsFunction
-from tswm_runtime.integration.structures import EVENT_SETTINGS, TOLERANCES, Outputs, Step, StepWork
+from tswm_runtime.integration import control, dopri5, events, painleve, rosenbrock, steady
+from tswm_runtime.integration.signatures import JAC_SIG
+from tswm_runtime.integration.structures import Step, StepWork
 
 # Method codes.
 DOPRI5 = 0  # Dormand-Prince 5(4), explicit (dopri5.py).
 ROSENBROCK23 = 1  # Shampine-Reichelt ode23s Rosenbrock 2(3), stiff, uses jac (rosenbrock.py).
 
-# Status codes returned by integrate_segment.
+# Status codes of a segment.
 REACHED_END = 0  # Integrated up to t_end exactly.
 EVENT = 1  # Stopped at the first event; t and y_stop are the event's.
 APPROACH = 2  # The singular guard (D) heads for zero: hand over to painleve.approach at t.
@@ -46,7 +46,7 @@ MAX_STEPS = -2  # max_steps step attempts (accepted + rejected) were made.
 NOT_FINITE = -3  # Non-finite state, derivative, Jacobian or guard at an accepted point.
 INVALID_INPUT = -4  # Unknown method, inconsistent array sizes, t_end < t0, ...
 
-# Indices into the counters array (incremented, never reset, by integrate_segment).
+# Indices into the counters array (incremented, never reset, by run).
 N_STEPS = 0  # Accepted steps.
 N_REJECTED = 1  # Rejected step attempts.
 N_RHS = 2  # Calls of rhs.
@@ -55,7 +55,6 @@ N_COUNTERS = 4
 
 MIN_STEP_ULPS = 10.0  # A step must exceed 10 ulp(t) to move t reliably (scipy's min_step).
 
-_VEC_I64 = types.int64[::1]
 
 
 @njit(JAC_SIG, cache=True)
@@ -282,24 +281,9 @@ def _refine(observe, mode, p, mon, obs, win, y_tmp):
 
 
 @njit(cache=True, error_model="numpy")
-def _valid(method, t0, y0, t_end, tol, max_steps, ev, out, i_out, y_stop, counters):
-    """Argument checks that keep the unchecked array accesses below in bounds."""
-    n = y0.size
-    sizes = n > 0 and tol.atol.size == n and y_stop.size == n and counters.size >= N_COUNTERS
-    outputs = 0 <= i_out <= out.t.size and (out.t.size == 0 or (
-        out.y.shape[0] >= out.t.size and out.y.shape[1] == n))
-    numbers = t_end >= t0 and tol.rtol > 0.0 and tol.hmax > 0.0 and max_steps >= 0
-    for a in tol.atol:
-        numbers = numbers and a >= 0.0
-    for d in ev.directions:
-        numbers = numbers and -1 <= d <= 1
-    return (method == DOPRI5 or method == ROSENBROCK23) and sizes and outputs and numbers
-
-
-@njit(cache=True, error_model="numpy")
 def run(method, rhs, jac, guards, observe, mode, p, t0, t_end, tol, max_steps, h0, ev, out, i, y,
         quad, mon, counters):
-    """The step loop of integrate_segment; y is the current state (updated in place).
+    """The step loop of one segment; y is the current state (updated in place).
 
     tol: Tolerances; ev: EventSettings (ev.singular: a guard (D) whose zero the model
     cannot be integrated to in t; the loop stops with APPROACH after a step that takes
@@ -440,58 +424,3 @@ def run(method, rhs, jac, guards, observe, mode, p, t0, t_end, tol, max_steps, h
     if n_mon > 0:
         _refine(observe, mode, p, mon, obs, win, y_tmp)
     return status, t, k, i, h_prop
-
-
-SEGMENT_SIG = types.Tuple((types.int64, types.float64, types.int64, types.int64, types.float64))(
-    types.int64,  # method
-    RhsFunction, JacFunction, GuardsFunction,
-    types.int64, VECTOR,  # mode, p
-    types.float64, VECTOR, types.float64,  # t0, y0, t_end
-    TOLERANCES, types.int64, types.float64,  # tol, max_steps, h0
-    EVENT_SETTINGS,  # ev
-    VECTOR, types.int64, MATRIX,  # t_out, i_out, y_out
-    VECTOR, _VEC_I64,  # y_stop, counters
-)
-
-
-@cache_guard.compile_cached(SEGMENT_SIG, error_model="numpy")
-def integrate_segment(method, rhs, jac, guards, mode, p, t0, y0, t_end, tol, max_steps, h0, ev, t_out,
-                      i_out, y_out, y_stop, counters):
-    """Integrate y' = rhs(mode, t, y, p) from (t0, y0) to t_end or the first event.
-
-    method: DOPRI5 or ROSENBROCK23 (the latter calls jac once per accepted step;
-        DOPRI5 runs may pass ``no_jacobian``).
-    rhs, jac, guards: the model, compiled with the signatures in ``signatures``.
-    mode, p: discrete mode and parameter vector, passed through to the model.
-    t0, y0, t_end: start and end (t_end >= t0); y0 is not modified.
-    tol: Tolerances(rtol, atol per component, hmin: smallest step after a rejection,
-        hmax: largest step, np.inf for none). max_steps: bound on step attempts.
-    h0: first trial step, e.g. the h returned by the previous segment; <= 0 selects
-        it automatically (Hairer).
-    ev: EventSettings: directions, one entry per guard (its size is the number of
-        guards): +1 rising, -1 falling, 0 both; gtol: guards with |g| <= gtol count as
-        zero (no sign): a guard zero at t0 is disarmed until it leaves zero; ttol: extra
-        relative time tolerance of event location (0 gives 4 eps); noise_band; singular.
-    t_out, i_out, y_out: sorted output times; rows y_out[i_out:] are filled for the
-        times t_out[i_out:] in [t0, t_stop] (t_out[i_out] >= t0 is assumed), from the
-        dense output; a time equal to t_stop gets exactly y_stop.
-    y_stop: receives the state at the returned time. counters: int64[4], incremented
-        (N_STEPS, N_REJECTED, N_RHS, N_JAC).
-
-    Returns (status, t_stop, event guard index or -1, number of output rows written,
-    proposed next step size for a warm restart). status: REACHED_END, EVENT,
-    STEP_TOO_SMALL, MAX_STEPS, NOT_FINITE or INVALID_INPUT (t_stop is then the last
-    accepted time and y_stop its state).
-    """
-    out = Outputs(t_out, y_out, np.empty(0, np.int64), np.empty((0, 0)))
-    if not _valid(method, t0, y0, t_end, tol, max_steps, ev, out, i_out, y_stop, counters):
-        return INVALID_INPUT, t0, -1, 0, h0
-    y_stop[:] = y0
-    i = i_out
-    while i < t_out.size and t_out[i] <= t0:
-        y_out[i, :] = y0
-        i += 1
-    status, t, k, i, h_next = run(method, rhs, jac, guards, guards, mode, p, t0, t_end, tol, max_steps, h0,
-                                  ev, out, i, y_stop, np.empty(0), np.empty((0, 3)), counters)
-    return status, t, k, i - i_out, h_next
-
