@@ -167,8 +167,10 @@ class _Emitter:
     def print(self, expr) -> str:
         return self.printer.doprint(expr)
 
-    def body(self, outputs: list[sp.Expr], law: sp.Symbol | None = None) -> tuple[list[str], list[str]]:
-        """Unpack states, free parameters and laws the outputs use; one CSE over the outputs.
+    def body(self, outputs: list[sp.Expr], law: sp.Symbol | None = None,
+             states_from_y: bool = True) -> tuple[list[str], list[str]]:
+        """Unpack states (unless the function takes them as arguments), free parameters and
+        laws the outputs use; one CSE over the outputs.
 
         A law symbol may share its name with a parameter (a constant load ``F2``): outside
         the law's own function the value then comes from the law, inside it from ``p``.
@@ -176,7 +178,7 @@ class _Emitter:
         exprs = [self.named(self.fold(sp.sympify(e))) for e in outputs]
         used = set().union(*(e.free_symbols for e in exprs))
         calls = [q.symbol for q in self.model.laws if q.symbol in used and q.symbol != law]
-        lines = [f"{s} = y[{i}]" for i, s in enumerate(self.model.states) if s in used]
+        lines = [f"{s} = y[{i}]" for i, s in enumerate(self.model.states) if s in used and states_from_y]
         lines += [f"{name} = p[{i}]" for i, name in enumerate(self.vector)
                   if sp.Symbol(name, real=True) in used and sp.Symbol(name, real=True) not in calls]
         lines += [f"{s} = {self.law_functions[s]}(t, y, p)" for s in calls]
@@ -462,8 +464,7 @@ def _impact(em: _Emitter) -> Function:
 
 def _body2(em: _Emitter) -> Function:
     """body2(x1, v1, gap, gap_rate, p) -> (x2, v2): plain Python, so it works on whole arrays."""
-    lines, results = em.body(list(em.model.body2))
-    lines = [line for line in lines if not re.fullmatch(r"\w+ = y\[\d+\]", line)]
+    lines, results = em.body(list(em.model.body2), states_from_y=False)
     return Function("body2", "x1, v1, gap, gap_rate, p", "(x2, v2), position and speed of body 2 "
                     f"(x2 = {_short(em.model.body2[0])}, v2 = {_short(em.model.body2[1])}); works on arrays.",
                     tuple(lines), ", ".join(results), jit=False)

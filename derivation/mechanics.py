@@ -179,8 +179,7 @@ class ImpactFrame:
     jump_v1: sp.Expr             # change of v1 for the impulse (P_n, P_t)
     jump_v2: sp.Expr             # change of v2
     v1_of: sp.Expr               # v1 from (gap_rate, slip): the inverse of the frame map
-    kinetic_energy: sp.Expr      # m1 v1^2/2 + m2 v2^2/2
-    energy_in_frame: sp.Expr     # the same in terms of (f gap_rate, slip)
+    energy_in_frame: sp.Expr     # m1 v1^2/2 + m2 v2^2/2 in terms of (f gap_rate, slip)
     newton_stick_loss: sp.Expr   # energy lost by Newton's law ending in stick: can be < 0
 
 
@@ -220,7 +219,7 @@ def impact_frame(flank: str) -> ImpactFrame:
     # Newton's law with a stick ending: (nu, s) -> (-e nu, 0). The energy it loses:
     newton_stick = sp.simplify(in_frame - in_frame.subs({nu: -e_r * nu, s: 0}))
     v1_of = sp.trigsimp(frame[v1].subs(nu, f * gap_rate))
-    return ImpactFrame(flank, W, jump_v1, jump_v2, v1_of, kinetic, in_frame, newton_stick)
+    return ImpactFrame(flank, W, jump_v1, jump_v2, v1_of, in_frame, newton_stick)
 
 
 # Mesh compliance: the flanks may overlap; the overlap pushes them apart like a spring and damper.
@@ -235,15 +234,13 @@ class MeshContact:
 
     flank: str
     direction: int
-    overlap: sp.Expr             # penetration along the flank normal, in gap (and clearance)
-    normal: sp.Expr              # N in terms of the states
+    normal: sp.Expr              # N = k overlap + c overlap' in terms of the states
     tangential: sp.Expr          # T, force on body 2 along t (stick: from the balance; slide: -s mu N)
     accel1: sp.Expr
     accel2: sp.Expr
     gap_accel: sp.Expr
     cone_forward: sp.Expr        # stick: mu N + T >= 0 while no slip forward
     cone_backward: sp.Expr       # stick: mu N - T >= 0 while no slip backward
-    friction_power: sp.Expr      # power the contact's friction absorbs (>= 0)
 
 
 @lru_cache(maxsize=None)
@@ -263,7 +260,5 @@ def mesh_contact(flank: str, direction: int) -> MeshContact:
         T_ = sp.solve(sp.Eq(slip_accel.subs(acc), 0), T)[0]
         acc = {k: sp.simplify(v.subs(T, T_)) for k, v in acc.items()}
     gap_accel = sp.simplify(ff.normal_speed.subs({v1: a1, v2: a2}).subs(acc))
-    slip = ff.slip.subs(v2, ff.v2_of)
-    power = -T_ * slip if direction else sp.Integer(0)
-    return MeshContact(flank, direction, overlap, normal, sp.simplify(T_), acc[a1], acc[a2], gap_accel,
-                       sp.simplify(mu * normal + T_), sp.simplify(mu * normal - T_), power)
+    return MeshContact(flank, direction, normal, sp.simplify(T_), acc[a1], acc[a2], gap_accel,
+                       sp.simplify(mu * normal + T_), sp.simplify(mu * normal - T_))

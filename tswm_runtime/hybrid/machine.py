@@ -215,9 +215,9 @@ def _select(mode, kind, rhs, guards, t, y, p, tol, tables, g, y_tmp, f):
     if mode_kind[mode] == M_MESH:
         m, need = _mesh_select(mode, kind, guards, t, y, p, tables, g)
         return (m, FINISHED, NEED_NOTHING) if m >= 0 else (-1, UNDECLARED, need)
-    flank = tables.flank[mode] if mode_kind[mode] == M_SLIDING else 0
-    if flank == 0 or _mode(M_FREE, 0, 0, tables) < 0:
-        flank = _touching(guards, t, y, p, tables, g)  # 0 without a clearance
+    flank = 0  # the touched flank with a clearance, 0 without one
+    if _mode(M_FREE, 0, 0, tables) >= 0:
+        flank = tables.flank[mode] if mode_kind[mode] == M_SLIDING else _touching(guards, t, y, p, tables, g)
     if kind == G_CONE_F or kind == G_CONE_B:  # breakaway from stick
         m, need = _sliding(1 if kind == G_CONE_F else -1, flank, rhs, guards, t, y, p, tol,
                            tables, g, y_tmp, f)
@@ -286,6 +286,12 @@ def _collide(impact, flank, rhs, guards, t, y, p, tol, tables, g, y_tmp, f, fram
 
 
 @njit(cache=True, error_model="numpy")
+def _need(m, direction):
+    """What a missing sliding mode in ``direction`` needs (nothing when mode ``m`` exists)."""
+    return NEED_NOTHING if m >= 0 else NEED_FORWARD if direction > 0 else NEED_BACKWARD
+
+
+@njit(cache=True, error_model="numpy")
 def _mesh_rest(flank, guards, t, y, p, tables, g):
     """(mode, need) where the slip of a compliant contact on ``flank`` is 0: stick while both
     friction cones hold, else sliding the way the violated cone points."""
@@ -298,7 +304,7 @@ def _mesh_rest(flank, guards, t, y, p, tables, g):
     if direction == 0:
         return ms, NEED_NOTHING
     m = _mode(M_MESH, flank, direction, tables)
-    return m, (NEED_NOTHING if m >= 0 else NEED_FORWARD if direction > 0 else NEED_BACKWARD)
+    return m, _need(m, direction)
 
 
 @njit(cache=True, error_model="numpy")
@@ -316,7 +322,7 @@ def _mesh_enter(flank, guards, t, y, p, tables, g):
         return _mesh_rest(flank, guards, t, y, p, tables, g)
     direction = 1 if slip > 0.0 else -1
     m = _mode(M_MESH, flank, direction, tables)
-    return m, (NEED_NOTHING if m >= 0 else NEED_FORWARD if direction > 0 else NEED_BACKWARD)
+    return m, _need(m, direction)
 
 
 @njit(cache=True, error_model="numpy")
@@ -331,7 +337,7 @@ def _mesh_select(mode, kind, guards, t, y, p, tables, g):
     if kind == G_CONE_F or kind == G_CONE_B:
         direction = 1 if kind == G_CONE_F else -1
         m = _mode(M_MESH, flank, direction, tables)
-        return m, (NEED_NOTHING if m >= 0 else NEED_FORWARD if direction > 0 else NEED_BACKWARD)
+        return m, _need(m, direction)
     guards(mode, t, y, p, g)  # a law event: the contact may open, a stick may break
     if g[_guard(G_MESH_N, tables.guard_kind)] < 0.0:
         return _mode(M_FREE, 0, 0, tables), NEED_NOTHING

@@ -237,7 +237,7 @@ class Result:
             KD1, KD2 = module.load_factors(mon[0, 1], mon[1, 1], p)
         return cls(
             scene=module.SCENE, params=dict(zip(module.PARAM_NAMES, p.tolist())), settings=dict(run),
-            t=t, x1=x1, v1=v1, a1=a1, x2=np.asarray(x2 + 0.0 * x1), v2=np.asarray(v2 + 0.0 * v1), S1=S1, S2=S2,
+            t=t, x1=x1, v1=v1, a1=a1, x2=x2, v2=v2, S1=S1, S2=S2,
             F1=F1, F2=F2, gap=gap, gap_rate=gap_rate,
             mode=mode, mode_names=tuple(module.MODES), events=events,
             phases=_phases(module, first_mode, events, t_stop),
