@@ -240,7 +240,7 @@ def test_observe_gives_the_reactions_and_constants_fit(name):
     p, out = parameters(m), np.zeros(2)
     for mode in range(len(m.MODES)):
         for v in (0.5, 4.0):
-            y = np.array([0.05, v] if len(m.STATES) == 2 else [v])
+            y = np.array([{"x1": 0.05, "v1": v, "gap": 1e-4}.get(s, 0.0) for s in m.STATES])
             m.observe(mode, 0.1, y, p, out)
             assert tuple(out) == m.reactions(mode, 0.1, y, p)
             assert all(math.isfinite(x) for x in out)
