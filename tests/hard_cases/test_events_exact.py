@@ -230,10 +230,10 @@ def test_every_status_message_builds_for_every_mode():
     from tswm_runtime.results.result import STATUS_NAMES, Event, status_message
     from tswm_runtime.apps.simulate import parameter_vector
 
-    for scene in ("paper-runup", "seating", "paper-literal", "one-sided"):
+    for scene in ("paper-runup", "seating", "paper-literal", "one-sided", "backlash", "mesh"):
         m = load_module(scene)
         p = parameter_vector(m, {})
-        y = np.array([0.1, 0.5][2 - len(m.STATES):])
+        y = np.array([{"x1": 0.1, "v1": 0.5, "gap": 1e-4}.get(s, 0.0) for s in m.STATES])
         events = [Event(0.1, "D" if "D" in m.GUARDS else m.GUARDS[0], m.MODES[0], None, 0.0, 0.5)]
         for status in STATUS_NAMES:
             for last in range(len(m.MODES)):
