@@ -269,7 +269,8 @@ class _Emitter:
 
 
 def law_function_name(symbol: sp.Symbol) -> str:
-    base = {"F1": "drive_force", "F2": "load_force", "x2": "body2_position"}
+    base = {"F1": "drive_force", "F2": "load_force", "x2": "body2_position", "F2_carried": "carried_load",
+            "m2_carried": "carried_mass"}
     name = str(symbol)
     return base.get(name, name.replace("rho", "friction_angle"))
 
@@ -291,6 +292,9 @@ def _mode_functions(em: _Emitter) -> list[Function]:
         if mode.gap_accel is not None:
             out.append(em.function(f"gap_accel_{mode.name}", f"d gap_rate/dt in mode {mode.name}: "
                                    f"{_short(mode.gap_accel)}", [mode.gap_accel]))
+        if mode.stem_accel is not None:
+            out.append(em.function(f"stem_accel_{mode.name}", f"d v3/dt, the stem's acceleration, in mode {mode.name}: "
+                                   "0 while held, F3/m3 on its own, a2 while carried", [mode.stem_accel]))
         if mode.slide is not None:
             out.append(em.function(f"reactions_{mode.name}", f"(S1, S2) in mode {mode.name}: Filippov's combination "
                                    "lambda (S1, S2)_fwd_a + (1 - lambda) (S1, S2)_fwd_b, lambda = rate_b / (rate_b - "
@@ -316,17 +320,20 @@ def _mode_functions(em: _Emitter) -> list[Function]:
 
 
 def state_rates(model: Model, mode) -> list[sp.Expr]:
-    """d(states)/dt in ``mode``: x1' = v1, gap' = gap_rate, gap_rate' = the mode's gap_accel, v1' = a1."""
+    """d(states)/dt in ``mode``: x1' = v1, gap' = gap_rate, gap_rate' = the mode's gap_accel, x3' = v3,
+    v3' = the mode's stem_accel, v1' = a1."""
     rate = {mechanics.x1: mechanics.v1, mechanics.gap: mechanics.gap_rate, mechanics.gap_rate: mode.gap_accel,
-            mechanics.v1: mode.accel}
+            mechanics.x3: mechanics.v3, mechanics.v3: mode.stem_accel, mechanics.v1: mode.accel}
     return [rate[s] for s in model.states]
 
 
 def _rate_sources(model: Model) -> list[str]:
-    """What rhs writes into dy[i], in the template: the velocity states, a1, the gap's acceleration."""
+    """What rhs writes into dy[i], in the template: the velocity states, a1, the gap's and the stem's
+    accelerations."""
     index = {s: i for i, s in enumerate(model.states)}
     source = {mechanics.x1: f"y[{index[mechanics.v1]}]", mechanics.v1: "accel(mode, t, y, p)",
-              mechanics.gap: f"y[{index.get(mechanics.gap_rate)}]", mechanics.gap_rate: "gap_accel(mode, t, y, p)"}
+              mechanics.gap: f"y[{index.get(mechanics.gap_rate)}]", mechanics.gap_rate: "gap_accel(mode, t, y, p)",
+              mechanics.x3: f"y[{index.get(mechanics.v3)}]", mechanics.v3: "stem_accel(mode, t, y, p)"}
     return [source[s] for s in model.states]
 
 
@@ -434,26 +441,38 @@ def _guards(em: _Emitter) -> Function:
         armed_lines, (armed,) = em.body([latch.armed])
         guard_lines, (guard,) = em.body([latch.guard])
         lines += armed_lines + [f"if {armed}:  # {latch.name}: {latch.doc}"]
-        if S1 in latch.guard.free_symbols:
-            lines.append("    S1 = reactions(mode, t, y, p)[0]")
+        if {S1, S2} & latch.guard.free_symbols:
+            lines.append("    S1, S2 = reactions(mode, t, y, p)")
         lines += [f"    {line}" for line in guard_lines] + [f"    g[{names.index(latch.name)}] = {guard}"]
     return Function("guards", "mode, t, y, p, g", "Event functions of `mode`, in the order of GUARDS.",
                     tuple(lines), "", "GUARDS_SIG")
 
 
 IMPACT_FRAME = ("nu", "s", "W_nn", "W_nt", "W_tt", "mu", "e", "dv1_dgap_rate", "dv1_ds")
+PICKUP_FRAME = ("nu", "s", "dnu_dP_fwd", "dv1_dP_fwd", "dnu_dP_bwd", "dv1_dP_bwd", "dnu_dP_stick", "stick_cone", "e",
+                "J", "m3", "v2_per_v1")
 
 
 def _impact(em: _Emitter) -> Function:
-    """impact(flank, t, y, p, out): the frame of a collision on flank +1 (a) or -1 (b), in IMPACT_FRAME order."""
+    """impact(flank, t, y, p, out): the frame of a collision on flank +1 (a) or -1 (b), in IMPACT_FRAME
+    order, or of the stem's pickup (flank 0), in PICKUP_FRAME order."""
+    model = em.model
+    if model.pickup:
+        body, values = em.body(list(model.pickup))
+        doc = ("The frame of the stem's pickup (`flank` 0): out = (nu, s, dnu/dP and dv1/dP sliding forward, the same "
+               "backward, dnu/dP in stick, stick cone, e, J, m3, v2/v1): nu = v3 - v2 (< 0: body 2 closes on the "
+               "stem), s = v1, P the impulse on the stem; the wedge sticks under the impulse where the cone is >= 0; "
+               "J v1^2/2 the kinetic energy of bodies 1 and 2.")
+        lines = list(body) + [f"out[{k}] = {v}  # {name}" for k, (name, v) in enumerate(zip(PICKUP_FRAME, values))]
+        return Function("impact", "flank, t, y, p, out", doc, tuple(lines), "", "GUARDS_SIG")
     doc = ("The frame of a collision on `flank` (+1 a, -1 b): out = (nu, s, W_nn, W_nt, W_tt, mu, e, dv1/d gap_rate, "
            "dv1/ds): nu = f gap_rate and s the slip, W the inverse mass in that frame, mu = tan(rho) of the flank, "
            "e the restitution, and v1 = dv1/d gap_rate gap_rate + dv1/ds s.")
-    if not em.model.impacts:
-        return Function("impact", "flank, t, y, p, out", "No clearance: the flanks never part, so nothing collides.",
+    if not model.impacts:
+        return Function("impact", "flank, t, y, p, out", "No clearance or lost motion: nothing collides.",
                         ("out[:] = math.nan",), "", "GUARDS_SIG")
     lines = []
-    for index, imp in enumerate(em.model.impacts):
+    for index, imp in enumerate(model.impacts):
         body, values = em.body(list(imp.frame))
         lines.append(f"{'if' if index == 0 else 'else:'} {'flank == 1:' if index == 0 else ''}".rstrip()
                      + f"  # flank {imp.flank}")

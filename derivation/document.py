@@ -225,6 +225,35 @@ def _clearance_sections(model: Model) -> list[Section]:
     return [fly, law]
 
 
+def _lost_motion_section() -> Section:
+    """The stem: held, struck, flying on its own or carried; the pickup impulse through the wedge."""
+    pk = M.pickup()
+    s = Section("Lost motion: picking up the stem")
+    s.text("Body 2 runs free over the travel $L$ before it reaches the stem (body 3, mass $m_3$, on body 2's "
+           "guide, resting until then); $x_3$ is the stem's travel from rest, $v_3$ its speed, and the gap "
+           "between them is $L + x_3 - x_2$. The load acts on the stem from the first pickup on. While body 2 "
+           "carries the stem, the load $F_2$ and the mass $m_3$ act on body 2 in every mode; apart, the stem "
+           "moves under $\\dot v_3 = F_2/m_3$. Newton for the carried stem, $m_3 a_2 = F_2 + N_3$, with body 2's "
+           "reaction $S_2 = F_2 - (m_2 + m_3) a_2$, gives the contact force")
+    s.math(_eq(M.N3, pk.stem_force.subs(M.F3, M.F2)))
+    s.text("and the stem leaves body 2 where it falls to 0. At the pickup an impulse $P$ acts on the stem and "
+           "$-P$ on body 2; the wedge passes it on like a force, with the resultant impulse leaning by $\\rho$ "
+           "against the slip of the direction $s$ it slides in (flank a carries it). The impulse balance of "
+           "worm and wheel gives")
+    s.math(*(f"\\frac{{d v_1}}{{d P}}\\Big|_{{s = {d}}} = {_l(pk.jump_v1[d])}" for d in (1, -1)))
+    s.text("(the sliding modes' $a_1$ for $F_1 = 0$, $F_2 = -1$), and $d(v_3 - v_2)/dP = 1/m_3 - "
+           "\\tan\\gamma\\, dv_1/dP$. Where $v_1$ reaches 0 inside the impulse, the wedge locks if the statics of "
+           "the impulse alone stay inside both friction cones,")
+    s.math(f"{_l(pk.cone_forward)} \\ge 0, \\qquad {_l(pk.cone_backward)} \\ge 0,")
+    s.text("that is if it is self-locking, and slides back otherwise. Compression ends at $v_3 = v_2$, and "
+           "restitution returns $e^2$ of the compression work, as for the flanks. The loss is the drop of "
+           "the kinetic energy $J v_1^2/2 + m_3 v_3^2/2$ with")
+    s.math(f"J = {_l(pk.inertia)}.")
+    s.text("A rebound within the tolerances is taken as plastic: body 2 carries the stem from then on, which ends "
+           "a sequence of bounces at its accumulation point with the momentum kept.")
+    return s
+
+
 def _mesh_section() -> Section:
     """Compliant flanks: the spring-damper normal force, sliding and stick in contact."""
     slide, stick = M.mesh_contact("a", 1), M.mesh_contact("a", 0)
@@ -336,6 +365,7 @@ def build_document(model: Model) -> dict:
     flank_dirs = [(f, d) for d in (1, -1) for f in ("a", "b")]
     sections = [_assumptions(), _kinematics(), *_sliding_sections(flank_dirs), _stick_section(),
                 *(_clearance_sections(model) if model.clearance is not None else []),
+                *([_lost_motion_section()] if model.pickup else []),
                 _load_factor_section(), _laws_section(model), _modes_section(model), _audit_section()]
     params = [[f"`{p.name}`", f"{p.value:.6g}", p.unit,
                "free" if p.free else "fixed"] for p in scene.params()]

@@ -86,6 +86,12 @@ def _contact_forces(force_on_body2: sp.Matrix) -> tuple[sp.Expr, sp.Expr]:
     return (-force_on_body2).dot(E1), force_on_body2.dot(E2)
 
 
+def _resultant(f: int, s: int) -> sp.Matrix:
+    """Coulomb: the contact resultant Q on flank f leans by rho from the normal, against body 2's
+    sliding with sign(v1) = s (a force, or an impulse in a collision)."""
+    return Q * (f * sp.cos(rho) * NORMAL - s * sp.sin(rho) * TANGENT)
+
+
 @lru_cache(maxsize=None)
 def kinematics() -> Kinematics:
     """Non-penetration of the flank, differentiated twice."""
@@ -105,9 +111,7 @@ def sliding(flank: str, direction: int) -> SlidingMode:
     """Solve the force balance of ``flank`` sliding with sign(v1) = ``direction``."""
     f, s = FLANK_SIGN[flank], direction
     kin = kinematics()
-    # Coulomb: the resultant leans by rho from the normal, against body 2's sliding.
-    resultant = Q * (f * sp.cos(rho) * NORMAL - s * sp.sin(rho) * TANGENT)
-    R1, R2 = _contact_forces(resultant)
+    R1, R2 = _contact_forces(_resultant(f, s))
     psi = sp.trigsimp(sp.simplify(-R1 / R2))
     # Newton for each body, reactions S_i = F_i - m_i a_i = -R_i, constraint a2 = ratio a1.
     eom = [sp.Eq(S1, F1 - m1 * a1), sp.Eq(S2, F2 - m2 * kin.ratio * a1), sp.Eq(S1, -Psi * S2)]
@@ -262,3 +266,44 @@ def mesh_contact(flank: str, direction: int) -> MeshContact:
     gap_accel = sp.simplify(ff.normal_speed.subs({v1: a1, v2: a2}).subs(acc))
     return MeshContact(flank, direction, normal, sp.simplify(T_), acc[a1], acc[a2], gap_accel,
                        sp.simplify(mu * normal + T_), sp.simplify(mu * normal - T_))
+
+
+# Lost motion: a stem (body 3) on body 2's guide, which body 2 picks up after a free travel.
+m3 = sp.Symbol("m3", positive=True)
+F3 = sp.Symbol("F3", real=True)               # the load, acting on the stem
+P = sp.Symbol("P", positive=True)             # pickup impulse: +P on the stem, -P on body 2, along x2
+N3 = sp.Symbol("N3", real=True)               # contact force of body 2 on the stem (>= 0)
+x3, v3 = sp.symbols("x3 v3", real=True)      # the stem's travel from its rest position, its speed
+
+
+@dataclass(frozen=True)
+class Pickup:
+    """Body 2, held by the wedge on flank a, strikes the stem: an impulse P along x2 (the stem's
+    contact is frictionless). The wedge passes the impulse on like a force: the same balance."""
+
+    jump_v1: dict[int, sp.Expr]  # dv1/dP while the wedge slides with sign(v1) = s
+    flank_impulse: dict[int, sp.Expr]  # the resultant impulse on flank a per unit P (> 0: flank a carries it)
+    cone_forward: sp.Expr        # the wedge sticks under the impulse alone where both cones are >= 0
+    cone_backward: sp.Expr       # (per unit P, from the statics with F1 = 0, F2 = -P)
+    inertia: sp.Expr             # J in m1 v1^2/2 + m2 v2^2/2 = J v1^2/2
+    stem_force: sp.Expr          # N3 while the stem moves with body 2, in S2 and F3
+
+
+@lru_cache(maxsize=None)
+def pickup() -> Pickup:
+    """Impulse balance of the pickup on each sliding direction, the stick test, and the stem's
+    contact force while it is carried (Newton for the stem, S2 with m2 + m3 and F2 = F3)."""
+    kin = kinematics()
+    dv1 = sp.Symbol("dv1", real=True)
+    jumps, impulses = {}, {}
+    for s in (1, -1):
+        R1, R2 = _contact_forces(_resultant(1, s))
+        sol = sp.solve([sp.Eq(m1 * dv1, R1), sp.Eq(m2 * kin.ratio * dv1, -P + R2)], [dv1, Q], dict=True)[0]
+        jumps[s], impulses[s] = sp.simplify(sol[dv1] / P), sp.simplify(sol[Q] / P)
+    unit = {F1: 0, F2: -1}
+    st = stick()
+    a2_ = sp.Symbol("a2_", real=True)
+    carried = sp.solve([sp.Eq(m3 * a2_, F3 + N3), sp.Eq(S2, F3 - (m2 + m3) * a2_)], [N3, a2_], dict=True)[0]
+    inertia = sp.simplify(2 * (m1 * v1**2 / 2 + m2 * (kin.ratio * v1)**2 / 2) / v1**2)
+    return Pickup(jumps, impulses, sp.simplify(st.cone_forward.subs(unit)), sp.simplify(st.cone_backward.subs(unit)),
+                  inertia, sp.simplify(carried[N3]))

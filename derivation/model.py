@@ -20,6 +20,10 @@ DIRECTIONS = {"forward": ("fwd", 1), "backward": ("bwd", -1)}
 REGIMES = {(1, "a"): "tractive", (1, "b"): "inverse-tractive",
            (-1, "a"): "backward on flank a", (-1, "b"): "backward on flank b"}
 T_TRIP = sp.Symbol("t_trip", real=True)
+T_PICKUP = sp.Symbol("t_pickup", real=True)      # lost motion: the first pickup of the stem
+T_ENGAGED = sp.Symbol("t_engaged", real=True)    # lost motion: since when the stem is carried (+inf: apart)
+M2_CARRIED = sp.Symbol("m2_carried", real=True)  # lost motion: m2, plus m3 while the stem is carried
+F2_CARRIED = sp.Symbol("F2_carried", real=True)  # lost motion: the load on body 2 while the stem is carried
 
 
 @dataclass(frozen=True)
@@ -33,11 +37,12 @@ class Slide:
 
 @dataclass(frozen=True)
 class Latch:
-    """A time parameter the runtime sets once, when the guard ``name`` fires (+inf until then)."""
+    """A time parameter the runtime sets when the guard ``name`` fires (+inf until then): once for
+    the torque switch; the stem's pickup and carry times at each pickup and release."""
 
     symbol: sp.Symbol            # read from p after the free parameters
     name: str                    # its guard
-    guard: sp.Expr               # falls through 0 when the latch fires; may use S1 of the mode
+    guard: sp.Expr               # falls through 0 when the latch fires; may use S1, S2 of the mode
     armed: sp.Expr               # the guard is computed while this holds
     doc: str
 
@@ -70,6 +75,7 @@ class Mode:
     declared: bool = True                # False: generated, but the scene does not let a run enter it
     gap_accel: sp.Expr | None = None     # d gap_rate/dt with a clearance: 0 in contact, own in free flight
     mesh: tuple[sp.Expr, ...] = ()       # compliant contact's guards: (N, slip) sliding, (N, cones) stick
+    stem_accel: sp.Expr | None = None    # d v3/dt with lost motion: held, own (F3/m3) or carried (a2)
 
 
 @dataclass(frozen=True)
@@ -107,6 +113,7 @@ class Model:
     clearance: sp.Symbol | None = None   # normal clearance (states gap, gap_rate), None: zero
     body2: tuple[sp.Expr, sp.Expr] = ()  # (x2, v2) in x1, v1 (and gap, gap_rate with a clearance)
     impacts: tuple[Impact, ...] = ()     # per flank, with a clearance
+    pickup: tuple[sp.Expr, ...] = ()     # lost motion: the pickup's frame (codegen.PICKUP_FRAME)
 
     @property
     def params(self) -> tuple[Param, ...]:
@@ -156,11 +163,12 @@ def _laws(scene: Scene, rho_of: dict[str, sp.Symbol]) -> tuple[tuple[Quantity, .
     """The laws in evaluation order (x2 first when a law reads it), their pieces, the latches."""
     slope = param_symbol(scene.gamma[scene.flanks[0]])
     x2 = sp.Symbol("x2", real=True)
-    load, load_pieces = laws.load_force(scene.load, param_symbol, x2)
+    load, load_pieces = laws.load_force(scene.load, param_symbol, mechanics.x3 if scene.lost_motion else x2)
     drive, doc, latches, drive_pieces = _drive(scene, x2)
     quantities = []
     breakpoints = [e.expr for p in (load_pieces, drive_pieces) if p is not None for e in p.events]
-    if x2 in set().union(load.free_symbols, drive.free_symbols, *(e.free_symbols for e in breakpoints)):
+    if scene.lost_motion or x2 in set().union(load.free_symbols, drive.free_symbols,
+                                              *(e.free_symbols for e in breakpoints)):
         if scene.clearance is None:
             x2_expr = mechanics.kinematics().x2_of_x1.subs(mechanics.gamma, slope)
             quantities.append(Quantity(x2, x2_expr, "position of body 2 (kinematic constraint)"))
@@ -168,7 +176,12 @@ def _laws(scene: Scene, rho_of: dict[str, sp.Symbol]) -> tuple[tuple[Quantity, .
             x2_expr = mechanics.free_flight().x2_of.subs(mechanics.gamma, slope)
             quantities.append(Quantity(x2, x2_expr, "position of body 2 (from x1 and the normal gap)"))
     quantities.append(Quantity(F1, drive, doc))
-    quantities.append(Quantity(F2, load, f"load force ({scene.load.kind})"))
+    quantities.append(Quantity(F2, load, f"load force ({scene.load.kind})" + (
+        ", on the stem from its first pickup" if scene.lost_motion else "")))
+    if scene.lost_motion:
+        stem_laws, stem_latches = _stem_laws(scene, x2)
+        quantities += stem_laws
+        latches += stem_latches
     done = set()
     for f in scene.flanks:
         if rho_of[f] not in done:
@@ -178,9 +191,47 @@ def _laws(scene: Scene, rho_of: dict[str, sp.Symbol]) -> tuple[tuple[Quantity, .
     return tuple(quantities), tuple(p for p in (drive_pieces, load_pieces) if p is not None), latches
 
 
+def _stem_laws(scene: Scene, x2: sp.Symbol) -> tuple[list[Quantity], tuple[Latch, ...]]:
+    """Lost motion: while body 2 carries the stem, the load F2 acts on body 2 and the stem's mass
+    moves with it; the latches of pickup and release."""
+    lm = {k: param_symbol(v) for k, v in scene.lost_motion.items()}
+    m2 = param_symbol(scene.m2)
+    carried = t >= T_ENGAGED
+    quantities = [
+        Quantity(F2_CARRIED, sp.Piecewise((F2, carried), (0, True)),
+                 "force on body 2: the load, through the stem while body 2 carries it"),
+        Quantity(M2_CARRIED, sp.Piecewise((m2 + lm["stem_mass"], carried), (m2, True)),
+                 "mass on body 2's guide: the stem's too while body 2 carries it"),
+    ]
+    release = mechanics.pickup().stem_force.subs({mechanics.m2: m2, mechanics.m3: lm["stem_mass"], mechanics.F3: F2})
+    latches = (Latch(T_PICKUP, "stem_gap", lm["travel"] + mechanics.x3 - x2, sp.Not(carried),
+                     "body 2 reaches the stem (gap travel + x3 - x2)"),
+               Latch(T_ENGAGED, "stem_contact", release, carried,
+                     "the stem's contact force N3 falls to 0: it leaves body 2"))
+    return quantities, latches
+
+
+def _stem(scene: Scene, rho_of: dict[str, sp.Symbol], modes: list[Mode]) -> tuple[list[Mode], tuple[sp.Expr, ...]]:
+    """Each mode's stem acceleration (held, own or carried) and the pickup's frame on flank a."""
+    lm = {k: param_symbol(v) for k, v in scene.lost_motion.items()}
+    m3 = lm["stem_mass"]
+    ratio = mechanics.kinematics().ratio.subs(mechanics.gamma, param_symbol(scene.gamma["a"]))
+    out = [dataclasses.replace(m, stem_accel=sp.Piecewise(
+        (ratio * m.accel, t >= T_ENGAGED), (F2 / m3, t >= T_PICKUP), (0, True))) for m in modes]
+    pk = mechanics.pickup()
+    sub = {**_specialise(scene, "a", rho_of), mechanics.m2: param_symbol(scene.m2)}   # body 2 without the stem
+    jump = {s: pk.jump_v1[s].subs(sub) for s in (1, -1)}
+    frame = (mechanics.v3 - ratio * v1, v1, 1 / m3 - ratio * jump[1], jump[1], 1 / m3 - ratio * jump[-1], jump[-1],
+             1 / m3, sp.Min(pk.cone_forward.subs(sub), pk.cone_backward.subs(sub)), lm["restitution"],
+             pk.inertia.subs(sub), m3, ratio)
+    return out, frame
+
+
 def _specialise(scene: Scene, flank: str, rho_of: dict[str, sp.Symbol]) -> dict:
     return {mechanics.gamma: param_symbol(scene.gamma[flank]), mechanics.rho: rho_of[flank],
-            mechanics.m1: param_symbol(scene.m1), mechanics.m2: param_symbol(scene.m2)}
+            mechanics.m1: param_symbol(scene.m1),
+            **({mechanics.m2: M2_CARRIED, F2: F2_CARRIED} if scene.lost_motion
+               else {mechanics.m2: param_symbol(scene.m2)})}
 
 
 def _sliding_modes(scene: Scene, rho_of: dict[str, sp.Symbol]) -> list[Mode]:
@@ -209,7 +260,7 @@ def _stick(scene: Scene, rho_of: dict[str, sp.Symbol]) -> tuple[Mode, StickCondi
         sub[mechanics.rho] = sp.Piecewise((rho_of["a"], flank_normal >= 0), (rho_of["b"], True))
     conditions = StickConditions(flank_normal, st.tangential.subs(sub),
                                  st.cone_forward.subs(sub), st.cone_backward.subs(sub))
-    mode = Mode(name="stick", regime="stick", flank="", direction=0, accel=sp.Integer(0), S1=F1, S2=F2)
+    mode = Mode(name="stick", regime="stick", flank="", direction=0, accel=sp.Integer(0), S1=F1, S2=F2.subs(sub))
     return mode, conditions
 
 
@@ -328,6 +379,10 @@ def build_model(scene: Scene) -> Model:
         states = (x1, mechanics.gap, mechanics.gap_rate, v1)   # x1 too: body 2's position needs it
         ff = mechanics.free_flight()
         body2 = (ff.x2_of.subs(slope), ff.v2_of.subs(slope))
+    pickup: tuple[sp.Expr, ...] = ()
+    if scene.lost_motion:
+        modes, pickup = _stem(scene, rho_of, modes)
+        states = (x1, mechanics.x3, mechanics.v3, v1)   # x1 too: the pickup's gap needs x2
     symbols = {p.name: param_symbol(p) for p in scene.params()}
     for q in quantities:     # a parameter may carry a law's name only if it is that law (constant F1, F2)
         assert str(q.symbol) not in symbols or q.expr == q.symbol, f"parameter {q.symbol} shadows the law {q.doc}"
@@ -335,4 +390,4 @@ def build_model(scene: Scene) -> Model:
                  laws=quantities, events=tuple(e for p in pieces for e in p.events), switching=switching,
                  modes=tuple(modes), stick=stick, latches=latches, pieces=pieces,
                  clearance=param_symbol(scene.clearance) if scene.clearance else None, impacts=impacts,
-                 body2=body2)
+                 body2=body2, pickup=pickup)

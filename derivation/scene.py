@@ -22,7 +22,7 @@ LITERAL_MODES = (("forward",), ("forward", "sliding"))
 EQUATIONS = ("consistent", "literal")
 METHODS = ("dopri5", "rosenbrock23")
 TOP_KEYS = ("name", "description", "equations", "wedge", "friction", "drive", "load",
-            "impact", "mesh", "reference", "modes", "run")
+            "impact", "mesh", "lost_motion", "reference", "modes", "run")
 NAME = re.compile(r"[a-z0-9][a-z0-9-]{0,63}")     # a file name on every system: at most 64 characters
 MAX_DESCRIPTION = 2000                            # characters
 MAX_SCENE_BYTES = 1_000_000                       # a scene file is a page of TOML; refuse anything near this
@@ -96,6 +96,7 @@ class Scene:
     clearance: Param | None = None       # normal clearance between the flanks (backlash), None: zero
     restitution: Param | None = None     # coefficient of restitution of a flank impact ([impact])
     mesh: dict[str, Param] | None = None # compliant flanks: stiffness, damping ([mesh]), None: rigid
+    lost_motion: dict[str, Param] | None = None  # travel, stem_mass, restitution ([lost_motion]), None: none
 
     def params(self) -> tuple[Param, ...]:
         """Every distinct model parameter once: wedge, friction, drive, torque switch, load, reference."""
@@ -105,6 +106,7 @@ class Scene:
             *self.drive.all_params(), *([self.torque_switch] if self.torque_switch else []),
             *self.load.all_params(), *self.reference.values(),
             *(p for p in (self.clearance, self.restitution) if p is not None), *(self.mesh or {}).values(),
+            *(self.lost_motion or {}).values(),
         )))
 
     def free_params(self) -> tuple[Param, ...]:
@@ -129,6 +131,8 @@ WEDGE = {"m1": Rule("mass", 0.0), "m2": Rule("mass", 0.0)}
 CLEARANCE = Rule("length", 0.0, lo_in=True)      # >= 0 (0: the flanks part and meet at once); absent: rigid
 IMPACT = {"restitution": Rule("dimensionless", 0.0, 1.0, lo_in=True, hi_in=True)}
 MESH = {"stiffness": Rule("stiffness", 0.0), "damping": Rule("damping", 0.0, lo_in=True, default=0.0)}
+LOST_MOTION = {"travel": Rule("length", 0.0, lo_in=True), "stem_mass": Rule("mass", 0.0),
+               "restitution": Rule("dimensionless", 0.0, 1.0, lo_in=True, hi_in=True)}
 FRICTION_LAWS = {
     "constant": {"rho": Rule("angle", 0.0, 90 * DEG, lo_in=True)},
     "velocity": {"a": Rule("dimensionless", 0.0, lo_in=True),
@@ -572,6 +576,18 @@ class _Reader:
         restitution = self.params(impact, "impact", IMPACT)["restitution"]
         return clearance, restitution, None
 
+    def lost_motion(self, doc: dict, flanks: tuple[str, ...], equations: str,
+                    clearance: Param | None) -> dict[str, Param] | None:
+        """[lost_motion]: body 2 travels freely before it picks up the stem, which carries the load."""
+        table = self.table(doc, "lost_motion", required=False)
+        if table is None:
+            return None
+        if clearance is not None or equations != "consistent" or "a" not in flanks:
+            self.fail("lost_motion", "lost motion needs rigid flanks without clearance (no wedge.clearance), "
+                      'flank a (it carries the pickup) and equations = "consistent"')
+        self.keys(table, "lost_motion", tuple(LOST_MOTION))
+        return self.params(table, "lost_motion", LOST_MOTION, "lost_motion_")
+
     def run(self, doc: dict) -> Run:
         table = self.table(doc, "run", required=False) or {}
         self.keys(table, "run", (*RUN, "method"))
@@ -607,9 +623,11 @@ class _Reader:
                       "model switches between both flanks)", _toml(list(flanks)))
         run = self.run(doc)
         clearance, restitution, mesh = self.clearance(doc, wedge, flanks, equations, run)
+        lost_motion = self.lost_motion(doc, flanks, equations, clearance)
         scene = Scene(name, description, equations, flanks, gamma, masses["m1"], masses["m2"],
                       friction, drive, load, reference or {}, modes, run,
-                      self.source, digest, torque_switch, tuple(dict.fromkeys(self.checks)), clearance, restitution, mesh)
+                      self.source, digest, torque_switch, tuple(dict.fromkeys(self.checks)), clearance, restitution, mesh,
+                      lost_motion)
         names = [p.name for p in scene.params()]
         assert len(set(names)) == len(names) and all(n.isidentifier() for n in names), names
         return scene

@@ -188,3 +188,32 @@ def test_mesh_contact_by_hand(flank, direction):
     if direction == 0:
         assert zero(a1 * cs + a2 * sn)                              # the slip's rate is 0 in stick
         assert zero(mc.cone_forward - (sp.tan(M.rho) * N + T)) and zero(mc.cone_backward - (sp.tan(M.rho) * N - T))
+
+
+@pytest.mark.parametrize("s", [1, -1])
+def test_pickup_impulse_by_hand(s):
+    """The pickup's impulse balance, by hand from the FTF: an impulse -P on body 2 alone acts like
+    a force F2 = -P with F1 = 0 in the sliding mode, so dv1/dP = -psi / (m1 + psi m2 tan gamma)
+    with psi = tan(gamma + s rho); flank a carries it (its resultant impulse Q > 0) wherever the
+    wedge does not jam (D > 0)."""
+    pk = M.pickup()
+    psi = sp.tan(M.gamma + s * M.rho)
+    hand = -psi / (M.m1 + psi * M.m2 * sp.tan(M.gamma))
+    for point in random_points(10):
+        assert float(pk.jump_v1[s].subs(point)) == pytest.approx(float(hand.subs(point)), rel=1e-12)
+        if float((M.m1 + psi * M.m2 * sp.tan(M.gamma)).subs(point)) > 0:
+            assert float(pk.flank_impulse[s].subs(point)) > 0.0
+
+
+def test_pickup_stick_cone_is_self_locking_and_stem_force_by_hand():
+    """The wedge locks under an impulse on body 2 alone exactly when it is self-locking
+    (tan rho >= tan gamma); the carried stem's contact force from Newton for the stem
+    (m3 a2 = F3 + N3) and for body 2 with it (S2 = F3 - (m2 + m3) a2); J = m1 + m2 tan^2."""
+    pk = M.pickup()
+    for g, r in [(0.1, 0.2), (0.2, 0.1), (0.3, 0.3 + 1e-9), (0.3, 0.3 - 1e-9)]:
+        holds = min(float(pk.cone_forward.subs({M.gamma: g, M.rho: r})),
+                    float(pk.cone_backward.subs({M.gamma: g, M.rho: r}))) >= 0.0
+        assert holds == (np.tan(r) >= np.tan(g))
+    a2 = (M.F3 - M.S2) / (M.m2 + M.m3)
+    assert zero(pk.stem_force - (M.m3 * a2 - M.F3))
+    assert zero(pk.inertia - (M.m1 + M.m2 * sp.tan(M.gamma) ** 2))

@@ -57,7 +57,7 @@ def test_base_is_valid():
 
 
 def test_shipped_names():
-    assert shipped_scenes() == ("asymmetric", "backlash", "load-schedule", "mesh", "one-sided", "paper",
+    assert shipped_scenes() == ("asymmetric", "backlash", "load-schedule", "lost-motion", "mesh", "one-sided", "paper",
                                 "paper-literal", "paper-lostmotion", "paper-runup", "seating", "stiff-drive",
                                 "valve-travel")
     for name in shipped_scenes():
@@ -239,7 +239,17 @@ def test_value_table_fixed_and_default_step():
     assert s.load.params["F2_before"].value == 0.0 and s.load.params["t_step"].free is False
 
 
+LOST = {"lost_motion.travel": '"1 mm"', "lost_motion.stem_mass": '"5 kg"', "lost_motion.restitution": "0.5"}
+
 BAD = [
+    # lost motion: its keys, ranges, and what it cannot be combined with
+    ({**LOST, "lost_motion.mass": '"1 kg"'}, ["lost_motion.mass", "unknown key", "stem_mass"]),
+    ({**LOST, "lost_motion.stem_mass": '"0 kg"'}, ["lost_motion.stem_mass", "> 0 kg"]),
+    ({**LOST, "lost_motion.travel": '"-1 mm"'}, ["lost_motion.travel", ">= 0"]),
+    ({**LOST, "lost_motion.restitution": "1.5"}, ["lost_motion.restitution", "[0, 1]"]),
+    ({**LOST, "wedge.clearance": '"0.1 mm"', "impact.restitution": "0.5"},
+     ["lost_motion", "rigid flanks without clearance"]),
+    ({**LOST, "wedge.flanks": '["b"]'}, ["lost_motion", "flank a"]),
     # unknown, missing, wrong type
     ({"wedge.m_2": '"1 kg"'}, ["wedge.m_2", "unknown key", "did you mean 'm2'",
                                "allowed here: flanks, gamma, gamma_a, gamma_b, clearance, m1, m2"]),

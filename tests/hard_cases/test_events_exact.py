@@ -230,7 +230,7 @@ def test_every_status_message_builds_for_every_mode():
     from tswm_runtime.results.result import STATUS_NAMES, Event, status_message
     from tswm_runtime.apps.simulate import parameter_vector
 
-    for scene in ("paper-runup", "seating", "paper-literal", "one-sided", "backlash", "mesh"):
+    for scene in ("paper-runup", "seating", "paper-literal", "one-sided", "backlash", "mesh", "lost-motion"):
         m = load_module(scene)
         p = parameter_vector(m, {})
         y = np.array([{"x1": 0.1, "v1": 0.5, "gap": 1e-4}.get(s, 0.0) for s in m.STATES])

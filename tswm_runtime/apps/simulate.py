@@ -103,9 +103,9 @@ _VALID_ROWS: set = set()
 
 
 def initial_state(module: ModuleType, run: dict) -> tuple[np.ndarray, np.ndarray]:
-    """(y0, quad): the states at t = 0 (the gap's rate 0: the bodies start together), and x1
-    as the quadrature's start if it is no state."""
-    start = {"x1": run["x1"], "v1": run["v1"], "gap": run.get("gap", 0.0), "gap_rate": 0.0}
+    """(y0, quad): the states at t = 0 (the gap's rate 0: the bodies start together; the stem at
+    rest where it is held), and x1 as the quadrature's start if it is no state."""
+    start = {"x1": run["x1"], "v1": run["v1"], "gap": run.get("gap", 0.0), "gap_rate": 0.0, "x3": 0.0, "v3": 0.0}
     y0 = np.array([start[name] for name in module.STATES], dtype=np.float64)
     return y0, (np.array([run["x1"]]) if module.STATES == ("v1",) else np.empty(0))
 
@@ -268,7 +268,7 @@ def simulate(model: str | ModuleType, params: dict | None = None, *, interruptib
     y_stop = log.state[n_ev - 1, :n].copy() if n_ev else y0
     at = x1_column(module)
     rigid = "mesh_normal" not in module.GUARDS   # compliant flanks overlap instead of colliding
-    impacts = {k for k, guard in enumerate(module.GUARDS) if guard in ("gap_a", "gap_b") and rigid}
+    impacts = {k for k, guard in enumerate(module.GUARDS) if guard in ("gap_a", "gap_b", "stem_gap") and rigid}
     events = [Event(float(log.t[e]), module.GUARDS[log.index[e, 0]], module.MODES[log.index[e, 1]],
                     module.MODES[log.index[e, 2]] if log.index[e, 2] >= 0 else None,
                     float(log.state[e, at]), float(log.state[e, n - 1]),

@@ -1,4 +1,4 @@
-"""A collision of the flanks: Routh's process with Coulomb friction and energetic restitution.
+"""A collision of the flanks, or the stem's pickup: Routh's process with Coulomb friction and energetic restitution.
 
 The relative velocity of body 2 against body 1 in the frame of the struck flank, u = (nu,
 s) (nu the normal speed, < 0 while the flanks approach, s the slip along the contact line),
@@ -12,12 +12,17 @@ Newton's law nu+ = -e nu-; where it stops inside the impact, Newton's law with a
 impulse can create energy (the paper gear's masses do: tests/test_impact.py), the energetic
 one never does: the normal work is (1 - e^2) times the compression work (<= 0) and friction
 work opposes the slip (<= 0).
+
+The stem's pickup (lost motion) runs the same process in one dimension: the normal speed is
+nu = v3 - v2 between body 2 and the stem, the "slip" is v1, the wedge's sliding, whose rates in
+P follow the force transfer function of the sliding direction (``mechanics.pickup``).
 """
 import math
 
+import numpy as np
 from numba import njit
 
-OK, JAMMED = 0, 1     # JAMMED: the sliding impulse cannot stop the approach (W_nn - mu W_nt <= 0)
+OK, JAMMED = 0, 1     # JAMMED: the sliding impulse cannot stop the approach (dnu/dP_n <= 0)
 MAX_PHASES = 8        # slide, slip stops, stick or reverse, compression ends, restitution: at most 4
 
 
@@ -39,28 +44,23 @@ def _phase_end(nu, s, k_nu, k_s, sigma, compressing, remaining):
 
 
 @njit(cache=True, error_model="numpy")
-def collide(nu, s, w_nn, w_nt, w_tt, mu, e):
-    """Impulse of a collision: (P_n, P_t, nu after, s after, kinetic energy lost, OK or JAMMED).
-
-    nu < 0 (approach) and s: relative velocity in the flank frame; W = [[w_nn, w_nt], [w_nt,
-    w_tt]]; mu = tan(rho) >= 0; e in [0, 1]."""
-    if not nu < 0.0:
-        return 0.0, 0.0, nu, s, 0.0, OK
+def _routh(nu, s, rates, stick_holds, e):
+    """Routh's process in the normal impulse P_n: (P_n, P_t, nu after, s after, normal and
+    tangential work (<= 0 lost), OK or JAMMED). rates[sigma + 1] = (dnu/dP_n, ds/dP_n, dP_t/dP_n)
+    while the slip has the sign sigma (0: stick, taken where the slip stops if ``stick_holds``;
+    else the slip reverses the way the impulse drives it)."""
     p_n = p_t = work_n = work_t = 0.0
     compressing, target = True, 0.0
-    stick_holds = abs(w_nt) <= mu * w_tt
     for _ in range(MAX_PHASES):
         if s != 0.0:
             sigma = 1 if s > 0.0 else -1
         elif stick_holds:
             sigma = 0
         else:
-            sigma = 1 if w_nt > 0.0 else -1    # the slip starts where the normal impulse pushes it
-        k_t = -w_nt / w_tt if sigma == 0 else -mu * sigma
-        k_nu = w_nn + w_nt * k_t
-        k_s = 0.0 if sigma == 0 else w_nt + w_tt * k_t
+            sigma = 1 if rates[2, 1] > 0.0 else -1
+        k_nu, k_s, k_t = rates[sigma + 1, 0], rates[sigma + 1, 1], rates[sigma + 1, 2]
         if compressing and k_nu <= 0.0:
-            return p_n, p_t, nu, s, -(work_n + work_t), JAMMED
+            return p_n, p_t, nu, s, work_n + work_t, JAMMED
         d, end = _phase_end(nu, s, k_nu, k_s, sigma, compressing, target - work_n)
         work_n += nu * d + 0.5 * k_nu * d * d
         work_t += k_t * (s * d + 0.5 * k_s * d * d)
@@ -77,4 +77,41 @@ def collide(nu, s, w_nn, w_nt, w_tt, mu, e):
                 break
         else:
             break
-    return p_n, p_t, nu, s, -(work_n + work_t), OK
+    return p_n, p_t, nu, s, work_n + work_t, OK
+
+
+@njit(cache=True, error_model="numpy")
+def collide(nu, s, w_nn, w_nt, w_tt, mu, e):
+    """Impulse of a collision: (P_n, P_t, nu after, s after, kinetic energy lost, OK or JAMMED).
+
+    nu < 0 (approach) and s: relative velocity in the flank frame; W = [[w_nn, w_nt], [w_nt,
+    w_tt]]; mu = tan(rho) >= 0; e in [0, 1]."""
+    if not nu < 0.0:
+        return 0.0, 0.0, nu, s, 0.0, OK
+    rates = np.empty((3, 3))
+    for sigma in (-1, 0, 1):
+        k_t = -w_nt / w_tt if sigma == 0 else -mu * sigma
+        rates[sigma + 1, 0] = w_nn + w_nt * k_t
+        rates[sigma + 1, 1] = 0.0 if sigma == 0 else w_nt + w_tt * k_t
+        rates[sigma + 1, 2] = k_t
+    p_n, p_t, nu, s, work, outcome = _routh(nu, s, rates, abs(w_nt) <= mu * w_tt, e)
+    return p_n, p_t, nu, s, -work, outcome
+
+
+@njit(cache=True, error_model="numpy")
+def pickup(frame):
+    """Impulse of the stem's pickup: (P, v1 after, v3 after, kinetic energy lost, OK or JAMMED).
+
+    frame: the model's pickup frame (codegen.PICKUP_FRAME): nu = v3 - v2 < 0 (body 2 closes on
+    the stem), s = v1, the rates of nu and v1 in P sliding forward, backward and in stick, the
+    stick cone (>= 0: the wedge sticks under the impulse), e, J, m3 and v2/v1. The wedge's
+    friction work has no tangential impulse here, so the loss is the kinetic energy's drop."""
+    nu, s, e, inertia, m3, ratio = frame[0], frame[1], frame[8], frame[9], frame[10], frame[11]
+    if not nu < 0.0:
+        return 0.0, s, nu + ratio * s, 0.0, OK
+    rates = np.zeros((3, 3))
+    rates[2, 0], rates[2, 1], rates[0, 0], rates[0, 1], rates[1, 0] = frame[2], frame[3], frame[4], frame[5], frame[6]
+    p, _, nu_after, s_after, _, outcome = _routh(nu, s, rates, frame[7] >= 0.0, e)
+    v3_before, v3_after = nu + ratio * s, nu_after + ratio * s_after
+    lost = 0.5 * (inertia * (s * s - s_after * s_after) + m3 * (v3_before * v3_before - v3_after * v3_after))
+    return p, s_after, v3_after, lost, outcome

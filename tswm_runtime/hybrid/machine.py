@@ -19,6 +19,10 @@ integer tables built in ``modes.py``):
 * A law event (a load step in time, a spring contact, the torque switch, which
   also latches the trip time into p): the mode is re-selected at once, since the
   law may have moved the state across phi = 0 or out of the friction cone.
+* Lost motion: body 2 reaches the stem (its gap closes): the pickup impulse through the
+  wedge; body 2 carries the stem from then on, or the stem rebounds and flies ahead on its
+  own until it lands again. The stem's contact force reaches 0: the stem leaves body 2.
+  Both set the stem's latches in p, which switch the load and the stem's mass onto body 2.
 * A mode the state needs but the scene did not declare: status UNDECLARED, with
   the mode needed (NEED_*), for a message naming it; NEED_FLANK when a one-sided
   scene's only contact force vanishes (body 2 would lift off the flank).
@@ -39,10 +43,10 @@ from tswm_runtime.integration.structures import (EVENT_LOG, JUMP_WIDTH, MODE_TAB
 
 # Guard kinds (modes.GUARD_KINDS maps the generated GUARDS names to these).
 (G_PHI, G_V1, G_D, G_JAM, G_CONE_F, G_CONE_B, G_FLANK_N, G_LAW, G_SLIDE_A, G_SLIDE_B, G_TRIP, G_GAP_A, G_GAP_B,
- G_MESH_N, G_SLIP) = range(15)
+ G_MESH_N, G_SLIP, G_STEM_GAP, G_STEM_N) = range(17)
 # Mode kinds: rigid sliding, rigid stick, Filippov sliding on phi = 0, free flight, compliant contact.
 M_SLIDING, M_STICK, M_FILIPPOV, M_FREE, M_MESH = 0, 1, 2, 3, 4
-IMPACT_FRAME = 9  # the quantities a model's impact() fills (codegen.IMPACT_FRAME)
+IMPACT_FRAME = 12  # the quantities a model's impact() fills at most (codegen.IMPACT_FRAME, PICKUP_FRAME)
 
 # Status codes; the integrator's own failures keep segment's codes.
 FINISHED = 0
@@ -286,6 +290,87 @@ def _collide(impact, flank, rhs, guards, t, y, p, tol, tables, g, y_tmp, f, fram
 
 
 @njit(cache=True, error_model="numpy")
+def _moving_on(rhs, guards, t, y, p, tol, tables, g, y_tmp, f):
+    """(mode, need) for the rigid wedge from (t, y) after a jump in v1 or in the laws."""
+    v = y[y.size - 1]
+    if v == 0.0:
+        return _at_rest(0, rhs, guards, t, y, p, tol, tables, g, y_tmp, f, False)
+    return _sliding(1 if v > 0.0 else -1, 0, rhs, guards, t, y, p, tol, tables, g, y_tmp, f)
+
+
+@njit(cache=True, error_model="numpy")
+def _pickup(impact, k, rhs, guards, t, y, p, tol, tables, g, y_tmp, f, frame, jump):
+    """(next mode, status, need) after body 2 reaches the stem (guard ``k``): the impulse through
+    the wedge (``impact`` module) changes v1 and v3; where the rebound is within the tolerances
+    (as for the flanks, ``_collide``) the impact is taken as plastic and body 2 carries the stem
+    from then on (this ends a sequence of bounces with the momentum kept), else the stem flies
+    ahead on its own. The first pickup starts the load on the stem (latch t_pickup), carrying
+    sets t_engaged. jump = (P, 0, kinetic energy lost, v1 before); frame[0] on return: the
+    flight time to the stem's next landing if the accelerations stay (inf: none)."""
+    n = y.size
+    jump[3] = y[n - 1]
+    impact(0, t, y, p, frame)
+    ratio, v1_before, v3_before = frame[11], y[n - 1], y[n - 2]
+    impulse, v1, v3, lost, outcome = collision.pickup(frame)
+    if outcome != collision.OK:
+        jump[0], jump[1], jump[2] = impulse, 0.0, lost
+        return -1, INCONSISTENT, NEED_NOTHING
+    k_pickup, k_carry = tables.guard_latch[k], tables.guard_latch[_guard(G_STEM_N, tables.guard_kind)]
+    p[k_pickup] = min(p[k_pickup], t)
+    y[n - 1], y[n - 2] = v1, v3
+    m, need = _moving_on(rhs, guards, t, y, p, tol, tables, g, y_tmp, f)
+    if m < 0:
+        return -1, UNDECLARED, need
+    rhs(m, t, y, p, f)
+    nu = v3 - ratio * v1
+    toward = ratio * f[n - 1] - f[n - 2]  # the stem's acceleration back onto body 2
+    gap_tol = tol.atol[n - 3] + tol.rtol * abs(y[n - 3])
+    frame[0] = np.inf
+    if nu <= tol.atol[n - 2] + tol.rtol * abs(v3) or (toward > 0.0 and nu * nu <= 2.0 * toward * gap_tol):
+        # no rebound beyond the tolerances: the impact is taken as plastic, body 2 carries the stem
+        y[n - 1], y[n - 2] = v1_before, v3_before
+        impact(0, t, y, p, frame)
+        frame[8] = 0.0
+        impulse, v1, v3, lost, outcome = collision.pickup(frame)
+        p[k_carry] = t
+        y[n - 1], y[n - 2] = v1, ratio * v1
+        m, need = _moving_on(rhs, guards, t, y, p, tol, tables, g, y_tmp, f)
+    elif toward > 0.0:
+        frame[0] = 2.0 * nu / toward
+    jump[0], jump[1], jump[2] = impulse, 0.0, lost
+    if m < 0:
+        return -1, UNDECLARED, need
+    return m, FINISHED, NEED_NOTHING
+
+
+@njit(cache=True, error_model="numpy")
+def _carry_at_start(impact, guards, t, y, p, tables, g, frame):
+    """Body 2 starting at the stem (lost motion 0) carries it from the start, at its speed."""
+    k = _guard(G_STEM_GAP, tables.guard_kind)
+    if k < 0:
+        return
+    guards(0, t, y, p, g)
+    if g[k] <= 0.0:
+        impact(0, t, y, p, frame)
+        p[tables.guard_latch[k]] = p[tables.guard_latch[_guard(G_STEM_N, tables.guard_kind)]] = t
+        y[y.size - 2] = frame[11] * y[y.size - 1]
+
+
+@njit(cache=True, error_model="numpy")
+def _released(mode, guards, t, y, p, tables, g):
+    """Release the carried stem if its contact force is negative in ``mode`` at (t, y) (after an
+    event that changed the laws it leaves body 2 at once: the guard would not see it); True if so."""
+    k = _guard(G_STEM_N, tables.guard_kind)
+    if k < 0:
+        return False
+    guards(mode, t, y, p, g)
+    if g[k] >= 0.0:  # (1 when the stem is not carried)
+        return False
+    p[tables.guard_latch[k]] = np.inf
+    return True
+
+
+@njit(cache=True, error_model="numpy")
 def _need(m, direction):
     """What a missing sliding mode in ``direction`` needs (nothing when mode ``m`` exists)."""
     return NEED_NOTHING if m >= 0 else NEED_FORWARD if direction > 0 else NEED_BACKWARD
@@ -472,6 +557,7 @@ def integrate_hybrid(method, rhs, jac, guards, observe, impact, p, tables, t0, y
     out.mode[:] = -1
     k_d = _guard(G_D, tables.guard_kind)
     _latch_pieces(guards, t0, y, p, tables, g)
+    _carry_at_start(impact, guards, t0, y, p, tables, g, frame)
     mode, need, status = mode0, NEED_NOTHING, FINISHED
     if mode < 0:
         v = y[n - 1]
@@ -486,6 +572,8 @@ def integrate_hybrid(method, rhs, jac, guards, observe, impact, p, tables, t0, y
         else:
             mode, need = _sliding(1 if v > 0.0 else -1, flank, rhs, guards, t0, y, p, tol, tables,
                                   g, y_tmp, f)
+    if mode >= 0 and _released(mode, guards, t0, y, p, tables, g):  # carried from the start, pulled off at once
+        mode, need = _moving_on(rhs, guards, t0, y, p, tol, tables, g, y_tmp, f)
     if mode < 0:
         return UNDECLARED, t0, 0, -1, need, -1
     if not _consistent(mode, guards, t0, y, p, tables, g):
@@ -545,7 +633,8 @@ def integrate_hybrid(method, rhs, jac, guards, observe, impact, p, tables, t0, y
             n_ev = _log(log, n_ev, t, k, mode, -1, y, q, jump)
             status = INCONSISTENT
             break
-        p_left = p.copy() if kind == G_TRIP or kind == G_LAW else p  # the laws up to the event: its left limit
+        latching = kind == G_TRIP or kind == G_LAW or kind == G_STEM_GAP or kind == G_STEM_N
+        p_left = p.copy() if latching else p  # the laws up to the event: its left limit
         if kind == G_TRIP:
             p[tables.guard_latch[k]] = t
         elif kind == G_LAW:
@@ -559,8 +648,19 @@ def integrate_hybrid(method, rhs, jac, guards, observe, impact, p, tables, t0, y
                                          tables, g, y_tmp, f, frame, jump)
             if frame[0] < np.inf:  # a first step inside the bounce, so that the gap's guard is armed again
                 h = 0.25 * frame[0] if h <= 0.0 else min(h, 0.25 * frame[0])
+        elif kind == G_STEM_GAP:  # body 2 reaches the stem: the pickup
+            new, status, need = _pickup(impact, k, rhs, guards, t, y, p, tol, tables, g, y_tmp, f, frame, jump)
+            if frame[0] < np.inf:  # a first step inside the stem's flight, so that its guard is armed again
+                h = 0.25 * frame[0] if h <= 0.0 else min(h, 0.25 * frame[0])
+        elif kind == G_STEM_N:  # the stem leaves body 2: the load and its mass leave with it
+            p[tables.guard_latch[k]] = np.inf
+            new, need = _moving_on(rhs, guards, t, y, p, tol, tables, g, y_tmp, f)
+            status = FINISHED if new >= 0 else UNDECLARED
         else:
             new, status, need = _select(mode, kind, rhs, guards, t, y, p, tol, tables, g, y_tmp, f)
+        if status == FINISHED and _released(new, guards, t, y, p, tables, g):
+            new, need = _moving_on(rhs, guards, t, y, p, tol, tables, g, y_tmp, f)
+            status = FINISHED if new >= 0 else UNDECLARED
         if status == FINISHED and not _consistent(new, guards, t, y, p, tables, g):
             status = INCONSISTENT
             _unbounded(observe, guards, mode, t, y, p_left, -1, mon, obs, g)

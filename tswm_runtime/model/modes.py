@@ -36,6 +36,8 @@ class GuardKind(IntEnum):
     GAP_B = hybrid.G_GAP_B
     MESH_NORMAL = hybrid.G_MESH_N
     SLIP = hybrid.G_SLIP
+    STEM_GAP = hybrid.G_STEM_GAP
+    STEM_CONTACT = hybrid.G_STEM_N
 
 
 GUARD_KINDS = {
@@ -45,6 +47,7 @@ GUARD_KINDS = {
     "slide_exit_a": GuardKind.SLIDE_EXIT_A, "slide_exit_b": GuardKind.SLIDE_EXIT_B,
     "torque_switch": GuardKind.TRIP, "gap_a": GuardKind.GAP_A, "gap_b": GuardKind.GAP_B,
     "mesh_normal": GuardKind.MESH_NORMAL, "slip": GuardKind.SLIP,
+    "stem_gap": GuardKind.STEM_GAP, "stem_contact": GuardKind.STEM_CONTACT,
 }
 GUARD_EVENT_NAMES = {
     "phi": "flank switch (phi = 0)", "v1": "v1 = 0", "D": "D = 0", "jam": "jam factor = 0",
@@ -54,6 +57,7 @@ GUARD_EVENT_NAMES = {
     "torque_switch": "torque switch trips",
     "gap_a": "gap closes on flank a", "gap_b": "gap closes on flank b",
     "mesh_normal": "flanks part (mesh force 0)", "slip": "slip stops",
+    "stem_gap": "body 2 strikes the stem", "stem_contact": "the stem leaves body 2",
 }
 SCHEDULE_GUARD = re.compile(r"(load|drive)_at([0-9]+)")
 

@@ -63,11 +63,12 @@ def title(result: Result, module: ModuleType) -> str:
 
 def figure(result: Result, module: ModuleType, *, heading: str | None = None,
            event_labels: bool = False) -> Figure:
-    """Stacked panels sharing t: a1, S1, S2 (and the gap, with a clearance); phases shaded by
-    regime (free flight hatched), events as dashed vertical lines, impacts as red lines with
-    their energy loss, the maxima of S1 and S2 marked. ``heading`` replaces the title;
+    """Stacked panels sharing t: a1, S1, S2 (and the gap with a clearance, the stem's travel with
+    lost motion); phases shaded by regime (free flight hatched), events as dashed vertical
+    lines, impacts as red lines with their energy loss, the maxima of S1 and S2 marked. ``heading`` replaces the title;
     ``event_labels`` writes each event's guard and time beside its line in the top panel."""
-    panels = PANELS + ((("gap", "gap [mm]", None),) if result.gap.size else ())
+    panels = (PANELS + ((("gap", "gap [mm]", None),) if result.gap.size else ())
+              + ((("x3", "stem travel x3 [mm]", None),) if result.x3.size else ()))
     fig = Figure(figsize=(8.0, 2.7 * len(panels)), layout="constrained")
     FigureCanvasAgg(fig)
     axes = fig.subplots(len(panels), 1, sharex=True)
@@ -82,7 +83,7 @@ def figure(result: Result, module: ModuleType, *, heading: str | None = None,
                 ax.axvline(e.t, color="black", linestyle="--", linewidth=0.6, alpha=0.6)
             else:
                 ax.axvline(e.t, color="tab:red", linestyle="-", linewidth=0.8, alpha=0.7)
-        values = getattr(result, name) * (1e3 if name == "gap" else 1.0)
+        values = getattr(result, name) * (1e3 if name in ("gap", "x3") else 1.0)
         ax.plot(result.t, values, color="black", linewidth=1.0)
         if peak is not None and result.t.size:
             value, at = getattr(result, peak[0]), getattr(result, peak[1])

@@ -36,14 +36,16 @@ STATUS_NAMES = {int(status): status.label for status in Status}
 SERIES = (("t", "s"), ("x1", "m"), ("v1", "m/s"), ("a1", "m/s^2"), ("x2", "m"), ("v2", "m/s"),
           ("S1", "N"), ("S2", "N"), ("F1", "N"), ("F2", "N"))
 GAP_SERIES = (("gap", "m"), ("gap_rate", "m/s"))   # with a clearance only
+STEM_SERIES = (("x3", "m"), ("v3", "m/s"))          # with lost motion only: the stem's travel and speed
 NEEDED_MODE = {hybrid.NEED_STICK: "stick", hybrid.NEED_FORWARD: "forward",
                hybrid.NEED_BACKWARD: "backward"}
 
 
 @dataclass(frozen=True)
 class Jump:
-    """What an impact did: the normal and tangential impulse on body 2, the kinetic energy
-    lost (>= 0), and v1 before it (the event's state is the one after)."""
+    """What an impact did: the normal and tangential impulse on body 2 (a pickup: P_n on the
+    stem, -P_n on body 2, P_t = 0), the kinetic energy lost (>= 0), and v1 before it (the
+    event's state is the one after)."""
 
     P_n: float
     P_t: float
@@ -127,15 +129,18 @@ class Result:
     extras: dict = field(default_factory=dict)
     gap: np.ndarray = field(default_factory=lambda: np.empty(0))       # normal gap from flank a (with a clearance)
     gap_rate: np.ndarray = field(default_factory=lambda: np.empty(0))
+    x3: np.ndarray = field(default_factory=lambda: np.empty(0))        # the stem's travel from rest (lost motion)
+    v3: np.ndarray = field(default_factory=lambda: np.empty(0))
 
     @property
     def series(self) -> tuple[tuple[str, str], ...]:
-        """(name, SI unit) of this result's per-point series: SERIES, and the gap's with a clearance."""
-        return SERIES + (GAP_SERIES if self.gap.size else ())
+        """(name, SI unit) of this result's per-point series: SERIES, the gap's with a clearance, the
+        stem's with lost motion."""
+        return SERIES + (GAP_SERIES if self.gap.size else ()) + (STEM_SERIES if self.x3.size else ())
 
     @property
     def impacts(self) -> list[Event]:
-        """The events that were impacts (gap closed on a flank)."""
+        """The events that were impacts (gap closed on a flank, or body 2 struck the stem)."""
         return [e for e in self.events if e.jump is not None]
 
     @property
@@ -238,7 +243,7 @@ class Result:
         return cls(
             scene=module.SCENE, params=dict(zip(module.PARAM_NAMES, p.tolist())), settings=dict(run),
             t=t, x1=x1, v1=v1, a1=a1, x2=x2, v2=v2, S1=S1, S2=S2,
-            F1=F1, F2=F2, gap=gap, gap_rate=gap_rate,
+            F1=F1, F2=F2, gap=gap, gap_rate=gap_rate, x3=states.get("x3", np.empty(0)), v3=states.get("v3", np.empty(0)),
             mode=mode, mode_names=tuple(module.MODES), events=events,
             phases=_phases(module, first_mode, events, t_stop),
             S1_max=float(mon[0, 1]), t_S1_max=float(mon[0, 2]), S2_max=float(mon[1, 1]),
@@ -275,6 +280,11 @@ def _phases(module: ModuleType, first: int, events: list[Event], t_stop: float) 
 def _inconsistent(module: ModuleType, t_stop: float, y_stop: np.ndarray, last: int, events: list[Event],
                   p: np.ndarray) -> str:
     """Where and why no finite contact force exists: the mode, D's formula and value."""
+    if events and events[-1].jump is not None and events[-1].to_mode is None and events[-1].guard == "stem_gap":
+        return (f"inconsistent at t = {t_stop:.9g} s: body 2 strikes the stem and the wedge jams: with the "
+                f"friction angle there, the pickup impulse through the sliding wedge cannot stop the approach "
+                f"(d(v3 - v2)/dP <= 0: the impulse counterpart of D <= 0), so no impulse satisfies Coulomb's "
+                f"law; lower the friction or change the masses")
     if events and events[-1].jump is not None and events[-1].to_mode is None:
         flank = events[-1].guard[-1]
         return (f"inconsistent at t = {t_stop:.9g} s: the impact on flank {flank} jams: with the friction angle "
