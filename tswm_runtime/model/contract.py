@@ -17,7 +17,8 @@ CONSTANTS = {
     "SCENE": "scene name",
     "SCENE_DIGEST": "sha256 of the scene file the module was generated from",
     "EQUATIONS": "'consistent' or 'literal'",
-    "STATES": "state names: ('v1',) or ('x1', 'v1'), with a clearance ('x1', 'gap', 'gap_rate', 'v1'); v1 is "
+    "STATES": "state names: ('v1',) or ('x1', 'v1'), with a clearance ('x1', 'gap', 'gap_rate', 'v1'), "
+              "with lost motion ('x1', 'x3', 'v3', 'v1'); v1 is "
               "always last; without x1 the runtime integrates v1 for it",
     "MODES": "mode names, indexed by the integer mode",
     "MODE_REGIME": "regime of each mode (tractive, inverse-tractive, backward on flank a/b, stick, "
@@ -49,8 +50,9 @@ FUNCTIONS = {
     "guards": "guards(mode, t, y, p, g): event functions; inactive ones are 1.0; signature GUARDS_SIG",
     "observe": "observe(mode, t, y, p, out): out = OBSERVABLES of `mode` (its reactions); signature GUARDS_SIG",
     "outputs": "outputs(mode, t, y, p, out): out = OUTPUTS of `mode` at an output row; signature GUARDS_SIG",
-    "impact": "impact(flank, t, y, p, out): the frame of a collision on flank +1 (a) or -1 (b) (codegen.IMPACT_FRAME); "
-              "NaN without a clearance; signature GUARDS_SIG",
+    "impact": "impact(flank, t, y, p, out): the frame of a collision on flank +1 (a) or -1 (b) (codegen.IMPACT_FRAME), "
+              "or with lost motion of the stem's pickup (flank 0, codegen.PICKUP_FRAME); NaN without either; "
+              "signature GUARDS_SIG",
     "body2": "body2(x1, v1, gap, gap_rate, p) -> (x2, v2), plain Python on arrays (gap, gap_rate unused without "
              "a clearance)",
     "accel": "accel(mode, t, y, p) -> a1",
