@@ -685,11 +685,13 @@ _ADDRESSES: dict = {}
 
 def compiled(function, signature):
     """A model function as numba's first-class function value for ``signature``, looked up
-    once: passing the dispatcher itself costs ~20 us a call to find its compiled code."""
-    key = (id(function), signature)
+    once: passing the dispatcher itself costs ~20 us a call to find its compiled code. Keyed
+    by identity (both are long-lived: a module's function, a signature constant): hashing a
+    numba signature walks its types, ~10 us a call."""
+    key = (id(function), id(signature))
     if key not in _ADDRESSES:
-        _ADDRESSES[key] = (function, CompileResultWAP(function.get_compile_result(signature)))
-    return _ADDRESSES[key][1]
+        _ADDRESSES[key] = (function, signature, CompileResultWAP(function.get_compile_result(signature)))
+    return _ADDRESSES[key][2]
 
 
 def integrate(method, model, p, tables, y0, t_end, *, rtol, atol, t_out, max_events, quad=None, t0=0.0,
