@@ -294,7 +294,7 @@ def _mode_functions(em: _Emitter) -> list[Function]:
                                    f"{_short(mode.gap_accel)}", [mode.gap_accel]))
         if mode.stem_accel is not None:
             out.append(em.function(f"stem_accel_{mode.name}", f"d v3/dt, the stem's acceleration, in mode {mode.name}: "
-                                   "0 while held, F3/m3 on its own, a2 while carried", [mode.stem_accel]))
+                                   "0 while held, F2/m3 on its own, a2 while carried", [mode.stem_accel]))
         if mode.slide is not None:
             out.append(em.function(f"reactions_{mode.name}", f"(S1, S2) in mode {mode.name}: Filippov's combination "
                                    "lambda (S1, S2)_fwd_a + (1 - lambda) (S1, S2)_fwd_b, lambda = rate_b / (rate_b - "

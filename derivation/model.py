@@ -75,7 +75,7 @@ class Mode:
     declared: bool = True                # False: generated, but the scene does not let a run enter it
     gap_accel: sp.Expr | None = None     # d gap_rate/dt with a clearance: 0 in contact, own in free flight
     mesh: tuple[sp.Expr, ...] = ()       # compliant contact's guards: (N, slip) sliding, (N, cones) stick
-    stem_accel: sp.Expr | None = None    # d v3/dt with lost motion: held, own (F3/m3) or carried (a2)
+    stem_accel: sp.Expr | None = None    # d v3/dt with lost motion: held, own (F2/m3) or carried (a2)
 
 
 @dataclass(frozen=True)
