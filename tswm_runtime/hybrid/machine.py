@@ -27,11 +27,12 @@ Chattering guard: more than MAX_SAME_TIME events without the time advancing
 stops the run with status CHATTERING instead of looping.
 """
 import numpy as np
-from numba import njit, types
+from numba import types
 from numba.core.types.function_type import CompileResultWAP
 
 from tswm_runtime.hybrid import impact as collision
 from tswm_runtime.integration import cache_guard, painleve, segment
+from tswm_runtime.integration.cache_guard import njit
 from tswm_runtime.integration.signatures import (GUARDS_SIG, JAC_SIG, MATRIX, RHS_SIG, VECTOR, GuardsFunction,
                                                  JacFunction, RhsFunction)
 from tswm_runtime.integration.structures import (EVENT_LOG, JUMP_WIDTH, MODE_TABLES, OUTPUTS, TOLERANCES, EventLog,

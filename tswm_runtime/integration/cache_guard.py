@@ -1,4 +1,5 @@
-"""Eager, cached compilation that notices edits in the kernel modules it inlines.
+"""Eager, cached compilation that notices edits in the kernel modules it inlines; ``njit``
+for the kernels' helpers.
 
 numba keys a function's on-disk cache on its own source file only (dependencies are
 not tracked, as numba's caching docs say), while the compiled integrators inline
@@ -14,8 +15,10 @@ import hashlib
 import warnings
 from pathlib import Path
 
-from numba import njit
+import numba
+from numba import types
 from numba.core import caching
+from numba.core.registry import CPUDispatcher
 
 from tswm_runtime.common.files import write_atomic
 
@@ -91,11 +94,33 @@ def check_kernel_caches() -> None:
             write_atomic(marker, digest)
 
 
+class _PlainArguments(CPUDispatcher):
+    """A dispatcher that types the constants it is called with from compiled code as their
+    plain types (int64, not Literal[int](3)). numba's own compiles a callee once per literal
+    value and once more for a variable that starts as a constant (typing widens it later):
+    each a full compile, repeated in every caller's link (issue 13)."""
+
+    def get_call_template(self, args, kws):
+        return super().get_call_template(tuple(map(types.unliteral, args)),
+                                         {k: types.unliteral(v) for k, v in kws.items()})
+
+
+def njit(*, cache=False, **options):
+    """``numba.njit(cache=cache, **options)`` with the dispatcher above, for the kernels' helpers."""
+    def decorate(py_func):
+        dispatcher = _PlainArguments(py_func=py_func, locals={},
+                                     targetoptions={"nopython": True, "boundscheck": None, **options})
+        if cache:
+            dispatcher.enable_caching()
+        return dispatcher
+    return decorate
+
+
 def compile_cached(signature, **options):
-    """Like ``njit(signature, cache=True, **options)``, with the kernel check above."""
+    """Like ``numba.njit(signature, cache=True, **options)``, with the kernel check above."""
     def decorate(py_func):
         check_kernel_caches()
-        dispatcher = njit(cache=True, **options)(py_func)
+        dispatcher = numba.njit(cache=True, **options)(py_func)
         dispatcher.compile(signature)
         dispatcher.disable_compile()
         return dispatcher

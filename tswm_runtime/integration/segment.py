@@ -27,9 +27,10 @@ is dispatched in one place, ``_attempt``.
 from collections import namedtuple
 
 import numpy as np
-from numba import njit
+import numba
 
 from tswm_runtime.integration import control, dopri5, events, painleve, rosenbrock, steady
+from tswm_runtime.integration.cache_guard import njit
 from tswm_runtime.integration.signatures import JAC_SIG
 from tswm_runtime.integration.structures import Step, StepWork
 
@@ -57,7 +58,7 @@ MIN_STEP_ULPS = 10.0  # A step must exceed 10 ulp(t) to move t reliably (scipy's
 
 
 
-@njit(JAC_SIG, cache=True)
+@numba.njit(JAC_SIG, cache=True)
 def no_jacobian(mode, t, y, p, J, dfdt):
     """Placeholder ``jac`` for DOPRI5 runs (DOPRI5 never calls it); fills NaN."""
     J[:, :] = np.nan

@@ -5,9 +5,10 @@ Kept apart from ``segment`` so that the runtime's import path (``hybrid.machine`
 compile it: an eagerly compiled entry point costs seconds on a cold numba cache.
 """
 import numpy as np
-from numba import njit, types
+from numba import types
 
 from tswm_runtime.integration import cache_guard
+from tswm_runtime.integration.cache_guard import njit
 from tswm_runtime.integration.segment import (DOPRI5, INVALID_INPUT, N_COUNTERS, ROSENBROCK23, run)
 from tswm_runtime.integration.signatures import MATRIX, VECTOR, GuardsFunction, JacFunction, RhsFunction
 from tswm_runtime.integration.structures import EVENT_SETTINGS, TOLERANCES, Outputs
