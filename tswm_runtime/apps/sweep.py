@@ -200,7 +200,7 @@ def run_cases(module: ModuleType, P: np.ndarray, run: dict):
     seq = np.full((cases, SEQ_LEN), -1, np.int64)
     if valid.any():
         f, i, sq = out_f[valid], out_i[valid], seq[valid]
-        batch.run_batch(METHODS[run["method"]], module.rhs, module.jac, module.guards,
+        batch.run_batch(batch.INTEGRATE, METHODS[run["method"]], module.rhs, module.jac, module.guards,
                         module.observe, module.impact, np.ascontiguousarray(full[valid]), modes.tables(module), y0, quad,
                         run["t_end"], Tolerances(run["rtol"], np.full(y0.size, run["atol"]), 0.0, run["hmax"]),
                         run["max_steps"], run["max_events"], len(module.OBSERVABLES), f, i, sq)
