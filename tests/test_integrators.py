@@ -163,7 +163,7 @@ def run(method, model, y0, t_end, t0=0.0, rtol=1e-8, atol=None, h0=0.0, hmin=0.0
     y = np.empty_like(y0)
     counters = np.zeros(seg.N_COUNTERS, np.int64)
     status, t, k, n_out, h = integrate_segment(
-        method, model.rhs, model.jac, model.guards, mode, np.array(p, dtype=np.float64),
+        method, seg.attempt_function(method), model.rhs, model.jac, model.guards, mode, np.array(p, dtype=np.float64),
         t0, y0, t_end, Tolerances(rtol, atol, hmin, hmax), max_steps, h0,
         EventSettings(np.array(directions, dtype=np.int64), gtol, ttol, False, -1, False), t_out, 0, y_out, y, counters)
     return SimpleNamespace(status=status, t=t, k=k, n_out=n_out, h=h, y=y, y_out=y_out,
@@ -427,7 +427,7 @@ def test_output_samples_stop_at_event_and_continue():
     status, h = seg.EVENT, 0.0
     while status == seg.EVENT:
         status, t, k, n_out, h = integrate_segment(
-            method=seg.DOPRI5, rhs=osc_rhs, jac=seg.no_jacobian, guards=osc_guards, mode=0,
+            method=seg.DOPRI5, attempt=seg.attempt_function(seg.DOPRI5), rhs=osc_rhs, jac=seg.no_jacobian, guards=osc_guards, mode=0,
             p=np.zeros(1), t0=t, y0=y.copy() if events else np.array([1.0, 0.0]), t_end=6.0,
             h0=h, i_out=i_out, **kw)
         assert n_out == np.searchsorted(t_out, t, side="right") - i_out
@@ -494,7 +494,7 @@ def test_non_finite_initial_state():
 def test_invalid_input():
     y0 = np.zeros(2)
     status = integrate_segment(  # atol has 3 entries for 2 states
-        seg.DOPRI5, osc_rhs, seg.no_jacobian, osc_guards, 0, np.zeros(1), 0.0, y0, 1.0,
+        seg.DOPRI5, seg.attempt_function(seg.DOPRI5), osc_rhs, seg.no_jacobian, osc_guards, 0, np.zeros(1), 0.0, y0, 1.0,
         Tolerances(1e-6, np.zeros(3), 0.0, np.inf), 100, 0.0, EventSettings(np.zeros(0, np.int64), 0.0, 0.0, False, -1, False),
         np.zeros(0), 0, np.zeros((0, 2)), np.zeros(2), np.zeros(4, np.int64))[0]
     assert status == seg.INVALID_INPUT

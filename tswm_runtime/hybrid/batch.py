@@ -43,7 +43,7 @@ INTEGRATE = hybrid.compiled(hybrid.integrate_hybrid, hybrid.HYBRID_SIG)
 
 BATCH_SIG = types.none(
     types.FunctionType(hybrid.HYBRID_SIG),  # integrate: INTEGRATE
-    types.int64,  # method
+    types.int64, segment.AttemptFunction,  # method, attempt: segment.attempt_function(method)
     RhsFunction, JacFunction, GuardsFunction, GuardsFunction, GuardsFunction,  # rhs, jac, guards, observe, impact
     MATRIX, MODE_TABLES,  # P (cases x parameters, latches included), mode tables
     VECTOR, VECTOR, types.float64,  # y0, quad, t_end
@@ -54,7 +54,7 @@ BATCH_SIG = types.none(
 
 
 @cache_guard.compile_cached(BATCH_SIG, parallel=True, error_model="numpy")
-def run_batch(integrate, method, rhs, jac, guards, observe, impact, P, tables, y0, quad, t_end, tol, max_steps,
+def run_batch(integrate, method, attempt, rhs, jac, guards, observe, impact, P, tables, y0, quad, t_end, tol, max_steps,
               max_events, n_obs, out_f, out_i, seq):
     """Integrate every row of P from (0, y0) to t_end; results into out_f, out_i, seq."""
     n = y0.size
@@ -69,8 +69,8 @@ def run_batch(integrate, method, rhs, jac, guards, observe, impact, P, tables, y
         mon = np.zeros((n_obs, 3))
         counters = np.zeros(segment.N_COUNTERS, np.int64)
         status, t_stop, n_ev, last, need, first = integrate(
-            method, rhs, jac, guards, observe, impact, p, tables, 0.0, y0, quad, -1, t_end, tol, max_steps, out, log,
-            mon, counters)
+            method, attempt, rhs, jac, guards, observe, impact, p, tables, 0.0, y0, quad, -1, t_end, tol, max_steps,
+            out, log, mon, counters)
         out_f[c, F_T_STOP] = t_stop
         # The state at t_stop: the output point at t_end, else the last event's state
         # if the run stopped at it, else unknown (NaN).
