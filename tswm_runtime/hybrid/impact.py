@@ -15,7 +15,7 @@ work opposes the slip (<= 0).
 """
 import math
 
-from tswm_runtime.integration.cache_guard import njit
+from numba import njit
 
 OK, JAMMED = 0, 1     # JAMMED: the sliding impulse cannot stop the approach (W_nn - mu W_nt <= 0)
 MAX_PHASES = 8        # slide, slip stops, stick or reverse, compression ends, restitution: at most 4

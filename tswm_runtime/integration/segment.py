@@ -101,7 +101,7 @@ def _judged(err, y, y_new, tol, order, safety, lo, hi):
     return e, control.step_factor(e, order, safety, lo, hi)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", no_cfunc_wrapper=False)  # a first-class function value
 def dopri5_attempt(rhs, mode, t, y, p, h, f0, work, y_new, f_new, err, tol, counters, estimate):
     """DOPRI5's step of size h from (t, y), f0 = f(t, y): y_new; with ``estimate`` also
     f_new = f(t + h, y_new), the dense output work.Q, and returns (scaled error norm, step
@@ -119,7 +119,7 @@ def dopri5_attempt(rhs, mode, t, y, p, h, f0, work, y_new, f_new, err, tol, coun
     return _judged(err, y, y_new, tol, dopri5.ERROR_ORDER, dopri5.SAFETY, dopri5.MIN_FACTOR, dopri5.MAX_FACTOR)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", no_cfunc_wrapper=False)  # a first-class function value
 def rosenbrock23_attempt(rhs, mode, t, y, p, h, f0, work, y_new, f_new, err, tol, counters, estimate):
     """ROSENBROCK23's step, as ``dopri5_attempt``; work.J and work.dfdt hold the Jacobian at (t, y)."""
     rosenbrock.stages(rhs, mode, t, y, p, h, f0, work.J, work.dfdt, work.LU, work.piv, work.K, y_new)
