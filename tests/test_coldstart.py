@@ -62,7 +62,7 @@ from tswm_runtime.integration.cache_guard import kernel_digest
 model = coldstart.model_source("paper")   # (None once the module is imported)
 simulate("paper", points=2)   # compiled now, or loaded: in numba's cache either way
 machine = coldstart.RUNTIME / "hybrid" / "machine.py"
-print(json.dumps([coldstart.cold_groups(["integrate"]), coldstart.model_cold(*model),
+print(json.dumps([coldstart.cold_groups(["integrate", "dopri5"]), coldstart.model_cold(*model),
                   coldstart.is_cached(machine, "integrate_hybrid", "tswm_runtime.hybrid.machine", True,
                                       kernel_digest()),
                   coldstart.is_cached(machine, "integrate_hybrid", "tswm_runtime.hybrid.machine", True, "0" * 64)]))
@@ -79,6 +79,18 @@ def test_a_warm_cache_is_found_and_a_stale_kernel_marker_is_not():
     run = subprocess.run([sys.executable, "-c", WARM_CHECK], capture_output=True, text=True, cwd=ROOT, timeout=900)
     assert run.returncode == 0, run.stderr
     assert json.loads(run.stdout.splitlines()[-1]) == [[], False, True, False]
+
+
+def test_a_run_compiles_or_loads_only_the_step_of_its_own_method():
+    """The methods' steps are first-class function arguments of the mode machine, compiled (or
+    loaded from the cache) on a method's first run: a dopri5 run never compiles rosenbrock23."""
+    code = ("from tswm_runtime.apps.simulate import simulate\n"
+            "from tswm_runtime.integration import segment\n"
+            "simulate('paper', method='dopri5', points=2)\n"
+            "print(len(segment.dopri5_attempt.signatures), len(segment.rosenbrock23_attempt.signatures))")
+    run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, timeout=900)
+    assert run.returncode == 0, run.stderr
+    assert run.stdout.split() == ["1", "0"]
 
 
 def test_the_model_entries_are_the_functions_compiled_with_a_signature():

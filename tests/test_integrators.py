@@ -163,7 +163,7 @@ def run(method, model, y0, t_end, t0=0.0, rtol=1e-8, atol=None, h0=0.0, hmin=0.0
     y = np.empty_like(y0)
     counters = np.zeros(seg.N_COUNTERS, np.int64)
     status, t, k, n_out, h = integrate_segment(
-        method, model.rhs, model.jac, model.guards, mode, np.array(p, dtype=np.float64),
+        method, seg.attempt_function(method), model.rhs, model.jac, model.guards, mode, np.array(p, dtype=np.float64),
         t0, y0, t_end, Tolerances(rtol, atol, hmin, hmax), max_steps, h0,
         EventSettings(np.array(directions, dtype=np.int64), gtol, ttol, False, -1, False), t_out, 0, y_out, y, counters)
     return SimpleNamespace(status=status, t=t, k=k, n_out=n_out, h=h, y=y, y_out=y_out,
@@ -427,7 +427,7 @@ def test_output_samples_stop_at_event_and_continue():
     status, h = seg.EVENT, 0.0
     while status == seg.EVENT:
         status, t, k, n_out, h = integrate_segment(
-            method=seg.DOPRI5, rhs=osc_rhs, jac=seg.no_jacobian, guards=osc_guards, mode=0,
+            method=seg.DOPRI5, attempt=seg.attempt_function(seg.DOPRI5), rhs=osc_rhs, jac=seg.no_jacobian, guards=osc_guards, mode=0,
             p=np.zeros(1), t0=t, y0=y.copy() if events else np.array([1.0, 0.0]), t_end=6.0,
             h0=h, i_out=i_out, **kw)
         assert n_out == np.searchsorted(t_out, t, side="right") - i_out
@@ -438,9 +438,10 @@ def test_output_samples_stop_at_event_and_continue():
     np.testing.assert_allclose(y_out, osc_exact(t_out).T, atol=1e-8)
 
 
-def test_illinois_returns_far_side_end():
-    """f(t) = t^3 - 2 on [0, 2]: ends at b on the positive side (or an exact zero) within
-    tol of the root."""
+@njit
+def _illinois_cube_root_of_2():
+    """(bracket state, tolerance, iterations) of the Illinois iteration on t^3 - 2 over [0, 2],
+    in compiled code (events' helpers have no CPython wrapper)."""
     state = ev.bracket_start(0.0, -2.0, 2.0, 6.0)
     tol = ev.time_tolerance(2.0, 0.0)
     for iterations in range(100):
@@ -448,9 +449,26 @@ def test_illinois_returns_far_side_end():
             break
         c = ev.bracket_next(state, tol)
         state = ev.bracket_update(state, c, c ** 3 - 2.0)
+    return state, tol, iterations
+
+
+def test_illinois_returns_far_side_end():
+    """f(t) = t^3 - 2 on [0, 2]: ends at b on the positive side (or an exact zero) within
+    tol of the root."""
+    state, tol, iterations = _illinois_cube_root_of_2()
     root = 2.0 ** (1 / 3)
     assert iterations < 20
     assert state[3] >= 0.0 and abs(state[2] - root) <= tol
+
+
+@njit
+def _lu_solve(A, b):
+    """(factorised, x with A x = b) by rosenbrock's LU, in compiled code (no CPython wrapper)."""
+    LU, piv, x = A.copy(), np.zeros(A.shape[0], np.int64), b.copy()
+    ok = ros.lu_factor(LU, piv)
+    if ok:
+        ros.lu_solve(LU, piv, x)
+    return ok, x
 
 
 def test_small_lu_with_partial_pivoting():
@@ -459,11 +477,10 @@ def test_small_lu_with_partial_pivoting():
                                                        for n in (1, 2, 3, 4) for _ in range(5)]
     for A in matrices:
         b = rng.normal(size=A.shape[0])
-        LU, piv, x = A.copy(), np.zeros(A.shape[0], np.int64), b.copy()
-        assert ros.lu_factor(LU, piv)
-        ros.lu_solve(LU, piv, x)
+        ok, x = _lu_solve(A, b)
+        assert ok
         np.testing.assert_allclose(x, np.linalg.solve(A, b), rtol=1e-10, atol=1e-12)
-    assert not ros.lu_factor(np.ones((3, 3)), np.zeros(3, np.int64))
+    assert not _lu_solve(np.ones((3, 3)), np.ones(3))[0]
 
 
 # --- failure statuses -----------------------------------------------------------------
@@ -494,7 +511,7 @@ def test_non_finite_initial_state():
 def test_invalid_input():
     y0 = np.zeros(2)
     status = integrate_segment(  # atol has 3 entries for 2 states
-        seg.DOPRI5, osc_rhs, seg.no_jacobian, osc_guards, 0, np.zeros(1), 0.0, y0, 1.0,
+        seg.DOPRI5, seg.attempt_function(seg.DOPRI5), osc_rhs, seg.no_jacobian, osc_guards, 0, np.zeros(1), 0.0, y0, 1.0,
         Tolerances(1e-6, np.zeros(3), 0.0, np.inf), 100, 0.0, EventSettings(np.zeros(0, np.int64), 0.0, 0.0, False, -1, False),
         np.zeros(0), 0, np.zeros((0, 2)), np.zeros(2), np.zeros(4, np.int64))[0]
     assert status == seg.INVALID_INPUT

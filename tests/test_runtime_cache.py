@@ -4,6 +4,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 from tswm_runtime.integration import cache_guard
 
 ROOT = Path(__file__).parents[1]
@@ -86,3 +88,26 @@ def test_a_cache_directory_that_vanishes_while_compiling_costs_the_cache_not_the
     captured = capsys.readouterr()
     assert code == 0, captured.err
     assert "status: finished" in captured.out
+
+
+@cache_guard.njit(error_model="numpy")
+def _shifted(k, x):
+    return x + k
+
+
+@cache_guard.njit(error_model="numpy", no_cpython_wrapper=False)
+def _calls_with_constants(x):
+    i = 0  # a constant first, widened to int64 by the loop
+    for _ in range(3):
+        i = _shifted(i, 1)
+    return _shifted(3, x) + _shifted(4, x) + i
+
+
+def test_helpers_compile_once_per_argument_types_not_per_constant_passed():
+    """cache_guard.njit types constant arguments as plain int64: numba's own njit would compile
+    _shifted three times or more here (Literal[int](0), (3), (4), then int64). Built without a
+    CPython wrapper, a helper refuses a call from Python (numba would crash)."""
+    assert _calls_with_constants(1.0) == 12.0
+    assert [tuple(map(str, s)) for s in _shifted.signatures] == [("int64", "int64"), ("int64", "float64")]
+    with pytest.raises(TypeError, match="helper of compiled code"):
+        _shifted(1, 2.0)

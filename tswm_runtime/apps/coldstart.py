@@ -5,7 +5,7 @@ being compiled and about how long").
 The integrators (``integrate_hybrid``, ``fill_rows``; for sweeps
 ``run_batch``) and a generated model's entry functions (``rhs``, ``jac``, ``guards``,
 ``observe``, ``outputs``) are compiled eagerly, with explicit signatures, when their modules
-are imported. Before that import, ``announce`` asks numba's own cache machinery whether each
+are imported; a method's step (``segment.attempt_function``) at its first run. Before that, ``announce`` asks numba's own cache machinery whether each
 of them would load from disk, without compiling anything:
 
 * numba keeps one index file per function (``<file stem>.<qualname>-<first line>.pyXY.nbi``,
@@ -26,9 +26,9 @@ If anything is cold the message goes to the ``tswm_runtime.compile`` logger at W
 ``logging.getLogger("tswm_runtime.compile").setLevel(logging.ERROR)``), once per process and
 group, e.g.::
 
-    tswm: compiling the integration kernels (dopri5 and rosenbrock23, the hybrid mode machine,
-    output rows) and the model `paper` into numba's cache: about 65 s (measured on 2 cores),
-    once; later runs load it from there
+    tswm: compiling the integration kernels (the hybrid mode machine, output rows) and the
+    model `paper` into numba's cache: about 40 s (measured on 2 cores), once; later runs load
+    it from there
 
 The seconds come from ``compile_times.json``, measured with an empty ``NUMBA_CACHE_DIR``
 on 2 cores by ``tools/measure_compile_times.py``. If numba's internals cannot be read (a
@@ -54,13 +54,16 @@ TIMES_FILE = Path(__file__).with_name("compile_times.json")
 WATCHDOG_S = 0.5
 
 # group -> (what the message calls it, [(source under tswm_runtime/, function, guarded by cache_guard)]):
-# the functions compiled eagerly when the group's modules are imported.
+# the functions compiled eagerly when the group's modules are imported, or (a method's step, named
+# as simulate.METHODS names the method) at its first run; the kernel check purges all of them.
 GROUPS = {
-    "integrate": ("the integration kernels (dopri5 and rosenbrock23, the hybrid mode machine, output rows)",
+    "integrate": ("the integration kernels (the hybrid mode machine, output rows)",
                   [("integration/segment.py", "no_jacobian", False),
                    ("hybrid/machine.py", "integrate_hybrid", True),
                    ("hybrid/rows.py", "fill_rows", True)]),
     "batch": ("the parallel sweep kernel", [("hybrid/batch.py", "run_batch", True)]),
+    "dopri5": ("the dopri5 step", [("integration/segment.py", "dopri5_attempt", True)]),
+    "rosenbrock23": ("the rosenbrock23 step", [("integration/segment.py", "rosenbrock23_attempt", True)]),
 }
 
 _announced: set = set()

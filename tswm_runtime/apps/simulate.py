@@ -255,6 +255,9 @@ def simulate(model: str | ModuleType, params: dict | None = None, *, interruptib
     n = len(module.STATES)
     y0, quad = initial_state(module, run)
     t_out = _output_times(run["t_end"], run["points"])
+    coldstart.announce((run["method"],))
+    segment.attempt_function(METHODS[run["method"]])  # the method's step compiles on its first run, if not cached
+    coldstart.done()
     status, t_stop, n_ev, last, need, first, out, log, mon, counters = hybrid.integrate(
         METHODS[run["method"]], module, p, modes.tables(module), y0, run["t_end"], rtol=run["rtol"],
         atol=run["atol"], t_out=t_out, max_events=run["max_events"], quad=quad, hmax=run["hmax"],

@@ -10,7 +10,9 @@ for every model (numba's ``parallel=True`` accepts function-typed arguments: the
 prange body is outlined into a gufunc that takes the function pointers as
 arguments). Calling ``integrate_hybrid`` from Python costs ~115 us per call for
 unboxing the function-typed arguments; inside this loop a case costs only its
-integration.
+integration. ``integrate_hybrid`` itself is such an argument (``INTEGRATE``): called
+through its address, its compiled code is not linked into this kernel, whose cold
+compile then skips re-optimizing the whole mode machine (issue 13: 24 s of 72).
 
 Per case the result rows hold:
     out_f[c] = (t_stop, S1m, tS1m, S2m, tS2m, x1, v1, impact energy)   (x1, v1 at t_stop;
@@ -36,8 +38,12 @@ N_F = 8
 I_STATUS, I_EVENTS, I_STEPS, I_REJECTED, I_RHS, I_JAC, I_FIRST, I_NMODES, I_IMPACTS = range(9)
 N_I = 9
 
+#: hybrid.integrate_hybrid as the first-class function value run_batch takes.
+INTEGRATE = hybrid.compiled(hybrid.integrate_hybrid, hybrid.HYBRID_SIG)
+
 BATCH_SIG = types.none(
-    types.int64,  # method
+    types.FunctionType(hybrid.HYBRID_SIG),  # integrate: INTEGRATE
+    types.int64, segment.AttemptFunction,  # method, attempt: segment.attempt_function(method)
     RhsFunction, JacFunction, GuardsFunction, GuardsFunction, GuardsFunction,  # rhs, jac, guards, observe, impact
     MATRIX, MODE_TABLES,  # P (cases x parameters, latches included), mode tables
     VECTOR, VECTOR, types.float64,  # y0, quad, t_end
@@ -48,8 +54,8 @@ BATCH_SIG = types.none(
 
 
 @cache_guard.compile_cached(BATCH_SIG, parallel=True, error_model="numpy")
-def run_batch(method, rhs, jac, guards, observe, impact, P, tables, y0, quad, t_end, tol, max_steps, max_events,
-              n_obs, out_f, out_i, seq):
+def run_batch(integrate, method, attempt, rhs, jac, guards, observe, impact, P, tables, y0, quad, t_end, tol, max_steps,
+              max_events, n_obs, out_f, out_i, seq):
     """Integrate every row of P from (0, y0) to t_end; results into out_f, out_i, seq."""
     n = y0.size
     width = n + quad.size
@@ -62,9 +68,9 @@ def run_batch(method, rhs, jac, guards, observe, impact, P, tables, y0, quad, t_
                        np.zeros((max_events, JUMP_WIDTH)))
         mon = np.zeros((n_obs, 3))
         counters = np.zeros(segment.N_COUNTERS, np.int64)
-        status, t_stop, n_ev, last, need, first = hybrid.integrate_hybrid(
-            method, rhs, jac, guards, observe, impact, p, tables, 0.0, y0, quad, -1, t_end, tol, max_steps, out, log,
-            mon, counters)
+        status, t_stop, n_ev, last, need, first = integrate(
+            method, attempt, rhs, jac, guards, observe, impact, p, tables, 0.0, y0, quad, -1, t_end, tol, max_steps,
+            out, log, mon, counters)
         out_f[c, F_T_STOP] = t_stop
         # The state at t_stop: the output point at t_end, else the last event's state
         # if the run stopped at it, else unknown (NaN).

@@ -31,11 +31,12 @@ Chattering guard: more than MAX_SAME_TIME events without the time advancing
 stops the run with status CHATTERING instead of looping.
 """
 import numpy as np
-from numba import njit, types
+from numba import types
 from numba.core.types.function_type import CompileResultWAP
 
 from tswm_runtime.hybrid import impact as collision
 from tswm_runtime.integration import cache_guard, painleve, segment
+from tswm_runtime.integration.cache_guard import njit
 from tswm_runtime.integration.signatures import (GUARDS_SIG, JAC_SIG, MATRIX, RHS_SIG, VECTOR, GuardsFunction,
                                                  JacFunction, RhsFunction)
 from tswm_runtime.integration.structures import (EVENT_LOG, JUMP_WIDTH, MODE_TABLES, OUTPUTS, TOLERANCES, EventLog,
@@ -502,7 +503,7 @@ def _log(log, n_ev, t, k, mode_from, mode_to, y, quad, jump):
 
 HYBRID_SIG = types.Tuple((types.int64, types.float64, types.int64, types.int64, types.int64,
                           types.int64))(
-    types.int64,  # method
+    types.int64, segment.AttemptFunction,  # method, attempt: segment.attempt_function(method)
     RhsFunction, JacFunction, GuardsFunction, GuardsFunction, GuardsFunction,  # rhs, jac, guards, observe, impact
     VECTOR, MODE_TABLES,  # p (its latches are written), tables
     types.float64, VECTOR, VECTOR, types.int64, types.float64,  # t0, y0, quad, mode0, t_end
@@ -513,8 +514,8 @@ HYBRID_SIG = types.Tuple((types.int64, types.float64, types.int64, types.int64, 
 
 
 @cache_guard.compile_cached(HYBRID_SIG, error_model="numpy", nogil=True)
-def integrate_hybrid(method, rhs, jac, guards, observe, impact, p, tables, t0, y0, quad, mode0, t_end, tol,
-                     max_steps, out, log, mon, counters):
+def integrate_hybrid(method, attempt, rhs, jac, guards, observe, impact, p, tables, t0, y0, quad, mode0, t_end,
+                     tol, max_steps, out, log, mon, counters):
     """Integrate the model from (t0, y0) to t_end through its mode changes.
 
     tables: the ModeTables from ``modes.tables``. p: parameters and latches;
@@ -587,7 +588,7 @@ def integrate_hybrid(method, rhs, jac, guards, observe, impact, p, tables, t0, y
         i0 = i
         k_singular = k_d if singular and k_d >= 0 and tables.guard_direction[mode, k_d] != 0 else -1
         ev = EventSettings(tables.guard_direction[mode], 0.0, 0.0, True, k_singular, True)
-        seg_status, t_new, k, i, h = segment.run(method, rhs, jac, guards, observe, mode, p, t, t_end, tol,
+        seg_status, t_new, k, i, h = segment.run(method, attempt, rhs, jac, guards, observe, mode, p, t, t_end, tol,
                                                  max(max_steps - steps, 0), h, ev, out, i, y, q, mon, counters)
         singular = True
         stalled = seg_status == segment.STEP_TOO_SMALL or seg_status == segment.NOT_FINITE
@@ -712,7 +713,8 @@ def integrate(method, model, p, tables, y0, t_end, *, rtol, atol, t_out, max_eve
     tol = Tolerances(float(rtol), np.array(np.broadcast_to(np.asarray(atol, np.float64), y0.shape)),
                      float(hmin), float(hmax))
     jac = model.jac  # DOPRI5 calls it only to confirm an equilibrium before holding it (steady)
-    args = (method, compiled(model.rhs, RHS_SIG), compiled(jac, JAC_SIG), compiled(model.guards, GUARDS_SIG),
+    args = (method, segment.attempt_function(method), compiled(model.rhs, RHS_SIG), compiled(jac, JAC_SIG),
+            compiled(model.guards, GUARDS_SIG),
             compiled(model.observe, GUARDS_SIG), compiled(model.impact, GUARDS_SIG), p, tables, float(t0), y0, quad, int(mode0), float(t_end), tol,
             int(max_steps), out, log, mon, counters)
     result = call(integrate_hybrid, args, counters)

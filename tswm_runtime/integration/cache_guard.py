@@ -1,4 +1,5 @@
-"""Eager, cached compilation that notices edits in the kernel modules it inlines.
+"""Eager, cached compilation that notices edits in the kernel modules it inlines; ``njit``
+for the kernels' helpers.
 
 numba keys a function's on-disk cache on its own source file only (dependencies are
 not tracked, as numba's caching docs say), while the compiled integrators inline
@@ -14,14 +15,17 @@ import hashlib
 import warnings
 from pathlib import Path
 
-from numba import njit
+import numba
+from numba import types
 from numba.core import caching
+from numba.core.registry import CPUDispatcher
 
 from tswm_runtime.common.files import write_atomic
 
 KERNEL_SOURCES = ("integration/structures.py", "integration/control.py", "integration/dopri5.py",
                   "integration/rosenbrock.py", "integration/events.py", "integration/segment.py", "integration/single.py",
-                  "integration/painleve.py", "integration/steady.py", "hybrid/machine.py", "hybrid/batch.py", "hybrid/rows.py")
+                  "integration/painleve.py", "integration/steady.py", "hybrid/machine.py", "hybrid/impact.py", "hybrid/batch.py",
+                  "hybrid/rows.py")
 
 
 class CacheIOWarning(UserWarning):
@@ -91,11 +95,47 @@ def check_kernel_caches() -> None:
             write_atomic(marker, digest)
 
 
+class _Helper(CPUDispatcher):
+    """A dispatcher for the kernels' helpers (issue 13: each compile of a helper is a full
+    compile, repeated in every caller's link).
+
+    It types the constants it is called with from compiled code as their plain types (int64,
+    not Literal[int](3)): numba's own compiles a callee once per literal value, and once more
+    for a variable that starts as a constant (typing widens it later). And, unless told
+    otherwise, it builds no CPython or C wrapper (``no_cpython_wrapper``, ``no_cfunc_wrapper``:
+    a sixth of the cold compile): such a helper is callable from compiled code only, and
+    calling it from Python raises TypeError (numba would crash).
+    """
+
+    def get_call_template(self, args, kws):
+        return super().get_call_template(tuple(map(types.unliteral, args)),
+                                         {k: types.unliteral(v) for k, v in kws.items()})
+
+    def __call__(self, *args, **kws):
+        if self.targetoptions["no_cpython_wrapper"]:
+            raise TypeError(f"{self.py_func.__qualname__} is a helper of compiled code (cache_guard.njit); "
+                            "pass no_cpython_wrapper=False to call it from Python")
+        return super().__call__(*args, **kws)
+
+
+def njit(*, cache=False, **options):
+    """``numba.njit(cache=cache, **options)`` with the dispatcher above, for the kernels' helpers;
+    ``options`` may turn the wrappers back on (no_cfunc_wrapper=False for a first-class function)."""
+    def decorate(py_func):
+        dispatcher = _Helper(py_func=py_func, locals={},
+                             targetoptions={"nopython": True, "boundscheck": None, "no_cpython_wrapper": True,
+                                            "no_cfunc_wrapper": True, **options})
+        if cache:
+            dispatcher.enable_caching()
+        return dispatcher
+    return decorate
+
+
 def compile_cached(signature, **options):
-    """Like ``njit(signature, cache=True, **options)``, with the kernel check above."""
+    """Like ``numba.njit(signature, cache=True, **options)``, with the kernel check above."""
     def decorate(py_func):
         check_kernel_caches()
-        dispatcher = njit(cache=True, **options)(py_func)
+        dispatcher = numba.njit(cache=True, **options)(py_func)
         dispatcher.compile(signature)
         dispatcher.disable_compile()
         return dispatcher

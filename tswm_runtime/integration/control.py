@@ -6,7 +6,7 @@ scipy's ``select_initial_step``). Each method module gives its own constants (er
 order, safety, smallest and largest step factor).
 """
 import numpy as np
-from numba import njit
+from tswm_runtime.integration.cache_guard import njit
 
 # Hairer's initial step selection (Sec. II.4): thresholds of scipy's common.py.
 H0_TINY_NORM = 1e-5  # ||y0|| or ||f0|| (scaled) below this: start from H0_FALLBACK.

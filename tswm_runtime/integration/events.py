@@ -36,7 +36,7 @@ The Illinois iteration is written as pure state-update functions (``bracket_*``)
 so that ``segment`` runs the same iteration on the re-taken full-order step.
 """
 import numpy as np
-from numba import njit
+from tswm_runtime.integration.cache_guard import njit
 
 GUARD_SUBINTERVALS = 4  # Guard samples per step: 3 interior points + the step end.
 ROOT_EPS_FACTOR = 4.0  # Root time tolerance floor: 4 eps, relative to max(1, |t|).

@@ -24,7 +24,7 @@ Output rows inside the approach are filled by solving t(sigma) = t_out on
 re-taken steps; the observables' running maxima are updated at step ends.
 """
 import numpy as np
-from numba import njit
+from tswm_runtime.integration.cache_guard import njit
 
 from tswm_runtime.integration import control, dopri5, events
 

@@ -4,7 +4,10 @@ The step loop ``run`` is compiled into the mode machine (``hybrid.machine``),
 whose explicit signature takes the model functions as numba first-class function
 types (see ``signatures``). The method is chosen by a code (``DOPRI5`` explicit,
 ``ROSENBROCK23`` stiff); both share the step loop, step-size control and event
-location below.
+location below. Its step (``dopri5_attempt``, ``rosenbrock23_attempt``) is a
+first-class function argument too (``attempt_function``), so the step loop and the
+mode machine are compiled once for both methods and each method's step on its
+first use: a run never compiles the method it does not use (issue 13).
 
 Per accepted step [t_a, t_b]: guards are sampled on the dense output and a
 crossing is located on it (``events``); the state AT the event is then obtained
@@ -21,17 +24,19 @@ not valid across a switch, scipy issue 18039), the caller restarts after events.
 ``single.integrate_segment`` calls ``run`` for one segment from Python (no noise
 band, no quadrature, no monitored observables; for tests and tools, and compiled
 only where they import it); the hybrid driver (``hybrid``) calls it with all three. Arguments travel in the named structures of
-``structures`` (Tolerances, EventSettings, Outputs, Step, StepWork); the method
-is dispatched in one place, ``_attempt``.
+``structures`` (Tolerances, EventSettings, Outputs, Step, StepWork).
 """
 from collections import namedtuple
 
 import numpy as np
-from numba import njit
+import numba
+from numba import types
+from numba.core.types.function_type import CompileResultWAP
 
 from tswm_runtime.integration import control, dopri5, events, painleve, rosenbrock, steady
-from tswm_runtime.integration.signatures import JAC_SIG
-from tswm_runtime.integration.structures import Step, StepWork
+from tswm_runtime.integration.cache_guard import njit
+from tswm_runtime.integration.signatures import JAC_SIG, VECTOR, RhsFunction
+from tswm_runtime.integration.structures import INTS, STEP_WORK, TOLERANCES, Step, StepWork
 
 # Method codes.
 DOPRI5 = 0  # Dormand-Prince 5(4), explicit (dopri5.py).
@@ -57,7 +62,7 @@ MIN_STEP_ULPS = 10.0  # A step must exceed 10 ulp(t) to move t reliably (scipy's
 
 
 
-@njit(JAC_SIG, cache=True)
+@numba.njit(JAC_SIG, cache=True)
 def no_jacobian(mode, t, y, p, J, dfdt):
     """Placeholder ``jac`` for DOPRI5 runs (DOPRI5 never calls it); fills NaN."""
     J[:, :] = np.nan
@@ -88,53 +93,78 @@ def _error_order(method):
 
 
 @njit(cache=True, error_model="numpy")
-def _attempt(method, rhs, mode, t, y, p, h, f0, work, y_new, f_new, err, tol, counters, estimate):
-    """The method's step of size h from (t, y), f0 = f(t, y): y_new; with ``estimate``
-    also f_new = f(t + h, y_new), the dense output work.Q, and returns (scaled error
-    norm, step factor) for the controller (inf and the smallest factor when anything is
-    not finite). The one place where the method is chosen."""
-    if method == DOPRI5:
-        work.K[0, :] = f0
-        dopri5.stages(rhs, mode, t, y, p, h, work.K, y_new)
-        counters[N_RHS] += dopri5.N_STAGES - 1
-        order, safety, lo, hi = dopri5.ERROR_ORDER, dopri5.SAFETY, dopri5.MIN_FACTOR, dopri5.MAX_FACTOR
-    else:
-        rosenbrock.stages(rhs, mode, t, y, p, h, f0, work.J, work.dfdt, work.LU, work.piv, work.K, y_new)
-        counters[N_RHS] += 1
-        order, safety, lo, hi = (rosenbrock.ERROR_ORDER, rosenbrock.SAFETY, rosenbrock.MIN_FACTOR,
-                                 rosenbrock.MAX_FACTOR)
-    if not estimate:
-        return np.inf, lo
-    rhs(mode, t + h, y_new, p, f_new)
-    counters[N_RHS] += 1
-    if method == DOPRI5:
-        work.K[dopri5.N_STAGES, :] = f_new
-        dopri5.error_estimate(h, work.K, err)
-        dopri5.dense_coeffs(work.K, work.Q)
-    else:
-        rosenbrock.error_estimate(h, f0, f_new, work.dfdt, work.LU, work.piv, work.K, err)
-        rosenbrock.dense_coeffs(work.K, work.Q)
+def _judged(err, y, y_new, tol, order, safety, lo, hi):
+    """(scaled error norm of err, step factor): inf and the smallest factor if anything is not finite."""
     e = control.error_norm(err, y, y_new, tol.atol, tol.rtol)
     if not (np.isfinite(e) and _all_finite(y_new)):
         e = np.inf
     return e, control.step_factor(e, order, safety, lo, hi)
 
 
+@njit(cache=True, error_model="numpy", no_cfunc_wrapper=False)  # a first-class function value
+def dopri5_attempt(rhs, mode, t, y, p, h, f0, work, y_new, f_new, err, tol, counters, estimate):
+    """DOPRI5's step of size h from (t, y), f0 = f(t, y): y_new; with ``estimate`` also
+    f_new = f(t + h, y_new), the dense output work.Q, and returns (scaled error norm, step
+    factor) for the controller (inf and the smallest factor when anything is not finite)."""
+    work.K[0, :] = f0
+    dopri5.stages(rhs, mode, t, y, p, h, work.K, y_new)
+    counters[N_RHS] += dopri5.N_STAGES - 1
+    if not estimate:
+        return np.inf, dopri5.MIN_FACTOR
+    rhs(mode, t + h, y_new, p, f_new)
+    counters[N_RHS] += 1
+    work.K[dopri5.N_STAGES, :] = f_new
+    dopri5.error_estimate(h, work.K, err)
+    dopri5.dense_coeffs(work.K, work.Q)
+    return _judged(err, y, y_new, tol, dopri5.ERROR_ORDER, dopri5.SAFETY, dopri5.MIN_FACTOR, dopri5.MAX_FACTOR)
+
+
+@njit(cache=True, error_model="numpy", no_cfunc_wrapper=False)  # a first-class function value
+def rosenbrock23_attempt(rhs, mode, t, y, p, h, f0, work, y_new, f_new, err, tol, counters, estimate):
+    """ROSENBROCK23's step, as ``dopri5_attempt``; work.J and work.dfdt hold the Jacobian at (t, y)."""
+    rosenbrock.stages(rhs, mode, t, y, p, h, f0, work.J, work.dfdt, work.LU, work.piv, work.K, y_new)
+    counters[N_RHS] += 1
+    if not estimate:
+        return np.inf, rosenbrock.MIN_FACTOR
+    rhs(mode, t + h, y_new, p, f_new)
+    counters[N_RHS] += 1
+    rosenbrock.error_estimate(h, f0, f_new, work.dfdt, work.LU, work.piv, work.K, err)
+    rosenbrock.dense_coeffs(work.K, work.Q)
+    return _judged(err, y, y_new, tol, rosenbrock.ERROR_ORDER, rosenbrock.SAFETY, rosenbrock.MIN_FACTOR,
+                   rosenbrock.MAX_FACTOR)
+
+
+#: attempt(rhs, mode, t, y, p, h, f0, work, y_new, f_new, err, tol, counters, estimate) -> (error, factor)
+ATTEMPT_SIG = types.UniTuple(types.float64, 2)(
+    RhsFunction, types.int64, types.float64, VECTOR, VECTOR, types.float64, VECTOR, STEP_WORK, VECTOR, VECTOR,
+    VECTOR, TOLERANCES, INTS, types.boolean)
+AttemptFunction = types.FunctionType(ATTEMPT_SIG)
+_ATTEMPTS = {DOPRI5: dopri5_attempt, ROSENBROCK23: rosenbrock23_attempt}
+_COMPILED: dict = {}
+
+
+def attempt_function(method):
+    """The step attempt of ``method`` as the first-class function value ``run`` takes. Compiled,
+    or loaded from numba's cache, on first use: a run compiles only its own method's step."""
+    if method not in _COMPILED:
+        _COMPILED[method] = CompileResultWAP(_ATTEMPTS[method].get_compile_result(ATTEMPT_SIG))
+    return _COMPILED[method]
+
+
 @njit(cache=True, error_model="numpy")
-def _state_at(method, rhs, guards, mode, p, step, t, work, y, g, tol, counters):
+def _state_at(attempt, rhs, guards, mode, p, step, t, work, y, g, tol, counters):
     """y = state at t in the step by a full step from t_a (exact at the ends); g = guards."""
     if t == step.t_b:
         y[:] = step.y_b
     elif t == step.t_a:
         y[:] = step.y_a
     else:
-        _attempt(method, rhs, mode, step.t_a, step.y_a, p, t - step.t_a, step.f_a, work, y, y, y, tol,
-                 counters, False)
+        attempt(rhs, mode, step.t_a, step.y_a, p, t - step.t_a, step.f_a, work, y, y, y, tol, counters, False)
     _eval_guards(guards, mode, t, y, p, g)
 
 
 @njit(cache=True, error_model="numpy")
-def _event_state(method, rhs, guards, mode, p, step, k, t_star, j, G, ev, tol, work, y_ev, y_tmp, g_tmp,
+def _event_state(attempt, rhs, guards, mode, p, step, k, t_star, j, G, ev, tol, work, y_ev, y_tmp, g_tmp,
                  counters):
     """(event time, True) and state y_ev for guard k crossing at t_star (found on the
     dense output); (t_star, False) if the re-taken steps show no crossing (the
@@ -147,7 +177,7 @@ def _event_state(method, rhs, guards, mode, p, step, k, t_star, j, G, ev, tol, w
     + w] with w 1e-3 of the step, widened to [t_a, .] or [., sample j] if needed.
     """
     post = G[j, k]
-    _state_at(method, rhs, guards, mode, p, step, t_star, work, y_ev, g_tmp, tol, counters)
+    _state_at(attempt, rhs, guards, mode, p, step, t_star, work, y_ev, g_tmp, tol, counters)
     g_star = g_tmp[k]
     t_far = events.sample_time(step.t_a, step.t_b, j)
     if (g_star != 0.0 and abs(g_star) <= ev.gtol) or (g_star == 0.0 and t_star >= t_far):
@@ -155,11 +185,11 @@ def _event_state(method, rhs, guards, mode, p, step, k, t_star, j, G, ev, tol, w
     far = g_star * post > 0.0
     w = 1e-3 * step.h
     t_probe = max(t_star - w, step.t_a) if far else min(t_star + w, t_far)
-    _state_at(method, rhs, guards, mode, p, step, t_probe, work, y_tmp, g_tmp, tol, counters)
+    _state_at(attempt, rhs, guards, mode, p, step, t_probe, work, y_tmp, g_tmp, tol, counters)
     g_probe = g_tmp[k]
     if (g_probe * post > 0.0) == far:  # the probe is on the same side: widen to the ends
         t_probe = step.t_a if far else t_far
-        _state_at(method, rhs, guards, mode, p, step, t_probe, work, y_tmp, g_tmp, tol, counters)
+        _state_at(attempt, rhs, guards, mode, p, step, t_probe, work, y_tmp, g_tmp, tol, counters)
         g_probe = g_tmp[k]
         if (g_probe * post > 0.0) == far:
             if far:  # already across at t_a (it crossed inside the noise band): report t_a
@@ -174,7 +204,7 @@ def _event_state(method, rhs, guards, mode, p, step, k, t_star, j, G, ev, tol, w
     ttol = events.time_tolerance(state[2], ev.ttol)
     while not events.bracket_done(state, ttol):
         c = events.bracket_next(state, ttol)
-        _state_at(method, rhs, guards, mode, p, step, c, work, y_tmp, g_tmp, tol, counters)
+        _state_at(attempt, rhs, guards, mode, p, step, c, work, y_tmp, g_tmp, tol, counters)
         state = events.bracket_update(state, c, g_tmp[k])
         if state[2] == c:
             y_ev[:] = y_tmp
@@ -281,10 +311,11 @@ def _refine(observe, mode, p, mon, obs, win, y_tmp):
 
 
 @njit(cache=True, error_model="numpy")
-def run(method, rhs, jac, guards, observe, mode, p, t0, t_end, tol, max_steps, h0, ev, out, i, y,
+def run(method, attempt, rhs, jac, guards, observe, mode, p, t0, t_end, tol, max_steps, h0, ev, out, i, y,
         quad, mon, counters):
     """The step loop of one segment; y is the current state (updated in place).
 
+    attempt: the method's step, ``attempt_function(method)``.
     tol: Tolerances; ev: EventSettings (ev.singular: a guard (D) whose zero the model
     cannot be integrated to in t; the loop stops with APPROACH after a step that takes
     it towards 0 fast, -1: none); out: Outputs (rows from i on are filled);
@@ -340,7 +371,7 @@ def run(method, rhs, jac, guards, observe, mode, p, t0, t_end, tol, max_steps, h
         if t_new >= t_end:
             t_new = t_end
             h = t_end - t
-        e, factor = _attempt(method, rhs, mode, t, y, p, h, f_a, work, y_b, f_b, err, tol, counters, True)
+        e, factor = attempt(rhs, mode, t, y, p, h, f_a, work, y_b, f_b, err, tol, counters, True)
         too_short = max(tol.hmin, MIN_STEP_ULPS * (np.nextafter(t, np.inf) - t))
         if not e < 1.0:
             counters[N_REJECTED] += 1
@@ -377,7 +408,7 @@ def run(method, rhs, jac, guards, observe, mode, p, t0, t_end, tol, max_steps, h
                                              y_tmp, g_tmp, y_pert, j, ignore)
             if k < 0:
                 break
-            t_ev, real = _event_state(method, rhs, guards, mode, p, step, k, t_star, j, G, ev, tol, work,
+            t_ev, real = _event_state(attempt, rhs, guards, mode, p, step, k, t_star, j, G, ev, tol, work,
                                       y_ev, y_tmp, g_tmp, counters)
             if real:
                 t_new = t_ev

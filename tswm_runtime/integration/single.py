@@ -5,10 +5,11 @@ Kept apart from ``segment`` so that the runtime's import path (``hybrid.machine`
 compile it: an eagerly compiled entry point costs seconds on a cold numba cache.
 """
 import numpy as np
-from numba import njit, types
+from numba import types
 
 from tswm_runtime.integration import cache_guard
-from tswm_runtime.integration.segment import (DOPRI5, INVALID_INPUT, N_COUNTERS, ROSENBROCK23, run)
+from tswm_runtime.integration.cache_guard import njit
+from tswm_runtime.integration.segment import DOPRI5, INVALID_INPUT, N_COUNTERS, ROSENBROCK23, AttemptFunction, run
 from tswm_runtime.integration.signatures import MATRIX, VECTOR, GuardsFunction, JacFunction, RhsFunction
 from tswm_runtime.integration.structures import EVENT_SETTINGS, TOLERANCES, Outputs
 
@@ -32,7 +33,7 @@ def _valid(method, t0, y0, t_end, tol, max_steps, ev, out, i_out, y_stop, counte
 
 
 SEGMENT_SIG = types.Tuple((types.int64, types.float64, types.int64, types.int64, types.float64))(
-    types.int64,  # method
+    types.int64, AttemptFunction,  # method, attempt
     RhsFunction, JacFunction, GuardsFunction,
     types.int64, VECTOR,  # mode, p
     types.float64, VECTOR, types.float64,  # t0, y0, t_end
@@ -44,12 +45,12 @@ SEGMENT_SIG = types.Tuple((types.int64, types.float64, types.int64, types.int64,
 
 
 @cache_guard.compile_cached(SEGMENT_SIG, error_model="numpy")
-def integrate_segment(method, rhs, jac, guards, mode, p, t0, y0, t_end, tol, max_steps, h0, ev, t_out,
+def integrate_segment(method, attempt, rhs, jac, guards, mode, p, t0, y0, t_end, tol, max_steps, h0, ev, t_out,
                       i_out, y_out, y_stop, counters):
     """Integrate y' = rhs(mode, t, y, p) from (t0, y0) to t_end or the first event.
 
     method: DOPRI5 or ROSENBROCK23 (the latter calls jac once per accepted step;
-        DOPRI5 runs may pass ``no_jacobian``).
+        DOPRI5 runs may pass ``no_jacobian``); attempt: its step, ``attempt_function(method)``.
     rhs, jac, guards: the model, compiled with the signatures in ``signatures``.
     mode, p: discrete mode and parameter vector, passed through to the model.
     t0, y0, t_end: start and end (t_end >= t0); y0 is not modified.
@@ -80,7 +81,7 @@ def integrate_segment(method, rhs, jac, guards, mode, p, t0, y0, t_end, tol, max
     while i < t_out.size and t_out[i] <= t0:
         y_out[i, :] = y0
         i += 1
-    status, t, k, i, h_next = run(method, rhs, jac, guards, guards, mode, p, t0, t_end, tol, max_steps, h0,
+    status, t, k, i, h_next = run(method, attempt, rhs, jac, guards, guards, mode, p, t0, t_end, tol, max_steps, h0,
                                   ev, out, i, y_stop, np.empty(0), np.empty((0, 3)), counters)
     return status, t, k, i - i_out, h_next
 

@@ -46,6 +46,7 @@ MODE_TABLES = types.NamedTuple((INTS, INTS, INTS, INTS, types.int64[:, ::1], INT
 #: Work arrays of one step of either method: stages K, dense-output coefficients Q, the
 #: Jacobian J and df/dt, the LU factors of W = I - h d J and their pivots (Rosenbrock).
 StepWork = namedtuple("StepWork", "K Q J dfdt LU piv")
+STEP_WORK = types.NamedTuple((MATRIX, MATRIX, MATRIX, VECTOR, MATRIX, INTS), StepWork)
 
 #: An accepted step [t_a, t_b = t_a + h]: its start state and derivative, its end state,
 #: and the dense output y(t_a + theta h) = y_a + h sum_j Q[:, j] theta^(j+1).
