@@ -289,12 +289,9 @@ def _mode_functions(em: _Emitter) -> list[Function]:
     for mode in em.model.modes:
         out.append(em.function(f"accel_{mode.name}", f"a1 in mode {mode.name} ({mode.regime}): "
                                f"{_short(mode.accel)}", [mode.accel]))
-        if mode.gap_accel is not None:
-            out.append(em.function(f"gap_accel_{mode.name}", f"d gap_rate/dt in mode {mode.name}: "
-                                   f"{_short(mode.gap_accel)}", [mode.gap_accel]))
-        if mode.stem_accel is not None:
-            out.append(em.function(f"stem_accel_{mode.name}", f"d v3/dt, the stem's acceleration, in mode {mode.name}: "
-                                   "0 while held, F2/m3 on its own, a2 while carried", [mode.stem_accel]))
+        for name, doc in _further_accelerations(em.model):
+            rate = getattr(mode, name)
+            out.append(em.function(f"{name}_{mode.name}", f"{doc} in mode {mode.name}: {_short(rate)}", [rate]))
         if mode.slide is not None:
             out.append(em.function(f"reactions_{mode.name}", f"(S1, S2) in mode {mode.name}: Filippov's combination "
                                    "lambda (S1, S2)_fwd_a + (1 - lambda) (S1, S2)_fwd_b, lambda = rate_b / (rate_b - "
@@ -319,22 +316,28 @@ def _mode_functions(em: _Emitter) -> list[Function]:
     return out
 
 
+# A position state's rate is its velocity state; a velocity state's rate is the mode's acceleration
+# of that name (a Mode field, and the module's dispatch function of the same name), with its doc.
+VELOCITY = {mechanics.x1: mechanics.v1, mechanics.gap: mechanics.gap_rate, mechanics.x3: mechanics.v3}
+ACCELERATION = {mechanics.v1: ("accel", "a1"), mechanics.gap_rate: ("gap_accel", "d gap_rate/dt"),
+                mechanics.v3: ("stem_accel", "d v3/dt, the stem's acceleration (0 held, F2/m3 on its own, a2 carried)")}
+
+
+def _further_accelerations(model: Model) -> list[tuple[str, str]]:
+    """(name, doc) of the accelerations besides a1 that the model's states need."""
+    return [ACCELERATION[s] for s in model.states if s in ACCELERATION and s != mechanics.v1]
+
+
 def state_rates(model: Model, mode) -> list[sp.Expr]:
-    """d(states)/dt in ``mode``: x1' = v1, gap' = gap_rate, gap_rate' = the mode's gap_accel, x3' = v3,
-    v3' = the mode's stem_accel, v1' = a1."""
-    rate = {mechanics.x1: mechanics.v1, mechanics.gap: mechanics.gap_rate, mechanics.gap_rate: mode.gap_accel,
-            mechanics.x3: mechanics.v3, mechanics.v3: mode.stem_accel, mechanics.v1: mode.accel}
-    return [rate[s] for s in model.states]
+    """d(states)/dt in ``mode``: a position state's velocity state, a velocity state's acceleration."""
+    return [VELOCITY[s] if s in VELOCITY else getattr(mode, ACCELERATION[s][0]) for s in model.states]
 
 
 def _rate_sources(model: Model) -> list[str]:
-    """What rhs writes into dy[i], in the template: the velocity states, a1, the gap's and the stem's
-    accelerations."""
+    """What rhs writes into dy[i], in the template: the velocity state, or the acceleration's dispatch."""
     index = {s: i for i, s in enumerate(model.states)}
-    source = {mechanics.x1: f"y[{index[mechanics.v1]}]", mechanics.v1: "accel(mode, t, y, p)",
-              mechanics.gap: f"y[{index.get(mechanics.gap_rate)}]", mechanics.gap_rate: "gap_accel(mode, t, y, p)",
-              mechanics.x3: f"y[{index.get(mechanics.v3)}]", mechanics.v3: "stem_accel(mode, t, y, p)"}
-    return [source[s] for s in model.states]
+    return [f"y[{index[VELOCITY[s]]}]" if s in VELOCITY else f"{ACCELERATION[s][0]}(mode, t, y, p)"
+            for s in model.states]
 
 
 def _jacobian(em: _Emitter, mode) -> Function:
@@ -465,12 +468,12 @@ def _impact(em: _Emitter) -> Function:
                "J v1^2/2 the kinetic energy of bodies 1 and 2.")
         lines = list(body) + [f"out[{k}] = {v}  # {name}" for k, (name, v) in enumerate(zip(PICKUP_FRAME, values))]
         return Function("impact", "flank, t, y, p, out", doc, tuple(lines), "", "GUARDS_SIG")
-    doc = ("The frame of a collision on `flank` (+1 a, -1 b): out = (nu, s, W_nn, W_nt, W_tt, mu, e, dv1/d gap_rate, "
-           "dv1/ds): nu = f gap_rate and s the slip, W the inverse mass in that frame, mu = tan(rho) of the flank, "
-           "e the restitution, and v1 = dv1/d gap_rate gap_rate + dv1/ds s.")
     if not model.impacts:
         return Function("impact", "flank, t, y, p, out", "No clearance or lost motion: nothing collides.",
                         ("out[:] = math.nan",), "", "GUARDS_SIG")
+    doc = ("The frame of a collision on `flank` (+1 a, -1 b): out = (nu, s, W_nn, W_nt, W_tt, mu, e, dv1/d gap_rate, "
+           "dv1/ds): nu = f gap_rate and s the slip, W the inverse mass in that frame, mu = tan(rho) of the flank, "
+           "e the restitution, and v1 = dv1/d gap_rate gap_rate + dv1/ds s.")
     lines = []
     for index, imp in enumerate(model.impacts):
         body, values = em.body(list(imp.frame))
@@ -552,7 +555,7 @@ def generate_module(model: Model, free: tuple[str, ...] | None = None) -> str:
     body = env.get_template("module.py.j2").render(
         scene=scene, model=model, functions=functions, free=free_params, latches=model.latches, fixed=fixed,
         pieces=model.pieces, derived=em.derived_constants(), guards_function=guards_function, impact=impact,
-        rates=_rate_sources(model),
+        rates=_rate_sources(model), accelerations=_further_accelerations(model),
         load_factors=load_factors,
         guards=guard_names(model),
         constants={k: inert(v, k) for k, v in constants.items()}, directions=_guard_directions(model))

@@ -205,6 +205,12 @@ def _filippov(mode, guards, t, y, p, tables, g):
 
 
 @njit(cache=True, error_model="numpy")
+def _outcome(m, need):
+    """(mode, status, need) of a mode choice: FINISHED with mode ``m``, or UNDECLARED with ``need``."""
+    return (m, FINISHED, NEED_NOTHING) if m >= 0 else (-1, UNDECLARED, need)
+
+
+@njit(cache=True, error_model="numpy")
 def _select(mode, kind, rhs, guards, t, y, p, tol, tables, g, y_tmp, f):
     """(next mode, status, need) after guard ``kind`` fired in ``mode`` at (t, y)."""
     mode_kind, mode_dir, declared = tables.kind, tables.direction, tables.declared
@@ -218,8 +224,7 @@ def _select(mode, kind, rhs, guards, t, y, p, tol, tables, g, y_tmp, f):
     if mode_kind[mode] == M_FREE:  # a law event in free flight
         return mode, FINISHED, NEED_NOTHING
     if mode_kind[mode] == M_MESH:
-        m, need = _mesh_select(mode, kind, guards, t, y, p, tables, g)
-        return (m, FINISHED, NEED_NOTHING) if m >= 0 else (-1, UNDECLARED, need)
+        return _outcome(*_mesh_select(mode, kind, guards, t, y, p, tables, g))
     flank = 0  # the touched flank with a clearance, 0 without one
     if _mode(M_FREE, 0, 0, tables) >= 0:
         flank = tables.flank[mode] if mode_kind[mode] == M_SLIDING else _touching(guards, t, y, p, tables, g)
@@ -245,9 +250,7 @@ def _select(mode, kind, rhs, guards, t, y, p, tol, tables, g, y_tmp, f):
             if declared[ms] == 0:
                 return -1, SLIDING, NEED_NOTHING
             m = ms
-    if m < 0:
-        return -1, UNDECLARED, need
-    return m, FINISHED, NEED_NOTHING
+    return _outcome(m, need)
 
 
 @njit(cache=True, error_model="numpy")
@@ -274,29 +277,34 @@ def _collide(impact, flank, rhs, guards, t, y, p, tol, tables, g, y_tmp, f, fram
     y[n - 1] = frame[7] * y[n - 2] + frame[8] * s
     rhs(m_free, t, y, p, f)
     toward = -flank * f[n - 2]  # the normal acceleration of free flight back onto the flank
-    gap_tol = tol.atol[n - 3] + tol.rtol * abs(y[n - 3])
-    if nu <= tol.atol[n - 2] + tol.rtol * abs(y[n - 1]) or (toward > 0.0 and nu * nu <= 2.0 * toward * gap_tol):
-        # no rebound beyond the tolerances (speed, or height of every later bounce): persistent contact
+    if _settles(nu, toward, y[n - 1], y, tol):  # persistent contact
         y[n - 2], y[n - 1] = 0.0, frame[8] * s
-        if y[n - 1] == 0.0:
-            m, need = _at_rest(flank, rhs, guards, t, y, p, tol, tables, g, y_tmp, f, False)
-        else:
-            m, need = _sliding(1 if y[n - 1] > 0.0 else -1, flank, rhs, guards, t, y, p, tol, tables, g, y_tmp, f)
+        m, need = _moving_on(flank, rhs, guards, t, y, p, tol, tables, g, y_tmp, f)
     else:
         m, need = m_free, NEED_NOTHING
     frame[0] = 2.0 * nu / toward if toward > 0.0 and m == m_free else np.inf
-    if m < 0:
-        return -1, UNDECLARED, need
-    return m, FINISHED, NEED_NOTHING
+    return _outcome(m, need)
 
 
 @njit(cache=True, error_model="numpy")
-def _moving_on(rhs, guards, t, y, p, tol, tables, g, y_tmp, f):
-    """(mode, need) for the rigid wedge from (t, y) after a jump in v1 or in the laws."""
+def _settles(nu, toward, speed, y, tol):
+    """Whether a rebound at normal speed nu (> 0: apart) ends a sequence of bounces: its speed is
+    within the velocity tolerance (scaled by ``speed``), or the height of the next bounce under the
+    acceleration ``toward`` the contact, and so of every later one, within the gap's tolerance (the
+    gap or the stem's travel is state n - 3, its rate n - 2)."""
+    n = y.size
+    gap_tol = tol.atol[n - 3] + tol.rtol * abs(y[n - 3])
+    return nu <= tol.atol[n - 2] + tol.rtol * abs(speed) or (toward > 0.0 and nu * nu <= 2.0 * toward * gap_tol)
+
+
+@njit(cache=True, error_model="numpy")
+def _moving_on(flank, rhs, guards, t, y, p, tol, tables, g, y_tmp, f):
+    """(mode, need) for the rigid wedge (touching ``flank`` with a clearance, else 0) from (t, y)
+    after a jump in v1 or in the laws: at rest or sliding the way v1 points."""
     v = y[y.size - 1]
     if v == 0.0:
-        return _at_rest(0, rhs, guards, t, y, p, tol, tables, g, y_tmp, f, False)
-    return _sliding(1 if v > 0.0 else -1, 0, rhs, guards, t, y, p, tol, tables, g, y_tmp, f)
+        return _at_rest(flank, rhs, guards, t, y, p, tol, tables, g, y_tmp, f, False)
+    return _sliding(1 if v > 0.0 else -1, flank, rhs, guards, t, y, p, tol, tables, g, y_tmp, f)
 
 
 @njit(cache=True, error_model="numpy")
@@ -311,37 +319,29 @@ def _pickup(impact, k, rhs, guards, t, y, p, tol, tables, g, y_tmp, f, frame, ju
     n = y.size
     jump[3] = y[n - 1]
     impact(0, t, y, p, frame)
-    ratio, v1_before, v3_before = frame[11], y[n - 1], y[n - 2]
+    ratio = frame[11]
     impulse, v1, v3, lost, outcome = collision.pickup(frame)
+    jump[0], jump[1], jump[2] = impulse, 0.0, lost
     if outcome != collision.OK:
-        jump[0], jump[1], jump[2] = impulse, 0.0, lost
         return -1, INCONSISTENT, NEED_NOTHING
     k_pickup, k_carry = tables.guard_latch[k], tables.guard_latch[_guard(G_STEM_N, tables.guard_kind)]
     p[k_pickup] = min(p[k_pickup], t)
     y[n - 1], y[n - 2] = v1, v3
-    m, need = _moving_on(rhs, guards, t, y, p, tol, tables, g, y_tmp, f)
+    m, need = _moving_on(0, rhs, guards, t, y, p, tol, tables, g, y_tmp, f)
     if m < 0:
         return -1, UNDECLARED, need
     rhs(m, t, y, p, f)
     nu = v3 - ratio * v1
     toward = ratio * f[n - 1] - f[n - 2]  # the stem's acceleration back onto body 2
-    gap_tol = tol.atol[n - 3] + tol.rtol * abs(y[n - 3])
-    frame[0] = np.inf
-    if nu <= tol.atol[n - 2] + tol.rtol * abs(v3) or (toward > 0.0 and nu * nu <= 2.0 * toward * gap_tol):
-        # no rebound beyond the tolerances: the impact is taken as plastic, body 2 carries the stem
-        y[n - 1], y[n - 2] = v1_before, v3_before
-        impact(0, t, y, p, frame)
-        frame[8] = 0.0
-        impulse, v1, v3, lost, outcome = collision.pickup(frame)
-        p[k_carry] = t
+    carried = _settles(nu, toward, v3, y, tol)
+    if carried:  # the impact is taken as plastic: body 2 carries the stem
+        frame[8] = 0.0  # (the frame is still the one before the impact)
+        jump[0], v1, v3, jump[2], outcome = collision.pickup(frame)
         y[n - 1], y[n - 2] = v1, ratio * v1
-        m, need = _moving_on(rhs, guards, t, y, p, tol, tables, g, y_tmp, f)
-    elif toward > 0.0:
-        frame[0] = 2.0 * nu / toward
-    jump[0], jump[1], jump[2] = impulse, 0.0, lost
-    if m < 0:
-        return -1, UNDECLARED, need
-    return m, FINISHED, NEED_NOTHING
+        p[k_carry] = t
+        m, need = _moving_on(0, rhs, guards, t, y, p, tol, tables, g, y_tmp, f)
+    frame[0] = 2.0 * nu / toward if toward > 0.0 and not carried else np.inf
+    return _outcome(m, need)
 
 
 @njit(cache=True, error_model="numpy")
@@ -530,8 +530,9 @@ def integrate_hybrid(method, attempt, rhs, jac, guards, observe, impact, p, tabl
         the segment that ends there: its left limit); rows after a stop keep their
         contents, mode -1.
     log: the EventLog (time; guard, from-mode, to-mode (-1: stop); state after the event;
-        an impact's (P_n, P_t, energy lost, v1 before)), its capacity is log.t.size. impact: the model's impact frame (a collision
-        when a gap closes, with a clearance). mon: (K, 3) running max |observable k|
+        an impact's (P_n, P_t, energy lost, v1 before)), its capacity is log.t.size.
+        impact: the model's impact frame (a collision when a gap closes with a clearance,
+        the stem's pickup with lost motion). mon: (K, 3) running max |observable k|
         as (|value|, value, t), K = number of observables; pass zeros.
     counters: int64[4] as in segment (steps, rejected, rhs calls, jac calls).
 
@@ -574,7 +575,7 @@ def integrate_hybrid(method, attempt, rhs, jac, guards, observe, impact, p, tabl
             mode, need = _sliding(1 if v > 0.0 else -1, flank, rhs, guards, t0, y, p, tol, tables,
                                   g, y_tmp, f)
     if mode >= 0 and _released(mode, guards, t0, y, p, tables, g):  # carried from the start, pulled off at once
-        mode, need = _moving_on(rhs, guards, t0, y, p, tol, tables, g, y_tmp, f)
+        mode, need = _moving_on(0, rhs, guards, t0, y, p, tol, tables, g, y_tmp, f)
     if mode < 0:
         return UNDECLARED, t0, 0, -1, need, -1
     if not _consistent(mode, guards, t0, y, p, tables, g):
@@ -641,27 +642,23 @@ def integrate_hybrid(method, attempt, rhs, jac, guards, observe, impact, p, tabl
         elif kind == G_LAW:
             _latch_pieces(guards, t, y, p, tables, g)
         jump[:] = 0.0
+        frame[0] = np.inf  # a collision or pickup leaves here the flight time to the next landing
         if (kind == G_GAP_A or kind == G_GAP_B) and mesh:  # the flanks begin to overlap
-            new, need = _mesh_enter(1 if kind == G_GAP_A else -1, guards, t, y, p, tables, g)
-            status = FINISHED if new >= 0 else UNDECLARED
+            new, status, need = _outcome(*_mesh_enter(1 if kind == G_GAP_A else -1, guards, t, y, p, tables, g))
         elif kind == G_GAP_A or kind == G_GAP_B:  # the gap closed: a collision on that flank
             new, status, need = _collide(impact, 1 if kind == G_GAP_A else -1, rhs, guards, t, y, p, tol,
                                          tables, g, y_tmp, f, frame, jump)
-            if frame[0] < np.inf:  # a first step inside the bounce, so that the gap's guard is armed again
-                h = 0.25 * frame[0] if h <= 0.0 else min(h, 0.25 * frame[0])
         elif kind == G_STEM_GAP:  # body 2 reaches the stem: the pickup
             new, status, need = _pickup(impact, k, rhs, guards, t, y, p, tol, tables, g, y_tmp, f, frame, jump)
-            if frame[0] < np.inf:  # a first step inside the stem's flight, so that its guard is armed again
-                h = 0.25 * frame[0] if h <= 0.0 else min(h, 0.25 * frame[0])
         elif kind == G_STEM_N:  # the stem leaves body 2: the load and its mass leave with it
             p[tables.guard_latch[k]] = np.inf
-            new, need = _moving_on(rhs, guards, t, y, p, tol, tables, g, y_tmp, f)
-            status = FINISHED if new >= 0 else UNDECLARED
+            new, status, need = _outcome(*_moving_on(0, rhs, guards, t, y, p, tol, tables, g, y_tmp, f))
         else:
             new, status, need = _select(mode, kind, rhs, guards, t, y, p, tol, tables, g, y_tmp, f)
+        if frame[0] < np.inf:  # a first step inside the bounce, so that the gap's guard is armed again
+            h = 0.25 * frame[0] if h <= 0.0 else min(h, 0.25 * frame[0])
         if status == FINISHED and _released(new, guards, t, y, p, tables, g):
-            new, need = _moving_on(rhs, guards, t, y, p, tol, tables, g, y_tmp, f)
-            status = FINISHED if new >= 0 else UNDECLARED
+            new, status, need = _outcome(*_moving_on(0, rhs, guards, t, y, p, tol, tables, g, y_tmp, f))
         if status == FINISHED and not _consistent(new, guards, t, y, p, tables, g):
             status = INCONSISTENT
             _unbounded(observe, guards, mode, t, y, p_left, -1, mon, obs, g)
@@ -714,8 +711,7 @@ def integrate(method, model, p, tables, y0, t_end, *, rtol, atol, t_out, max_eve
                      float(hmin), float(hmax))
     jac = model.jac  # DOPRI5 calls it only to confirm an equilibrium before holding it (steady)
     args = (method, segment.attempt_function(method), compiled(model.rhs, RHS_SIG), compiled(jac, JAC_SIG),
-            compiled(model.guards, GUARDS_SIG),
-            compiled(model.observe, GUARDS_SIG), compiled(model.impact, GUARDS_SIG), p, tables, float(t0), y0, quad, int(mode0), float(t_end), tol,
-            int(max_steps), out, log, mon, counters)
+            compiled(model.guards, GUARDS_SIG), compiled(model.observe, GUARDS_SIG), compiled(model.impact, GUARDS_SIG),
+            p, tables, float(t0), y0, quad, int(mode0), float(t_end), tol, int(max_steps), out, log, mon, counters)
     result = call(integrate_hybrid, args, counters)
     return (*result, out, log, mon, counters)

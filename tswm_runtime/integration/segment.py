@@ -23,8 +23,9 @@ not valid across a switch, scipy issue 18039), the caller restarts after events.
 
 ``single.integrate_segment`` calls ``run`` for one segment from Python (no noise
 band, no quadrature, no monitored observables; for tests and tools, and compiled
-only where they import it); the hybrid driver (``hybrid``) calls it with all three. Arguments travel in the named structures of
-``structures`` (Tolerances, EventSettings, Outputs, Step, StepWork).
+only where they import it); the hybrid driver (``hybrid``) calls it with all three.
+Arguments travel in the named structures of ``structures`` (Tolerances,
+EventSettings, Outputs, Step, StepWork).
 """
 from collections import namedtuple
 
