@@ -265,6 +265,9 @@ def test_lostmotion_cells_are_simulate_at_the_fitted_L(report):
         # the load acts from x2 = L on and not before (k = 1 N/m stands for zero)
         before, after = r.x2 < L - 1e-9, r.x2 > L + 1e-9
         assert np.all(r.F2[before] == 0.0) and np.all(np.abs(r.F2[after] - F2) < 1.0)
+        pick = next(e for e in r.events if e.guard == "load_at1")    # the pickup, where x2 reaches L
+        assert cell["pickup"] == {"t": pick.t, "v1": pick.v1, "x1": pick.x1}
+        assert pick.x1 * math.tan(r.model["fixed_params"]["gamma"]) == pytest.approx(L, rel=1e-9)
     # the fit's own model values at L are the same numbers
     for c in lost["fit"]["cases"]:
         row = next(x for x in data["cases"] if x["test"] == int(c["case"][4:])) if any(

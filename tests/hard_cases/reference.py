@@ -56,3 +56,29 @@ def run_flanks(v0, t0, t_end, F2, m2, m1=M1, t_eval=None, switches=True):
         flank = -flank
         t_eval = t_eval[t_eval > t]
     return np.array(ts), np.array(vs), found
+
+
+def energy_residual(r, K, power_in, absorbed):
+    """(residual, total |work|) of the energy balance work in = change of K + absorbed power,
+    integrated by the trapezoidal rule segment by segment between the events of result ``r``
+    (within a segment the balance is smooth; across an impact K jumps)."""
+    cuts = [0.0, *[ev.t for ev in r.events], r.t_stop]
+    residual, total = 0.0, 0.0
+    for lo, hi in zip(cuts[:-1], cuts[1:]):
+        inside = (r.t > lo) & (r.t < hi)
+        if inside.sum() < 3:
+            continue
+        t = r.t[inside]
+        work = np.trapezoid(power_in[inside], t)
+        residual += (K[inside][-1] - K[inside][0]) + np.trapezoid(absorbed[inside], t) - work
+        total += abs(work)
+    return residual, total
+
+
+def impact_drops(r, K, net_power, impacts):
+    """Per impact of result ``r``: (drop of K across its two output rows, its reported loss,
+    slack). The rows are dt apart, so the smooth change over 2 dt is bounded by |net power| 2 dt."""
+    slack = np.max(np.abs(net_power)) * (r.t[1] - r.t[0]) * 2
+    for ev in impacts:
+        before = np.searchsorted(r.t, ev.t) - 1
+        yield K[before] - K[before + 1], ev.jump.energy_lost, slack

@@ -164,8 +164,6 @@ def empty_cache(log=print) -> list[dict]:
     import tempfile
     import threading
 
-    from tswm_runtime.apps import coldstart
-
     out = []
     for name, (argv, result_mark) in EMPTY_CACHE.items():
         with tempfile.TemporaryDirectory() as cache:
@@ -256,7 +254,7 @@ def main(quick: bool = False, output: str | os.PathLike = "tswm-report/bench", c
     verdicts = report.speedup_verdicts(rows)
     thr = throughput(cases or (1000 if quick else 10_000), log=log)
     flat = flat_cost(rows)
-    cold = cold_start()
+    first_calls = cold_start()
     empty = empty_cache(log) if (not quick if cold is None else cold) else []
     info = machine(load_before, os.getloadavg())
     write_atomic(out / "runs.csv", pd.DataFrame(rows).to_csv(index=False))
@@ -265,11 +263,11 @@ def main(quick: bool = False, output: str | os.PathLike = "tswm-report/bench", c
     refs = [{"case": c.name, "scene": c.scene, "params": dict(c.params), "v1(0)": c.v0, "t_end": c.t_end,
              "m1": c.m1, "S1_max": reference(c).S1, "v1_end": reference(c).v_end, "x1_end": reference(c).x_end,
              "events": ", ".join(f"{k} {t:.12g}" for k, t in reference(c).events) or "none"} for c in chosen]
-    md = _markdown(info, refs, t_ref, rows, verdicts, thr, flat, cold, empty, tols, repeats, sweep_n,
+    md = _markdown(info, refs, t_ref, rows, verdicts, thr, flat, first_calls, empty, tols, repeats, sweep_n,
                    time.perf_counter() - start)
     write_atomic(out / "work-precision.md", md)
     write_atomic(out / "bench.json", json.dumps({"machine": info, "references": refs, "verdicts": verdicts,
-                                                 "throughput": thr, "flat_cost": flat, "cold_start": cold,
+                                                 "throughput": thr, "flat_cost": flat, "cold_start": first_calls,
                                                  "empty_cache": empty},
                                                 indent=2, default=str))
     log(md[md.index("## Targets"):md.index("## All runs")])

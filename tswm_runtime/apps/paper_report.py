@@ -458,7 +458,7 @@ def _cell(reading: Reading, result: Result, paper) -> dict:
         # residual = printed - computed, per cell; where the load is picked up; v1 at the peaks
         cell["residual"] = {q: (None if paper is None or values[q] is None else getattr(paper, q) - values[q])
                             for q, _, _ in QUANTITIES}
-        pick = next((e for e in result.events if e.guard == "load_contact"), None)
+        pick = next((e for e in result.events if e.guard == lostmotion.FREE), None)
         cell["pickup"] = None if pick is None else {"t": pick.t, "v1": pick.v1, "x1": pick.x1}
         for q, t in (("S1m", result.t_S1_max), ("S2m", result.t_S2_max)):
             cell[f"v1_at_{q}"] = None if t is None else float(np.ravel(result.sol(t)[1])[0])

@@ -202,19 +202,6 @@ def _output_times(t_end: float, points: int) -> np.ndarray:
     return _time_grid(t_end, points).copy()
 
 
-_OUTPUTS: dict = {}
-
-
-def _outputs_function(module: ModuleType):
-    """The module's ``outputs`` as the first-class function value fill_rows takes (hybrid.compiled,
-    whose lookup hashes numba's signature object: ~3.5 us), remembered per function object."""
-    function = module.outputs
-    known = _OUTPUTS.get(id(function))
-    if known is None or known[0] is not function:
-        known = _OUTPUTS[id(function)] = (function, hybrid.compiled(function, GUARDS_SIG))
-    return known[1]
-
-
 _ENTRY_POINTS: dict = {}
 
 
@@ -270,16 +257,14 @@ def simulate(model: str | ModuleType, params: dict | None = None, *, interruptib
                                               for a in (t_out, out.y, out.p, out.mode))
     y_stop = log.state[n_ev - 1, :n].copy() if n_ev else y0
     at = x1_column(module)
-    rigid = "mesh_normal" not in module.GUARDS   # compliant flanks overlap instead of colliding
-    impacts = {k for k, guard in enumerate(module.GUARDS) if guard in ("gap_a", "gap_b", "stem_gap") and rigid}
     events = [Event(float(log.t[e]), module.GUARDS[log.index[e, 0]], module.MODES[log.index[e, 1]],
                     module.MODES[log.index[e, 2]] if log.index[e, 2] >= 0 else None,
                     float(log.state[e, at]), float(log.state[e, n - 1]),
-                    Jump(*map(float, log.jump[e])) if log.index[e, 0] in impacts else None,
+                    None if math.isnan(log.jump[e, 0]) else Jump(*map(float, log.jump[e])),
                     dict(zip(module.STATES, map(float, log.state[e, :n]))))
               for e in range(n_ev)]
     rows = np.empty((t_kept.size, len(module.OUTPUTS)))
-    _entry_point(fill_rows)(_outputs_function(module), t_kept, y_kept, modes_kept, p_rows, n, rows)
+    _entry_point(fill_rows)(hybrid.compiled(module.outputs, GUARDS_SIG), t_kept, y_kept, modes_kept, p_rows, n, rows)
     return Result.build(module, p, p_rows, run, t_kept, y_kept, modes_kept, rows, events, log.state[:n_ev, :n],
                         mon, counters, hybrid_status=status, t_stop=t_stop,
                         first_mode=first, message=status_message(module, status, t_stop, y_stop, last,

@@ -19,7 +19,7 @@ Per case the result rows hold:
                 NaN when the run stopped inside a step (max-steps, step-too-small,
                 not-finite); the kinetic energy lost in impacts)
     out_i[c] = (status, n_events, steps, rejected, rhs calls, jac calls, first mode,
-                n_modes, impacts (events with a normal impulse))
+                n_modes, impacts (collisions and pickups))
     seq[c, :n_modes] = the sequence of modes visited (the first mode, then every
                 event's to-mode that differs from the mode before; at most
                 seq.shape[1], the rest is cut off and n_modes counts them all).
@@ -99,6 +99,7 @@ def run_batch(integrate, method, attempt, rhs, jac, guards, observe, impact, P, 
             if n_seq > 0:
                 seq[c, 0] = first
             n_modes, prev = 1, first
+        impacts, lost = 0, 0.0
         for e in range(n_ev):
             to = log.index[e, 2]
             if to >= 0 and to != prev:
@@ -106,10 +107,8 @@ def run_batch(integrate, method, attempt, rhs, jac, guards, observe, impact, P, 
                     seq[c, n_modes] = to
                 n_modes += 1
                 prev = to
-        out_i[c, I_NMODES] = n_modes
-        impacts, lost = 0, 0.0
-        for e in range(n_ev):
-            if log.jump[e, 0] > 0.0:
+            if not np.isnan(log.jump[e, 0]):  # an impact (the log's jump is NaN for other events)
                 impacts += 1
                 lost += log.jump[e, 2]
+        out_i[c, I_NMODES] = n_modes
         out_i[c, I_IMPACTS], out_f[c, F_IMPACT_E] = impacts, lost

@@ -32,13 +32,12 @@ stops the run with status CHATTERING instead of looping.
 """
 import numpy as np
 from numba import types
-from numba.core.types.function_type import CompileResultWAP
 
 from tswm_runtime.hybrid import impact as collision
 from tswm_runtime.integration import cache_guard, painleve, segment
 from tswm_runtime.integration.cache_guard import njit
 from tswm_runtime.integration.signatures import (GUARDS_SIG, JAC_SIG, MATRIX, RHS_SIG, VECTOR, GuardsFunction,
-                                                 JacFunction, RhsFunction)
+                                                 JacFunction, RhsFunction, compiled)
 from tswm_runtime.integration.structures import (EVENT_LOG, JUMP_WIDTH, MODE_TABLES, OUTPUTS, TOLERANCES, EventLog,
                                                  EventSettings, Outputs, Tolerances)
 
@@ -552,7 +551,7 @@ def integrate_hybrid(method, attempt, rhs, jac, guards, observe, impact, p, tabl
         return INVALID_INPUT, t0, 0, -1, NEED_NOTHING, -1
     y, q = y0.copy(), quad.copy()
     g, y_tmp, f = np.empty(n_guards), np.empty(n), np.empty(n)
-    frame, jump = np.empty(IMPACT_FRAME), np.zeros(JUMP_WIDTH)
+    frame, jump = np.empty(IMPACT_FRAME), np.empty(JUMP_WIDTH)
     m_free = _mode(M_FREE, 0, 0, tables)
     mesh = _guard(G_MESH_N, tables.guard_kind) >= 0  # compliant flanks: no impacts, contact by overlap
     obs = np.empty(mon.shape[0])
@@ -626,6 +625,7 @@ def integrate_hybrid(method, attempt, rhs, jac, guards, observe, impact, p, tabl
             status = TOO_MANY_EVENTS
             break
         kind = tables.guard_kind[k]
+        jump[:] = np.nan  # no impact, unless a collision or pickup fills it
         if kind == G_V1:  # at rest exactly: the left limits of the observables there, v1 = 0
             y[n - 1] = 0.0
             _observe_max(observe, mode, t, y, p, mon, obs)
@@ -641,7 +641,6 @@ def integrate_hybrid(method, attempt, rhs, jac, guards, observe, impact, p, tabl
             p[tables.guard_latch[k]] = t
         elif kind == G_LAW:
             _latch_pieces(guards, t, y, p, tables, g)
-        jump[:] = 0.0
         frame[0] = np.inf  # a collision or pickup leaves here the flight time to the next landing
         if (kind == G_GAP_A or kind == G_GAP_B) and mesh:  # the flanks begin to overlap
             new, status, need = _outcome(*_mesh_enter(1 if kind == G_GAP_A else -1, guards, t, y, p, tables, g))
@@ -676,20 +675,6 @@ def integrate_hybrid(method, attempt, rhs, jac, guards, observe, impact, p, tabl
 
 def _call(kernel, args, counters):
     return kernel(*args)
-
-
-_ADDRESSES: dict = {}
-
-
-def compiled(function, signature):
-    """A model function as numba's first-class function value for ``signature``, looked up
-    once: passing the dispatcher itself costs ~20 us a call to find its compiled code. Keyed
-    by identity (both are long-lived: a module's function, a signature constant): hashing a
-    numba signature walks its types, ~10 us a call."""
-    key = (id(function), id(signature))
-    if key not in _ADDRESSES:
-        _ADDRESSES[key] = (function, signature, CompileResultWAP(function.get_compile_result(signature)))
-    return _ADDRESSES[key][2]
 
 
 def integrate(method, model, p, tables, y0, t_end, *, rtol, atol, t_out, max_events, quad=None, t0=0.0,

@@ -32,11 +32,10 @@ from collections import namedtuple
 import numpy as np
 import numba
 from numba import types
-from numba.core.types.function_type import CompileResultWAP
 
-from tswm_runtime.integration import control, dopri5, events, painleve, rosenbrock, steady
+from tswm_runtime.integration import cache_guard, control, dopri5, events, painleve, rosenbrock, steady
 from tswm_runtime.integration.cache_guard import njit
-from tswm_runtime.integration.signatures import JAC_SIG, VECTOR, RhsFunction
+from tswm_runtime.integration.signatures import JAC_SIG, VECTOR, RhsFunction, compiled
 from tswm_runtime.integration.structures import INTS, STEP_WORK, TOLERANCES, Step, StepWork
 
 # Method codes.
@@ -141,15 +140,14 @@ ATTEMPT_SIG = types.UniTuple(types.float64, 2)(
     VECTOR, TOLERANCES, INTS, types.boolean)
 AttemptFunction = types.FunctionType(ATTEMPT_SIG)
 _ATTEMPTS = {DOPRI5: dopri5_attempt, ROSENBROCK23: rosenbrock23_attempt}
-_COMPILED: dict = {}
 
 
 def attempt_function(method):
     """The step attempt of ``method`` as the first-class function value ``run`` takes. Compiled,
-    or loaded from numba's cache, on first use: a run compiles only its own method's step."""
-    if method not in _COMPILED:
-        _COMPILED[method] = CompileResultWAP(_ATTEMPTS[method].get_compile_result(ATTEMPT_SIG))
-    return _COMPILED[method]
+    or loaded from numba's cache, on first use: a run compiles only its own method's step (after
+    the stale-cache check, which a cached step must not precede)."""
+    cache_guard.check_kernel_caches()
+    return compiled(_ATTEMPTS[method], ATTEMPT_SIG)
 
 
 @njit(cache=True, error_model="numpy")

@@ -25,6 +25,7 @@ typed as its own ``Dispatcher`` and force a recompilation per model and process
 (numba issue 9237). Measured costs: ``tools/bench_calling_convention.py``.
 """
 from numba import types
+from numba.core.types.function_type import CompileResultWAP
 
 #: A C-contiguous float64 vector: states, parameters, derivatives, guard values.
 VECTOR = types.float64[::1]
@@ -41,3 +42,17 @@ GUARDS_SIG = types.none(types.int64, types.float64, VECTOR, VECTOR, VECTOR)
 RhsFunction = types.FunctionType(RHS_SIG)
 JacFunction = types.FunctionType(JAC_SIG)
 GuardsFunction = types.FunctionType(GUARDS_SIG)
+
+
+_ADDRESSES: dict = {}
+
+
+def compiled(function, signature):
+    """A jitted function as numba's first-class function value for ``signature``, looked up
+    once: passing the dispatcher itself costs ~20 us a call to find its compiled code. Keyed
+    by identity (both are long-lived: a module's function, a signature constant): hashing a
+    numba signature walks its types, ~10 us a call."""
+    key = (id(function), id(signature))
+    if key not in _ADDRESSES:
+        _ADDRESSES[key] = (function, signature, CompileResultWAP(function.get_compile_result(signature)))
+    return _ADDRESSES[key][2]

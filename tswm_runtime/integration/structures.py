@@ -32,7 +32,7 @@ Outputs = namedtuple("Outputs", "t y mode p")
 OUTPUTS = types.NamedTuple((VECTOR, MATRIX, INTS, MATRIX), Outputs)
 
 #: The event log: time; (guard, from-mode, to-mode or -1 for a stop); state after the event;
-#: for an impact (P_n, P_t, kinetic energy lost, v1 before it), zeros for other events.
+#: for an impact (P_n, P_t, kinetic energy lost, v1 before it), NaN for other events.
 EventLog = namedtuple("EventLog", "t index state jump")
 EVENT_LOG = types.NamedTuple((VECTOR, types.int64[:, ::1], MATRIX, MATRIX), EventLog)
 JUMP_WIDTH = 4
