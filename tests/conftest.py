@@ -1,12 +1,18 @@
 """Shared fixtures: generate a model module from scene text, as a user's new scene would be."""
 from __future__ import annotations
 
+import os
+
 import pytest
 
 from derivation.codegen import module_name, write_module
 from derivation.model import build_model
 from derivation.scene import parse_scene
 from tswm_runtime.model.contract import load_module
+
+# CLI commands run by the tests compile what they miss in the foreground, as the API does: no
+# background compiles outliving a test (tests/test_warmup.py sets the other modes itself).
+os.environ["TSWM_COLD_START"] = "foreground"
 
 
 @pytest.fixture(scope="session")

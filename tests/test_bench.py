@@ -109,15 +109,22 @@ def test_bench_full_run(tmp_path):
 def test_empty_cache_rows_time_the_message_and_the_first_result(monkeypatch, tmp_path):
     """The empty-cache measurement's mechanics on a stand-in command (the real one compiles for
     minutes: test_bench_full_run): the stderr message and the result line are timed from the
-    process start, the targets get verdicts, and the report shows them."""
-    fake = ("import sys, time; print('tswm: compiling the stand-in', file=sys.stderr, flush=True); "
-            "time.sleep(0.2); print('  status: finished', flush=True)")
-    monkeypatch.setattr(bench, "EMPTY_CACHE", {"stand-in": (["-c", fake], "status:")})
-    (row,) = bench.empty_cache(log=lambda *a: None)
-    assert row["exit"] == 0 and row["message"] == "tswm: compiling the stand-in"
-    assert 0 < row["message_s"] < row["first_result_s"] <= row["process_s"]
-    assert row["message_verdict"].startswith(("met", "missed")) and row["result_verdict"].startswith("met")
-    assert row["over_target_s"] == 0.0
+    process start, the targets get verdicts, and the report shows them. The stand-in "fills the
+    cache" (a file in NUMBA_CACHE_DIR) on its first run, so in background mode its second run,
+    after the wait for the background compile's lock, is silent."""
+    fake = ("import os, sys, time; marker = os.path.join(os.environ['NUMBA_CACHE_DIR'], 'filled')\n"
+            "if not os.path.exists(marker): print('tswm: compiling the stand-in', file=sys.stderr, flush=True)\n"
+            "open(marker, 'w').close(); time.sleep(0.2); print('  status: finished', flush=True)")
+    monkeypatch.setattr(bench, "EMPTY_CACHE", [("stand-in", mode, ["-c", fake], "status:")
+                                               for mode in ("background", "foreground")])
+    background, foreground = bench.empty_cache(log=lambda *a: None)
+    for row in (background, foreground):
+        assert row["exit"] == 0 and row["message"] == "tswm: compiling the stand-in"
+        assert 0 < row["message_s"] < row["first_result_s"] <= row["process_s"]
+        assert row["message_verdict"].startswith(("met", "missed")) and row["result_verdict"].startswith("met")
+        assert row["over_target_s"] == 0.0
+    assert background["process_s"] < background["cache_filled_s"] and background["next_run_silent"] is True
+    assert background["next_run_s"] > 0.2 and math.isnan(foreground["next_run_s"])
     assert bench.main(quick=True, output=tmp_path, case_names=["decelerate-and-stick"], peers=("RK45",),
                       tols=(1e-5, 1e-8), repeats=1, sweep_n=2, cases=16, cold=True, log=lambda *a: None) == 0
     md = (tmp_path / "work-precision.md").read_text()
@@ -125,6 +132,6 @@ def test_empty_cache_rows_time_the_message_and_the_first_result(monkeypatch, tmp
 
 
 def test_an_empty_cache_that_prints_nothing_is_reported_as_such(monkeypatch):
-    monkeypatch.setattr(bench, "EMPTY_CACHE", {"silent": (["-c", "print('status: x')"], "status:")})
+    monkeypatch.setattr(bench, "EMPTY_CACHE", [("silent", "foreground", ["-c", "print('status: x')"], "status:")])
     (row,) = bench.empty_cache(log=lambda *a: None)
     assert row["message_verdict"] == "none printed" and math.isnan(row["message_s"])

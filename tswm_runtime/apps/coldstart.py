@@ -46,6 +46,8 @@ import types
 from functools import lru_cache
 from pathlib import Path
 
+import numba
+
 from tswm_runtime.integration.cache_guard import MARKER
 
 LOG = logging.getLogger("tswm_runtime.compile")
@@ -200,19 +202,50 @@ def estimate(groups, model: str | None) -> float:
     return total
 
 
-def message(groups, model: str | None, seconds: float) -> str:
+def describe(groups, model: str | None) -> str:
+    """What the groups and the model are, in words: "the integration kernels (...) and the model `paper`"."""
     parts = [GROUPS[g][0] for g in groups] + ([f"the model `{model}`"] if model else [])
-    what = ", ".join(parts[:-1]) + (" and " if len(parts) > 1 else "") + parts[-1]
+    return ", ".join(parts[:-1]) + (" and " if len(parts) > 1 else "") + parts[-1]
+
+
+def message(groups, model: str | None, seconds: float) -> str:
     about = max(5 * round(seconds / 5), 5)
-    return (f"tswm: compiling {what} into numba's cache: about {about:.0f} s (measured on 2 cores), once; "
-            "later runs load it from there")
+    return (f"tswm: compiling {describe(groups, model)} into numba's cache: about {about:.0f} s (measured on "
+            "2 cores), once; later runs load it from there")
+
+
+def model_name(model) -> str:
+    """The scene name a message uses for a scene name or a generated module's .py path."""
+    return Path(str(model)).stem.replace("_", "-") if str(model).endswith(".py") else str(model)
+
+
+def cold(groups, model=None) -> tuple[list[str], bool] | None:
+    """(the cold groups, whether the model is cold) if anything of ``groups`` and ``model`` would
+    be compiled on import, else None; None too if numba's internals cannot be read."""
+    source = model_source(model) if model is not None else None
+    try:
+        groups = cold_groups(groups)
+        model_is_cold = source is not None and model_cold(*source)
+    except Exception:  # noqa: BLE001 - numba's internals moved: the caller compiles as before
+        return None
+    return (groups, model_is_cold) if groups or model_is_cold else None
+
+
+def cache_directory_of_kernels() -> Path | None:
+    """numba's cache directory for the mode machine (the largest kernel)."""
+    from tswm_runtime.integration.cache_guard import cache_directory
+
+    return cache_directory(RUNTIME / "hybrid" / "machine.py")
 
 
 def announce(groups=(), model=None) -> str | None:
     """Log the compile message if any of ``groups`` (keys of GROUPS) or the generated module
     ``model`` (a scene name or .py path; a module object counts as compiled) would be compiled
     on import; each group and model is announced once per process. Returns the message, or
-    None. Call it before importing the kernels' modules: it imports none of them."""
+    None. Call it before importing the kernels' modules: it imports none of them. Silent
+    while numba's jit is off (``warmup``: the command runs interpreted)."""
+    if numba.config.DISABLE_JIT:
+        return None
     with _lock:
         groups = [g for g in groups if g not in _announced]
         source = model_source(model) if model is not None and ("model", str(model)) not in _announced else None
@@ -227,8 +260,7 @@ def announce(groups=(), model=None) -> str | None:
         except Exception:  # noqa: BLE001 - numba's internals moved: fall back to a timer
             _watchdog(groups, model if source is not None else None)
             return None
-        name = (Path(str(model)).stem.replace("_", "-") if str(model).endswith(".py") else str(model)) \
-            if model_is_cold else None
+        name = model_name(model) if model_is_cold else None
         if not cold and name is None:
             return None
         text = message(cold, name, estimate(cold, name))

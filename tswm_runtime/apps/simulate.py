@@ -162,7 +162,14 @@ def _in_a_thread(kernel, args: tuple, counters: np.ndarray):
     import time
 
     box = {}
-    worker = threading.Thread(target=lambda: box.setdefault("out", kernel(*args)), daemon=True)
+
+    def work():
+        try:
+            box["out"] = kernel(*args)
+        except BaseException as error:  # noqa: BLE001 - raised again in the calling thread
+            box["error"] = error
+
+    worker = threading.Thread(target=work, daemon=True)
     start = next_report = time.monotonic() + PROGRESS_EVERY
     worker.start()
     while worker.is_alive():
@@ -171,6 +178,8 @@ def _in_a_thread(kernel, args: tuple, counters: np.ndarray):
             next_report += PROGRESS_EVERY
             print(f"  ... running: {int(counters[segment.N_STEPS]):,} steps after "
                   f"{time.monotonic() - start + PROGRESS_EVERY:.0f} s (Ctrl-C stops)", file=sys.stderr, flush=True)
+    if "error" in box:
+        raise box["error"]
     return box["out"]
 
 

@@ -100,14 +100,23 @@ def _model_spec(scene: str) -> str:
     return scene
 
 
-def announce_compile(scene: str, groups) -> str:
-    """Resolve the scene (``_model_spec``) and, before anything compiles, say on stderr what numba
-    will compile and about how long (``coldstart``); returns the spec for ``_load_model``."""
-    from tswm_runtime.apps import coldstart
+def prepare_kernels(scene: str, groups):
+    """Resolve the scene (``_model_spec``) and, before anything compiles, choose how this command
+    gets its kernels (``warmup.interpret_if_cold``: cached, compiled now with a message saying what
+    and about how long, or run interpreted). Returns (spec for ``_load_model``, the ColdStart to
+    pass to ``warmup.begin`` once the run's method is known, or None)."""
+    from tswm_runtime.apps import warmup
 
     spec = _model_spec(scene)
-    coldstart.announce(groups, spec)
-    return spec
+    try:
+        return spec, warmup.interpret_if_cold(groups, spec)
+    except warmup.ColdStartError as error:
+        raise UsageError(str(error)) from None
+
+
+def run_method(args: argparse.Namespace, module) -> str | None:
+    """The integration method a command runs: its --method, else the scene's [run] method."""
+    return args.method or module.RUN.get("method")
 
 
 def _load_model(scene: str):
@@ -228,11 +237,15 @@ def _simulate(args: argparse.Namespace) -> int:
 
     start = time.perf_counter()
     output_directory(args.output)
-    spec = announce_compile(args.scene, ("integrate",))
+    spec, cold = prepare_kernels(args.scene, ("integrate",))
     from tswm_runtime.model.contract import ContractError
     from tswm_runtime.apps.simulate import SimulationInputError, simulate
 
+    from tswm_runtime.apps import warmup
+
     module = _load_model(spec)
+    if cold is not None:
+        warmup.begin(cold, run_method(args, module))
     t_load = time.perf_counter() - start
     params = _parse_sets(args.set, module)
     overrides = setting_overrides(args, SETTING_OPTIONS)
@@ -247,6 +260,10 @@ def _simulate(args: argparse.Namespace) -> int:
         raise setting_error(error, overrides) from None
     except ContractError as error:
         raise UsageError(f"scene {args.scene!r}: {error}") from None
+    except warmup.PYTHON_ONLY_ERRORS as error:
+        if cold is None:
+            raise
+        return warmup.rerun_compiled(args.argv, error)
     t_run = time.perf_counter() - start
     origin = args.scene if args.scene.endswith(".py") else f"generated/{args.scene.replace('-', '_')}.py"
     _print_summary(result, module, origin, t_load, t_run)
@@ -359,6 +376,7 @@ def _bad_input() -> tuple[type[Exception], ...]:
 
 def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
+    args.argv = list(sys.argv[1:] if argv is None else argv)   # to rerun the command (apps.warmup)
     try:
         status = args.run(args)
         sys.stdout.flush()  # a reader that went away shows here at the latest, not at exit

@@ -10,11 +10,12 @@ SWEEP_SETTINGS = ("t_end", "rtol", "atol", "method", "max_steps", "max_events")
 
 
 def _sweep(args: argparse.Namespace) -> int:
-    from tswm_runtime.cli import (UsageError, _load_model, announce_compile, output_directory, setting_error,
-                                  setting_overrides)
+    from tswm_runtime.cli import (UsageError, _load_model, output_directory, prepare_kernels, run_method,
+                                  setting_error, setting_overrides)
 
     output_directory(args.output)
-    spec = announce_compile(args.scene, ("integrate", "batch"))
+    spec, cold = prepare_kernels(args.scene, ("integrate", "batch"))
+    from tswm_runtime.apps import warmup
     from tswm_runtime.apps.simulate import SimulationInputError
     from tswm_runtime.apps.sweep import (SweepInputError, SweepInterrupted, check_size, grid_cases, grid_size,
                                     parse_grid, parse_ranges, sample_cases, sweep)
@@ -36,6 +37,10 @@ def _sweep(args: argparse.Namespace) -> int:
             P = grid_cases(module, grid)
         else:
             raise SweepInputError("give --grid NAME=START:STOP:COUNT ... or --samples N --range NAME=LO:HI ...")
+        if cold is not None:
+            if not warmup.interpreting_is_quicker(cold, module, P, overrides, run_method(args, module)):
+                return warmup.rerun_compiled(args.argv)
+            warmup.begin(cold, run_method(args, module))
         client = cluster = None
         if args.scheduler:
             from distributed import Client, LocalCluster
@@ -54,6 +59,10 @@ def _sweep(args: argparse.Namespace) -> int:
         except SweepInterrupted as stop:
             print(f"tswm sweep: {stop}", file=sys.stderr)
             return 1
+        except warmup.PYTHON_ONLY_ERRORS as error:
+            if cold is None or isinstance(error, (SweepInputError, SimulationInputError)):
+                raise
+            return warmup.rerun_compiled(args.argv, error)
         finally:
             if client is not None:
                 client.close()

@@ -120,8 +120,11 @@ class _Helper(CPUDispatcher):
 
 def njit(*, cache=False, **options):
     """``numba.njit(cache=cache, **options)`` with the dispatcher above, for the kernels' helpers;
-    ``options`` may turn the wrappers back on (no_cfunc_wrapper=False for a first-class function)."""
+    ``options`` may turn the wrappers back on (no_cfunc_wrapper=False for a first-class function).
+    The function itself while numba's jit is off, as numba.njit does."""
     def decorate(py_func):
+        if numba.config.DISABLE_JIT:   # an interpreted run (apps.warmup)
+            return py_func
         dispatcher = _Helper(py_func=py_func, locals={},
                              targetoptions={"nopython": True, "boundscheck": None, "no_cpython_wrapper": True,
                                             "no_cfunc_wrapper": True, **options})
@@ -132,8 +135,11 @@ def njit(*, cache=False, **options):
 
 
 def compile_cached(signature, **options):
-    """Like ``numba.njit(signature, cache=True, **options)``, with the kernel check above."""
+    """Like ``numba.njit(signature, cache=True, **options)``, with the kernel check above; the
+    function itself while numba's jit is off (an interpreted run, apps.warmup)."""
     def decorate(py_func):
+        if numba.config.DISABLE_JIT:
+            return py_func
         check_kernel_caches()
         dispatcher = numba.njit(cache=True, **options)(py_func)
         dispatcher.compile(signature)

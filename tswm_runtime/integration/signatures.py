@@ -24,7 +24,7 @@ for every model; a jitted function passed without a signature would instead be
 typed as its own ``Dispatcher`` and force a recompilation per model and process
 (numba issue 9237). Measured costs: ``tools/bench_calling_convention.py``.
 """
-from numba import types
+from numba import config, types
 from numba.core.types.function_type import CompileResultWAP
 
 #: A C-contiguous float64 vector: states, parameters, derivatives, guard values.
@@ -51,7 +51,10 @@ def compiled(function, signature):
     """A jitted function as numba's first-class function value for ``signature``, looked up
     once: passing the dispatcher itself costs ~20 us a call to find its compiled code. Keyed
     by identity (both are long-lived: a module's function, a signature constant): hashing a
-    numba signature walks its types, ~10 us a call."""
+    numba signature walks its types, ~10 us a call. While numba's jit is off (an interpreted
+    run, apps.warmup) the function itself."""
+    if config.DISABLE_JIT:
+        return function
     key = (id(function), id(signature))
     if key not in _ADDRESSES:
         _ADDRESSES[key] = (function, signature, CompileResultWAP(function.get_compile_result(signature)))
