@@ -176,11 +176,10 @@ def _about(seconds: float) -> str:
 def _spawn(groups, spec) -> None:
     argv = [sys.executable, "-m", "tswm_runtime.apps.warmup", *groups]
     if spec is not None:
-        argv += ["--model", str(spec)]
+        argv += ["--model", str(Path(spec).resolve()) if str(spec).endswith(".py") else str(spec)]
     env = {**os.environ, ENV: "foreground"}
     with open(lock_path().with_suffix(".log"), "w") as log:
-        subprocess.Popen(argv, stdin=subprocess.DEVNULL, stdout=log, stderr=log, env=env, start_new_session=True,
-                         cwd=Path(__file__).parents[2])
+        subprocess.Popen(argv, stdin=subprocess.DEVNULL, stdout=log, stderr=log, env=env, start_new_session=True)
 
 
 def compile_into_cache(groups, spec) -> None:
