@@ -156,8 +156,7 @@ EMPTY_CACHE = [  # (name, TSWM_COLD_START, command line after the interpreter, t
      "cases in"),
     ("tswm simulate paper", "foreground", ["-m", "tswm_runtime.cli", "simulate", "paper"], "status:"),
 ]
-WAIT_FOR_BACKGROUND = ("import fcntl; from tswm_runtime.apps import warmup\n"
-                       "with open(warmup.lock_path(), 'a') as h: fcntl.flock(h, fcntl.LOCK_EX)")
+WAIT_FOR_BACKGROUND = "from tswm_runtime.apps import warmup; warmup.wait()"
 
 
 def _timed_run(argv, env, result_mark) -> dict:

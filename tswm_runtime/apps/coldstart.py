@@ -208,9 +208,13 @@ def describe(groups, model: str | None) -> str:
     return ", ".join(parts[:-1]) + (" and " if len(parts) > 1 else "") + parts[-1]
 
 
+def about(seconds: float) -> str:
+    """A compile time as a message says it: to 5 s, at least 5."""
+    return f"{max(5 * round(seconds / 5), 5):.0f}"
+
+
 def message(groups, model: str | None, seconds: float) -> str:
-    about = max(5 * round(seconds / 5), 5)
-    return (f"tswm: compiling {describe(groups, model)} into numba's cache: about {about:.0f} s (measured on "
+    return (f"tswm: compiling {describe(groups, model)} into numba's cache: about {about(seconds)} s (measured on "
             "2 cores), once; later runs load it from there")
 
 

@@ -100,6 +100,12 @@ def running() -> bool:
     return False
 
 
+def wait() -> None:
+    """Return once no background compile holds the lock."""
+    with open(lock_path(), "a") as handle:
+        fcntl.flock(handle, fcntl.LOCK_EX)
+
+
 def _to_compile(cold: ColdStart, method: str | None) -> tuple[list[str], float]:
     """The groups to compile for ``cold`` and ``method``'s step, and the measured seconds for them."""
     groups = [*cold.groups, *([method] if method in METHOD_GROUPS else [])]
@@ -118,9 +124,10 @@ def begin(cold: ColdStart, method: str | None) -> str:
         text = f"{head}; a background compile is already under way (log: {lock_path().with_suffix('.log')})"
     else:
         _spawn(groups, cold.model)
-        text = (f"{head}, while a background process compiles them for later runs: about {_about(seconds)} s "
-                f"(measured on 2 cores), once (log: {lock_path().with_suffix('.log')}; {ENV}=foreground "
-                "compiles before running instead)")
+        log = lock_path().with_suffix(".log")
+        text = (f"{head}, while a background process compiles them for later runs: about "
+                f"{coldstart.about(seconds)} s (measured on 2 cores), once (log: {log}; {ENV}=foreground compiles "
+                "before running instead)")
     coldstart.LOG.warning(text)
     return text
 
@@ -149,7 +156,7 @@ def interpreting_is_quicker(cold: ColdStart, module, P, overrides: dict, method:
     if interpreted <= compiling:
         return True
     coldstart.LOG.warning(f"tswm: {P.shape[0]} cases interpreted would take about {interpreted:.3g} s, more "
-                          f"than compiling first (about {_about(compiling)} s): compiling")
+                          f"than compiling first (about {coldstart.about(compiling)} s): compiling")
     return False
 
 
@@ -162,15 +169,10 @@ def rerun_compiled(argv: list[str], error: Exception | None = None) -> int:
                               "arithmetic; compiled code gives inf or nan there): running it compiled")
     if running():
         coldstart.LOG.warning("tswm: waiting for the background compile to finish")
-        with open(lock_path(), "a") as handle:
-            fcntl.flock(handle, fcntl.LOCK_EX)
+        wait()
     sys.stdout.flush()
     sys.stderr.flush()
     return subprocess.call([sys.executable, "-m", "tswm_runtime.cli", *argv], env={**os.environ, ENV: "foreground"})
-
-
-def _about(seconds: float) -> str:
-    return f"{max(5 * round(seconds / 5), 5):.0f}"
 
 
 def _spawn(groups, spec) -> None:
