@@ -86,6 +86,31 @@ def test_a_cold_cli_run_is_interpreted_and_says_so(tmp_path):
     np.testing.assert_allclose(got["S1"], ref.S1, rtol=1e-9, atol=1e-9 * float(np.max(np.abs(ref.S1))))
 
 
+def test_a_cold_cli_sweep_is_interpreted_and_gives_the_compiled_table(tmp_path):
+    """A small sweep on an empty cache runs interpreted (fewer cases than the probe: no timing
+    needed); its table is the compiled sweep's for the same rows (the chunk keys prove the rows)."""
+    import pandas as pd
+
+    from tswm_runtime.apps.sweep import sample_cases, sweep
+
+    out = tmp_path / "out"
+    run = subprocess.run([sys.executable, "-m", "tswm_runtime.cli", "sweep", "paper", "--samples", "6", "--range",
+                          "F2=-20000:5000", "--range", "m2=100:400", "--no-progress", "-o", str(out)],
+                         capture_output=True, text=True, cwd=ROOT, env=_env(tmp_path / "cache", "interpret"),
+                         timeout=300)
+    assert run.returncode == 0, run.stderr
+    assert "this run is interpreted" in run.stderr.splitlines()[0] and "finished 6" in run.stdout
+    got = pd.read_parquet(out / "paper-sweep.parquet")
+    module = load_module("paper")
+    P = sample_cases(module, 6, {"F2": (-20000.0, 5000.0), "m2": (100.0, 400.0)}, 0)
+    ref = sweep(module, P).table
+    np.testing.assert_array_equal(got[["m2", "F2"]].to_numpy(), P)
+    assert (got["status"] == ref["status"]).all() and (got["regimes"] == ref["regimes"]).all()
+    assert (got["steps"] == ref["steps"]).all()
+    for column in ("S1m", "S2m", "v1", "x1", "KD1"):
+        np.testing.assert_allclose(got[column], ref[column], rtol=1e-9, err_msg=column)
+
+
 def test_an_unknown_cold_start_mode_is_refused_by_name(monkeypatch, capsys):
     monkeypatch.setenv(warmup.ENV, "later")
     assert main(["simulate", "paper", "--points", "2"]) == 2
