@@ -354,6 +354,8 @@ def run(method, attempt, rhs, jac, guards, observe, mode, p, t0, t_end, tol, max
                                              tol.rtol, tol.atol, y_b, f_b)
         counters[N_RHS] += 1
     rejected = False
+    h_rej, e_rej = 0.0, 0.0  # the last rejected step at t and its error
+    h_acc, e_acc = 0.0, 0.0  # the last accepted step and its error
     jac_current = False
     status, k = MAX_STEPS, -1
     for _ in range(max_steps):
@@ -374,7 +376,10 @@ def run(method, attempt, rhs, jac, guards, observe, mode, p, t0, t_end, tol, max
         too_short = max(tol.hmin, MIN_STEP_ULPS * (np.nextafter(t, np.inf) - t))
         if not e < 1.0:
             counters[N_REJECTED] += 1
+            if rejected and e_rej > e > 0.0 and h_rej > h:  # rejected again at t: the order the error shows
+                factor = min(factor, control.observed_order_factor(e, np.log(e_rej / e) / np.log(h_rej / h)))
             rejected = True
+            h_rej, e_rej = h, e
             h_prop = h * factor
             if h_prop < too_short:
                 status = STEP_TOO_SMALL
@@ -385,12 +390,16 @@ def run(method, attempt, rhs, jac, guards, observe, mode, p, t0, t_end, tol, max
             if painleve.too_steep(G[0, k_sing], g_b[k_sing]):
                 counters[N_REJECTED] += 1
                 rejected = True
+                e_rej = 0.0
                 h_prop = 0.5 * h
                 if h_prop < too_short:
                     status = STEP_TOO_SMALL
                     break
                 continue
         counters[N_STEPS] += 1
+        if h_acc > 0.0 and e > 0.0:  # Gustafsson's predictive controller: follow the trend of the steps
+            factor = min(factor, control.predictive_factor(h, e, h_acc, e_acc, _error_order(method)))
+        h_acc, e_acc = h, max(e, control.PREDICTIVE_MIN_ERR)
         if rejected:
             factor = min(1.0, factor)
         # A step clipped to land on t_end says nothing against the step wanted.
