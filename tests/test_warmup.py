@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 from tswm_runtime.apps import coldstart, warmup
+from tswm_runtime.apps import sweep as sweep_app
 from tswm_runtime.apps.simulate import simulate
 from tswm_runtime.cli import main
 from tswm_runtime.model.contract import load_module
@@ -156,6 +157,9 @@ def test_a_sweep_compiles_first_when_interpreting_its_cases_would_take_longer(mo
     assert not warmup.interpreting_is_quicker(cold, module, P, {}, "dopri5")
     assert warmup.interpreting_is_quicker(cold, module, P[:warmup.PROBE_CASES], {}, "dopri5")  # too few to time
     assert warmup.interpreting_is_quicker(warmup.ColdStart((), None, "interpret"), module, P, {}, "dopri5")
+    monkeypatch.setattr(coldstart, "estimate", lambda groups, model: 1e9)
+    monkeypatch.setattr(sweep_app, "run_cases", lambda *args: 1.0 / 0.0)   # Python-only arithmetic: compile
+    assert not warmup.interpreting_is_quicker(cold, module, P, {}, "dopri5")
 
 
 def test_python_only_arithmetic_in_an_interpreted_run_reruns_the_command_compiled(monkeypatch):

@@ -149,7 +149,8 @@ def interpreting_is_quicker(cold: ColdStart, module, P, overrides: dict, method:
         run_cases(module, P[:1], run)
         start = time.perf_counter()
         run_cases(module, P[1:1 + PROBE_CASES], run)
-    except PYTHON_ONLY_ERRORS:
+    except PYTHON_ONLY_ERRORS as error:
+        coldstart.LOG.warning(f"tswm: the interpreted probe stopped on {type(error).__name__}: {error}: compiling")
         return False
     interpreted = (time.perf_counter() - start) / PROBE_CASES * n
     compiling = _to_compile(cold, method)[1]

@@ -238,10 +238,9 @@ def _simulate(args: argparse.Namespace) -> int:
     start = time.perf_counter()
     output_directory(args.output)
     spec, cold = prepare_kernels(args.scene, ("integrate",))
-    from tswm_runtime.model.contract import ContractError
-    from tswm_runtime.apps.simulate import SimulationInputError, simulate
-
     from tswm_runtime.apps import warmup
+    from tswm_runtime.apps.simulate import SimulationInputError, simulate
+    from tswm_runtime.model.contract import ContractError
 
     module = _load_model(spec)
     if cold is not None:
