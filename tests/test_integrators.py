@@ -517,6 +517,11 @@ def test_invalid_input():
     assert status == seg.INVALID_INPUT
 
 
+def test_an_unknown_method_is_refused_by_name():
+    with pytest.raises(ValueError, match=r"method 7: expected 0 \(dopri5\) or 1 \(rosenbrock23\)"):
+        seg.attempt_function(7)
+
+
 def test_dopri5_accepts_placeholder_jacobian():
     model = SimpleNamespace(rhs=osc_rhs, jac=seg.no_jacobian, guards=osc_guards)
     r = run(seg.DOPRI5, model, [1.0, 0.0], 1.0)

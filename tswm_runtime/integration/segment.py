@@ -145,7 +145,10 @@ _ATTEMPTS = {DOPRI5: dopri5_attempt, ROSENBROCK23: rosenbrock23_attempt}
 def attempt_function(method):
     """The step attempt of ``method`` as the first-class function value ``run`` takes. Compiled,
     or loaded from numba's cache, on first use: a run compiles only its own method's step (after
-    the stale-cache check, which a cached step must not precede)."""
+    the stale-cache check, which a cached step must not precede). An unknown ``method`` is a
+    ValueError that names it."""
+    if method not in _ATTEMPTS:
+        raise ValueError(f"method {method!r}: expected {DOPRI5} (dopri5) or {ROSENBROCK23} (rosenbrock23)")
     cache_guard.check_kernel_caches()
     return compiled(_ATTEMPTS[method], ATTEMPT_SIG)
 
