@@ -121,7 +121,7 @@ def test_an_unknown_cold_start_mode_is_refused_by_name(monkeypatch, capsys):
 
 def test_background_mode_starts_one_compile_of_what_is_cold_and_the_run_method(monkeypatch):
     spawned = []
-    monkeypatch.setattr(warmup, "_spawn", lambda groups, spec: spawned.append((groups, spec)))
+    monkeypatch.setattr(warmup, "_spawn", lambda groups, spec, log: spawned.append((groups, spec)))
     monkeypatch.setattr(warmup, "running", lambda: False)
     cold = warmup.ColdStart(("integrate",), "paper", "background")
     text = warmup.begin(cold, "rosenbrock23")
@@ -133,6 +133,13 @@ def test_background_mode_starts_one_compile_of_what_is_cold_and_the_run_method(m
     assert "already under way" in warmup.begin(cold, "dopri5") and len(spawned) == 1
     assert "nothing is compiled" in warmup.begin(warmup.ColdStart(("batch",), None, "interpret"), None)
     assert len(spawned) == 1
+
+
+def test_an_unwritable_temporary_directory_costs_the_background_compile_not_the_run(monkeypatch, tmp_path):
+    monkeypatch.setattr(warmup, "running", lambda: False)
+    monkeypatch.setattr(warmup, "lock_path", lambda: tmp_path / "missing" / "tswm-warmup.lock")
+    text = warmup.begin(warmup.ColdStart(("integrate",), "paper", "background"), "dopri5")
+    assert "this run is interpreted" in text and not (tmp_path / "missing").exists()
 
 
 def test_a_second_background_compile_leaves_at_once_while_the_lock_is_held(tmp_path):

@@ -20,7 +20,6 @@ that calls it in a loop wants the compiled kernels.
 from __future__ import annotations
 
 import argparse
-import fcntl
 import hashlib
 import logging
 import os
@@ -31,6 +30,11 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from tswm_runtime.apps import coldstart
+
+try:
+    import fcntl   # the background compile's lock; without it (Windows) commands compile first
+except ImportError:  # pragma: no cover - POSIX machines have it
+    fcntl = None
 
 ENV = "TSWM_COLD_START"
 MODES = ("background", "foreground", "interpret")
@@ -69,6 +73,8 @@ def interpret_if_cold(groups, spec) -> ColdStart | None:
     process (the kernels are then imported as Python) and return what is cold; else announce
     the compile as before (``coldstart.announce``) and return None."""
     how = mode()
+    if how == "background" and fcntl is None:
+        how = "foreground"
     parts = coldstart.cold(groups, spec) if how != "foreground" else None
     if parts is None:
         coldstart.announce(groups, spec)
@@ -123,11 +129,16 @@ def begin(cold: ColdStart, method: str | None) -> str:
     elif running():
         text = f"{head}; a background compile is already under way (log: {lock_path().with_suffix('.log')})"
     else:
-        _spawn(groups, cold.model)
         log = lock_path().with_suffix(".log")
-        text = (f"{head}, while a background process compiles them for later runs: about "
-                f"{coldstart.about(seconds)} s (measured on 2 cores), once (log: {log}; {ENV}=foreground compiles "
-                "before running instead)")
+        try:
+            _spawn(groups, cold.model, log)
+        except OSError as error:  # an unwritable temporary directory: no background compile, the run goes on
+            text = (f"{head}; the background compile could not start ({log}: {error.strerror or error}): "
+                    "later runs will be interpreted too")
+        else:
+            text = (f"{head}, while a background process compiles them for later runs: about "
+                    f"{coldstart.about(seconds)} s (measured on 2 cores), once (log: {log}; {ENV}=foreground "
+                    "compiles before running instead)")
     coldstart.LOG.warning(text)
     return text
 
@@ -176,13 +187,13 @@ def rerun_compiled(argv: list[str], error: Exception | None = None) -> int:
     return subprocess.call([sys.executable, "-m", "tswm_runtime.cli", *argv], env={**os.environ, ENV: "foreground"})
 
 
-def _spawn(groups, spec) -> None:
+def _spawn(groups, spec, log: Path) -> None:
     argv = [sys.executable, "-m", "tswm_runtime.apps.warmup", *groups]
     if spec is not None:
         argv += ["--model", str(Path(spec).resolve()) if str(spec).endswith(".py") else str(spec)]
     env = {**os.environ, ENV: "foreground"}
-    with open(lock_path().with_suffix(".log"), "w") as log:
-        subprocess.Popen(argv, stdin=subprocess.DEVNULL, stdout=log, stderr=log, env=env, start_new_session=True)
+    with open(log, "w") as handle:
+        subprocess.Popen(argv, stdin=subprocess.DEVNULL, stdout=handle, stderr=handle, env=env, start_new_session=True)
 
 
 def compile_into_cache(groups, spec) -> None:
