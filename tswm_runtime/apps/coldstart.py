@@ -223,18 +223,6 @@ def model_name(model) -> str:
     return Path(str(model)).stem.replace("_", "-") if str(model).endswith(".py") else str(model)
 
 
-def cold(groups, model=None) -> tuple[list[str], bool] | None:
-    """(the cold groups, whether the model is cold) if anything of ``groups`` and ``model`` would
-    be compiled on import, else None; None too if numba's internals cannot be read."""
-    source = model_source(model) if model is not None else None
-    try:
-        groups = cold_groups(groups)
-        model_is_cold = source is not None and model_cold(*source)
-    except Exception:  # noqa: BLE001 - numba's internals moved: the caller compiles as before
-        return None
-    return (groups, model_is_cold) if groups or model_is_cold else None
-
-
 def cache_directory_of_kernels() -> Path | None:
     """numba's cache directory for the mode machine (the largest kernel)."""
     from tswm_runtime.integration.cache_guard import cache_directory
@@ -242,12 +230,13 @@ def cache_directory_of_kernels() -> Path | None:
     return cache_directory(RUNTIME / "hybrid" / "machine.py")
 
 
-def announce(groups=(), model=None) -> str | None:
-    """Log the compile message if any of ``groups`` (keys of GROUPS) or the generated module
-    ``model`` (a scene name or .py path; a module object counts as compiled) would be compiled
-    on import; each group and model is announced once per process. Returns the message, or
-    None. Call it before importing the kernels' modules: it imports none of them. Silent
-    while numba's jit is off (``warmup``: the command runs interpreted)."""
+def check(groups=(), model=None) -> tuple[list[str], str | None] | None:
+    """(the groups of ``groups`` (keys of GROUPS) that numba would compile on import, the scene
+    name of the generated module ``model`` if it would be compiled, else None), or None if
+    nothing would be; a module object counts as compiled. Each group and model is checked once
+    per process (later calls leave it out) and never while numba's jit is off (``warmup``: the
+    command runs interpreted). If numba's internals cannot be read, a timer announces instead
+    (``_watchdog``) and the result is None. Imports none of the kernels' modules."""
     if numba.config.DISABLE_JIT:
         return None
     with _lock:
@@ -264,12 +253,23 @@ def announce(groups=(), model=None) -> str | None:
         except Exception:  # noqa: BLE001 - numba's internals moved: fall back to a timer
             _watchdog(groups, model if source is not None else None)
             return None
-        name = model_name(model) if model_is_cold else None
-        if not cold and name is None:
-            return None
-        text = message(cold, name, estimate(cold, name))
-        LOG.warning(text)
-        return text
+    name = model_name(model) if model_is_cold else None
+    return (cold, name) if cold or name is not None else None
+
+
+def say(cold: list[str], name: str | None) -> str:
+    """Log (and return) the compile message for what ``check`` found cold."""
+    text = message(cold, name, estimate(cold, name))
+    LOG.warning(text)
+    return text
+
+
+def announce(groups=(), model=None) -> str | None:
+    """Log the compile message if any of ``groups`` or the generated module ``model`` would be
+    compiled on import (``check``); returns the message, or None. Call it before importing the
+    kernels' modules."""
+    parts = check(groups, model)
+    return None if parts is None else say(*parts)
 
 
 def _watchdog(groups, model) -> None:

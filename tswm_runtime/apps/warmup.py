@@ -66,25 +66,31 @@ class ColdStart:
     model: object             # the scene spec, if its module is cold, else None
     mode: str                 # "background" or "interpret"
 
+    @property
+    def model_name(self) -> str | None:
+        return None if self.model is None else coldstart.model_name(self.model)
+
 
 def interpret_if_cold(groups, spec) -> ColdStart | None:
     """Before any kernel module is imported: if one of ``groups`` or the model ``spec`` is not in
     numba's cache and TSWM_COLD_START is not ``foreground``, switch numba's jit off for this
     process (the kernels are then imported as Python) and return what is cold; else announce
-    the compile as before (``coldstart.announce``) and return None."""
+    the compile as before (``coldstart.say``) and return None."""
     how = mode()
     if how == "background" and fcntl is None:
         how = "foreground"
-    parts = coldstart.cold(groups, spec) if how != "foreground" else None
+    parts = coldstart.check(groups, spec)
     if parts is None:
-        coldstart.announce(groups, spec)
+        return None
+    if how == "foreground":
+        coldstart.say(*parts)
         return None
     import numba
     import numpy as np
 
     numba.config.DISABLE_JIT = True   # read by numba.njit when each kernel module is imported
     np.seterr(all="ignore")           # IEEE results without warnings, as the compiled kernels give
-    return ColdStart(tuple(parts[0]), spec if parts[1] else None, how)
+    return ColdStart(tuple(parts[0]), spec if parts[1] is not None else None, how)
 
 
 def lock_path() -> Path:
@@ -95,7 +101,9 @@ def lock_path() -> Path:
 
 
 def running() -> bool:
-    """Whether a background compile holds the lock now."""
+    """Whether a background compile holds the lock now (never without fcntl: none is started)."""
+    if fcntl is None:
+        return False
     try:
         with open(lock_path(), "a") as handle:
             fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
@@ -115,21 +123,21 @@ def wait() -> None:
 def _to_compile(cold: ColdStart, method: str | None) -> tuple[list[str], float]:
     """The groups to compile for ``cold`` and ``method``'s step, and the measured seconds for them."""
     groups = [*cold.groups, *([method] if method in METHOD_GROUPS else [])]
-    return groups, coldstart.estimate(groups, None if cold.model is None else coldstart.model_name(cold.model))
+    return groups, coldstart.estimate(groups, cold.model_name)
 
 
 def begin(cold: ColdStart, method: str | None) -> str:
     """Say how this command runs, and start the background compile of what it found cold plus
     ``method``'s step (the other method's is left for its first run). Returns the message."""
     groups, seconds = _to_compile(cold, method)
-    what = coldstart.describe(cold.groups, None if cold.model is None else coldstart.model_name(cold.model))
-    head = f"tswm: {what} not in numba's cache yet: this run is interpreted (no compile wait; slower per step)"
+    head = (f"tswm: {coldstart.describe(cold.groups, cold.model_name)} not in numba's cache yet: this run is "
+            "interpreted (no compile wait; slower per step)")
+    log = lock_path().with_suffix(".log")
     if cold.mode == "interpret":
         text = f"{head}; {ENV}=interpret: nothing is compiled"
     elif running():
-        text = f"{head}; a background compile is already under way (log: {lock_path().with_suffix('.log')})"
+        text = f"{head}; a background compile is already under way (log: {log})"
     else:
-        log = lock_path().with_suffix(".log")
         try:
             _spawn(groups, cold.model, log)
         except OSError as error:  # an unwritable temporary directory: no background compile, the run goes on

@@ -38,9 +38,10 @@ def _sweep(args: argparse.Namespace) -> int:
         else:
             raise SweepInputError("give --grid NAME=START:STOP:COUNT ... or --samples N --range NAME=LO:HI ...")
         if cold is not None:
-            if not warmup.interpreting_is_quicker(cold, module, P, overrides, run_method(args, module)):
+            method = run_method(args, module)
+            if not warmup.interpreting_is_quicker(cold, module, P, overrides, method):
                 return warmup.rerun_compiled(args.argv)
-            warmup.begin(cold, run_method(args, module))
+            warmup.begin(cold, method)
         client = cluster = None
         if args.scheduler:
             from distributed import Client, LocalCluster

@@ -351,9 +351,10 @@ def run(method, attempt, rhs, jac, guards, observe, mode, p, t0, t_end, tol, max
     if not (_eval_guards(guards, mode, t, y, p, G[0]) and _all_finite(y) and _all_finite(f_a)):
         return NOT_FINITE, t, -1, i, h0
     events.arm_guards(G[0], ev.gtol, sgn)
+    order = _error_order(method)
     h_prop = h0
     if h_prop <= 0.0:
-        h_prop = control.select_initial_step(rhs, mode, t, y, p, f_a, t_end, tol.hmax, _error_order(method),
+        h_prop = control.select_initial_step(rhs, mode, t, y, p, f_a, t_end, tol.hmax, order,
                                              tol.rtol, tol.atol, y_b, f_b)
         counters[N_RHS] += 1
     rejected = False
@@ -401,7 +402,7 @@ def run(method, attempt, rhs, jac, guards, observe, mode, p, t0, t_end, tol, max
                 continue
         counters[N_STEPS] += 1
         if h_acc > 0.0 and e > 0.0:  # Gustafsson's predictive controller: follow the trend of the steps
-            factor = min(factor, control.predictive_factor(h, e, h_acc, e_acc, _error_order(method)))
+            factor = min(factor, control.predictive_factor(h, e, h_acc, e_acc, order))
         h_acc, e_acc = h, max(e, control.PREDICTIVE_MIN_ERR)
         if rejected:
             factor = min(1.0, factor)
