@@ -8,6 +8,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
+from hypothesis import given, settings, strategies as st
 from numba import njit
 from scipy.integrate import RK45, solve_ivp
 
@@ -459,6 +460,63 @@ def test_illinois_returns_far_side_end():
     root = 2.0 ** (1 / 3)
     assert iterations < 20
     assert state[3] >= 0.0 and abs(state[2] - root) <= tol
+
+
+@njit(GUARDS_SIG, cache=True)
+def counted_guards(mode, t, y, p, g):
+    """cos t + p[0] on the oscillator; counts its calls in p[1]."""
+    p[1] += 1.0
+    g[0] = y[0] + p[0]
+
+
+@pytest.mark.parametrize("method", METHODS, ids=METHOD_IDS)
+def test_steps_no_guard_can_cross_are_not_sampled_inside(method):
+    """cos t + 2 stays >= 1: after the start (value and rate) every accepted step costs two guard
+    calls, its end and its rate, not the three interior samples besides. cos t + 1 + 1e-6 comes
+    within 1e-6 of zero at t = pi without crossing: the steps there are sampled, and no event."""
+    model = SimpleNamespace(rhs=osc_rhs, jac=osc_jac, guards=counted_guards)
+    calls = {}
+    for offset in (2.0, 1.0 + 1e-6):
+        p = np.array([offset, 0.0])
+        y, counters = np.empty(2), np.zeros(seg.N_COUNTERS, np.int64)
+        status, *_ = integrate_segment(
+            method, seg.attempt_function(method), model.rhs, model.jac, model.guards, 0, p, 0.0,
+            np.array([1.0, 0.0]), 2 * math.pi, Tolerances(1e-8, np.full(2, 1e-8), 0.0, np.inf), 10**6, 0.0,
+            EventSettings(np.zeros(1, np.int64), 0.0, 0.0, False, -1, False), np.empty(0), 0,
+            np.empty((0, 2)), y, counters)
+        assert status == seg.REACHED_END
+        calls[offset] = (p[1], counters[seg.N_STEPS])
+    far_calls, far_steps = calls[2.0]
+    assert far_calls == 2 + 2 * far_steps
+    near_calls, near_steps = calls[1.0 + 1e-6]
+    assert near_calls >= 2 + 2 * near_steps + 3  # at least one step sampled inside
+
+
+@njit
+def _clear_of_zero(g_a, g_b, rate_a, rate_b, h, sign):
+    return ev.clear_of_zero(np.array([g_a]), np.array([g_b]), np.array([rate_a]), np.array([rate_b]), h,
+                            np.array([sign]), 0.0)
+
+
+_VALUES = st.floats(-1e3, 1e3, allow_nan=False)
+
+
+@settings(max_examples=400, deadline=None)
+@given(g_a=_VALUES, g_b=_VALUES, rate_a=_VALUES, rate_b=_VALUES, h=st.floats(1e-6, 10.0), sign=st.sampled_from([-1, 1]))
+def test_a_step_left_unsampled_keeps_its_cubic_away_from_zero(g_a, g_b, rate_a, rate_b, h, sign):
+    """Where clear_of_zero leaves a step unsampled, the cubic Hermite interpolant of the guard's
+    end values and rates (the guard itself, if it is a cubic in t) keeps the guard's sign on the
+    whole step, by at least half its smaller end distance: its extrema found independently
+    (numpy's roots of its derivative)."""
+    if not _clear_of_zero(g_a, g_b, rate_a, rate_b, h, sign):
+        return
+    # H(theta) = g_a h00 + h rate_a h10 + g_b h01 + h rate_b h11, as a polynomial in theta
+    cubic = (np.polynomial.Polynomial([1, 0, -3, 2]) * g_a + np.polynomial.Polynomial([0, 1, -2, 1]) * h * rate_a
+             + np.polynomial.Polynomial([0, 0, 3, -2]) * g_b + np.polynomial.Polynomial([0, 0, -1, 1]) * h * rate_b)
+    critical = [r.real for r in cubic.deriv().roots() if abs(r.imag) < 1e-12 and 0.0 <= r.real <= 1.0]
+    lowest = min(sign * cubic(theta) for theta in [0.0, 1.0] + critical)
+    distance = min(sign * g_a, sign * g_b)
+    assert lowest >= (1.0 - ev.CLEAR_MARGIN) * distance - 1e-9 * (abs(g_a) + abs(g_b) + h * (abs(rate_a) + abs(rate_b)))
 
 
 @njit

@@ -9,8 +9,9 @@ first-class function argument too (``attempt_function``), so the step loop and t
 mode machine are compiled once for both methods and each method's step on its
 first use: a run never compiles the method it does not use (issue 13).
 
-Per accepted step [t_a, t_b]: guards are sampled on the dense output and a
-crossing is located on it (``events``); the state AT the event is then obtained
+Per accepted step [t_a, t_b]: guards are sampled on the dense output (unless their
+values and rates at both ends show that none can reach zero) and a crossing is
+located on it (``events``); the state AT the event is then obtained
 by re-taking a full-order step of length t_event - t_a from (t_a, y_a). If that
 state is still on the pre-crossing side of the guard (the interpolant and the
 step differ by about the local error), the same Illinois iteration is continued
@@ -272,43 +273,86 @@ def _monitor(observe, mode, t, y, p, mon, obs, step, t_hi, win):
             win.Q[k, slot] = step.Q
 
 
-REFINE_ITERATIONS = 40  # Golden-section steps: the window shrinks by 0.618^40 = 4e-9.
+REFINE_XTOL = 1e-9  # Maxima are located to 1e-9 of their window (plus sqrt(eps) relative to t: Brent's floor).
+REFINE_MAX_CALLS = 100  # A bound on observable calls per window (Brent converges in about 10).
+_SQRT_EPS = np.sqrt(np.finfo(np.float64).eps)
+_GOLDEN = 0.5 * (3.0 - np.sqrt(5.0))
 
 
 @njit(cache=True, error_model="numpy")
 def _window_value(observe, mode, p, k, t, win, y_tmp, obs):
-    """Observable k at t, from the window slot whose step contains t."""
+    """|Observable k| at t, from the window slot whose step contains t."""
     slot = 0 if (t <= win.f[k, 0, 2] or win.s[k] < 2) else 1
     t_a, h = win.f[k, slot, 0], win.f[k, slot, 1]
     events.dense_eval(win.y[k, slot], h, win.Q[k, slot], (t - t_a) / h, y_tmp)
     observe(mode, t, y_tmp, p, obs)
-    return obs[k]
+    return abs(obs[k])
+
+
+@njit(cache=True, error_model="numpy")
+def _brent_max(observe, mode, p, k, win, y_tmp, obs, a, b, x):
+    """(t, |observable k|) at its largest on [a, b], from x: Brent's bounded method (parabolic
+    steps with a golden-section fallback; scipy's fminbound), to REFINE_XTOL of b - a."""
+    xatol = REFINE_XTOL * (b - a)
+    fx = -_window_value(observe, mode, p, k, x, win, y_tmp, obs)
+    v, w, fv, fw = x, x, fx, fx
+    rat, e = 0.0, 0.0
+    for _ in range(REFINE_MAX_CALLS):
+        xm = 0.5 * (a + b)
+        tol1 = _SQRT_EPS * abs(x) + xatol / 3.0
+        tol2 = 2.0 * tol1
+        if abs(x - xm) <= tol2 - 0.5 * (b - a):
+            break
+        golden = True
+        if abs(e) > tol1:  # try a parabola through x, w, v
+            r = (x - w) * (fx - fv)
+            q = (x - v) * (fx - fw)
+            num = (x - v) * q - (x - w) * r
+            q = 2.0 * (q - r)
+            if q > 0.0:
+                num = -num
+            q = abs(q)
+            r, e = e, rat
+            if abs(num) < abs(0.5 * q * r) and q * (a - x) < num < q * (b - x):
+                golden = False
+                rat = num / q
+                if (x + rat - a) < tol2 or (b - x - rat) < tol2:
+                    rat = tol1 if xm >= x else -tol1
+        if golden:
+            e = (a - x) if x >= xm else (b - x)
+            rat = _GOLDEN * e
+        u = x + (max(abs(rat), tol1) if rat >= 0.0 else -max(abs(rat), tol1))
+        fu = -_window_value(observe, mode, p, k, u, win, y_tmp, obs)
+        if fu <= fx:
+            if u >= x:
+                a = x
+            else:
+                b = x
+            v, fv, w, fw, x, fx = w, fw, x, fx, u, fu
+        else:
+            if u < x:
+                a = u
+            else:
+                b = u
+            if fu <= fw or w == x:
+                v, fv, w, fw = w, fw, u, fu
+            elif fu <= fv or v == x or v == w:
+                v, fv = u, fu
+    return x, -fx
 
 
 @njit(cache=True, error_model="numpy")
 def _refine(observe, mode, p, mon, obs, win, y_tmp):
-    """Golden-section search of max |observable| on each pending window; resets them."""
-    r = 0.5 * (np.sqrt(5.0) - 1.0)
+    """Locate max |observable| in each pending window (Brent, from the largest step end) and
+    reset them."""
     for k in range(mon.shape[0]):
         if win.s[k] == 0:
             continue
-        lo, hi = win.f[k, 0, 0], win.f[k, win.s[k] - 1, 2]
-        c, d = hi - r * (hi - lo), lo + r * (hi - lo)
-        fc = abs(_window_value(observe, mode, p, k, c, win, y_tmp, obs))
-        fd = abs(_window_value(observe, mode, p, k, d, win, y_tmp, obs))
-        for _ in range(REFINE_ITERATIONS):
-            if fc >= fd:
-                hi, d, fd = d, c, fc
-                c = hi - r * (hi - lo)
-                fc = abs(_window_value(observe, mode, p, k, c, win, y_tmp, obs))
-            else:
-                lo, c, fc = c, d, fd
-                d = lo + r * (hi - lo)
-                fd = abs(_window_value(observe, mode, p, k, d, win, y_tmp, obs))
-        t_best = c if fc >= fd else d
-        value = _window_value(observe, mode, p, k, t_best, win, y_tmp, obs)
-        if abs(value) > mon[k, 0]:
-            mon[k, 0], mon[k, 1], mon[k, 2] = abs(value), value, t_best
+        lo, hi, t_m = win.f[k, 0, 0], win.f[k, win.s[k] - 1, 2], mon[k, 2]
+        t_best, best = _brent_max(observe, mode, p, k, win, y_tmp, obs, lo, hi, min(max(t_m, lo), hi))
+        if best > mon[k, 0]:
+            _window_value(observe, mode, p, k, t_best, win, y_tmp, obs)
+            mon[k, 0], mon[k, 1], mon[k, 2] = best, obs[k], t_best
         win.s[k] = 0
 
 
@@ -335,6 +379,7 @@ def run(method, attempt, rhs, jac, guards, observe, mode, p, t0, t_end, tol, max
     G = np.empty((events.GUARD_SUBINTERVALS + 1, m))
     g_b = G[events.GUARD_SUBINTERVALS]
     g_tmp, sgn, cand = np.empty(m), np.zeros(m, np.int64), np.zeros(m, np.bool_)
+    rate_a, rate_b = np.empty(m), np.empty(m)  # the guards' rates at the step's ends
     ignore = np.zeros(m, np.bool_)
     n_mon = mon.shape[0]
     obs = np.empty(n_mon)
@@ -357,6 +402,7 @@ def run(method, attempt, rhs, jac, guards, observe, mode, p, t0, t_end, tol, max
         h_prop = control.select_initial_step(rhs, mode, t, y, p, f_a, t_end, tol.hmax, order,
                                              tol.rtol, tol.atol, y_b, f_b)
         counters[N_RHS] += 1
+    events.guard_rates(guards, mode, t, y, f_a, p, G[0], h_prop, y_tmp, g_tmp, rate_a)
     rejected = False
     h_rej, e_rej = 0.0, 0.0  # the last rejected step at t and its error
     h_acc, e_acc = 0.0, 0.0  # the last accepted step and its error
@@ -389,8 +435,8 @@ def run(method, attempt, rhs, jac, guards, observe, mode, p, t0, t_end, tol, max
                 status = STEP_TOO_SMALL
                 break
             continue
+        guards_finite = _eval_guards(guards, mode, t_new, y_b, p, g_b)
         if k_sing >= 0:  # no step in t may change D by more than a factor 2: it could jump its zero
-            _eval_guards(guards, mode, t_new, y_b, p, g_b)
             if painleve.too_steep(G[0, k_sing], g_b[k_sing]):
                 counters[N_REJECTED] += 1
                 rejected = True
@@ -408,14 +454,16 @@ def run(method, attempt, rhs, jac, guards, observe, mode, p, t0, t_end, tol, max
             factor = min(1.0, factor)
         # A step clipped to land on t_end says nothing against the step wanted.
         h_prop = max(h * factor, h_want) if h < h_want else h * factor
-        if not _eval_guards(guards, mode, t_new, y_b, p, g_b):
+        if not guards_finite:
             status = NOT_FINITE
             break
         y_a[:] = y
         step = Step(t, y_a, f_a, h, t_new, y_b, work.Q)
         k, j = -1, 1
         ignore[:] = False
-        for _ in range(m):  # each pass finds an event or ignores one more guard
+        events.guard_rates(guards, mode, t_new, y_b, f_b, p, g_b, h, y_tmp, g_tmp, rate_b)
+        clear = events.clear_of_zero(G[0], g_b, rate_a, rate_b, h, sgn, ev.gtol)
+        for _ in range(0 if clear else m):  # each pass finds an event or ignores one more guard
             k, t_star, j = events.find_event(guards, mode, p, step, G, ev, tol, sgn, t_new == t_end, cand,
                                              y_tmp, g_tmp, y_pert, j, ignore)
             if k < 0:
@@ -459,6 +507,7 @@ def run(method, attempt, rhs, jac, guards, observe, mode, p, t0, t_end, tol, max
                 break
         f_a[:] = f_b
         G[0, :] = g_b
+        rate_a[:] = rate_b
         rejected = False
         jac_current = fresh_jac
         if t == t_end:
