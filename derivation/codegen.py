@@ -287,6 +287,8 @@ def _short(expr: sp.Expr) -> str:
 def _mode_functions(em: _Emitter) -> list[Function]:
     out = []
     for mode in em.model.modes:
+        out.append(em.function(f"outputs_{mode.name}", f"(a1, S1, S2, F1, F2) in mode {mode.name}: an output row, "
+                               "each law evaluated once", [mode.accel, mode.S1, mode.S2, mechanics.F1, mechanics.F2]))
         out.append(em.function(f"accel_{mode.name}", f"a1 in mode {mode.name} ({mode.regime}): "
                                f"{_short(mode.accel)}", [mode.accel]))
         for name, doc in _further_accelerations(em.model):
