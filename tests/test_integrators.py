@@ -472,24 +472,17 @@ def counted_guards(mode, t, y, p, g):
 @pytest.mark.parametrize("method", METHODS, ids=METHOD_IDS)
 def test_steps_no_guard_can_cross_are_not_sampled_inside(method):
     """cos t + 2 stays >= 1: after the start (value and rate) every accepted step costs two guard
-    calls, its end and its rate, not the three interior samples besides. cos t + 1 + 1e-6 comes
-    within 1e-6 of zero at t = pi without crossing: the steps there are sampled, and no event."""
-    model = SimpleNamespace(rhs=osc_rhs, jac=osc_jac, guards=counted_guards)
-    calls = {}
-    for offset in (2.0, 1.0 + 1e-6):
-        p = np.array([offset, 0.0])
-        y, counters = np.empty(2), np.zeros(seg.N_COUNTERS, np.int64)
-        status, *_ = integrate_segment(
-            method, seg.attempt_function(method), model.rhs, model.jac, model.guards, 0, p, 0.0,
-            np.array([1.0, 0.0]), 2 * math.pi, Tolerances(1e-8, np.full(2, 1e-8), 0.0, np.inf), 10**6, 0.0,
-            EventSettings(np.zeros(1, np.int64), 0.0, 0.0, False, -1, False), np.empty(0), 0,
-            np.empty((0, 2)), y, counters)
-        assert status == seg.REACHED_END
-        calls[offset] = (p[1], counters[seg.N_STEPS])
-    far_calls, far_steps = calls[2.0]
-    assert far_calls == 2 + 2 * far_steps
-    near_calls, near_steps = calls[1.0 + 1e-6]
-    assert near_calls >= 2 + 2 * near_steps + 3  # at least one step sampled inside
+    calls, its end and its rate, not the three interior samples besides. (That a step with a
+    double crossing inside is still sampled: test_two_crossings_in_one_step_found_in_order.)"""
+    p = np.array([2.0, 0.0])
+    y, counters = np.empty(2), np.zeros(seg.N_COUNTERS, np.int64)
+    status, *_ = integrate_segment(
+        method, seg.attempt_function(method), osc_rhs, osc_jac, counted_guards, 0, p, 0.0, np.array([1.0, 0.0]),
+        2 * math.pi, Tolerances(1e-8, np.full(2, 1e-8), 0.0, np.inf), 10**6, 0.0,
+        EventSettings(np.zeros(1, np.int64), 0.0, 0.0, False, -1, False), np.empty(0), 0, np.empty((0, 2)), y,
+        counters)
+    assert status == seg.REACHED_END and counters[seg.N_STEPS] > 10
+    assert p[1] == 2 + 2 * counters[seg.N_STEPS]
 
 
 @njit
@@ -498,7 +491,7 @@ def _clear_of_zero(g_a, g_b, rate_a, rate_b, h, sign):
                             np.array([sign]), 0.0)
 
 
-_VALUES = st.floats(-1e3, 1e3, allow_nan=False)
+_VALUES = st.floats(-1e3, 1e3, allow_nan=False, allow_subnormal=False)
 
 
 @settings(max_examples=400, deadline=None)
@@ -507,7 +500,8 @@ def test_a_step_left_unsampled_keeps_its_cubic_away_from_zero(g_a, g_b, rate_a, 
     """Where clear_of_zero leaves a step unsampled, the cubic Hermite interpolant of the guard's
     end values and rates (the guard itself, if it is a cubic in t) keeps the guard's sign on the
     whole step, by at least half its smaller end distance: its extrema found independently
-    (numpy's roots of its derivative)."""
+    (numpy's roots of its derivative). Subnormal values are left out: numpy's polynomial
+    arithmetic loses their digits."""
     if not _clear_of_zero(g_a, g_b, rate_a, rate_b, h, sign):
         return
     # H(theta) = g_a h00 + h rate_a h10 + g_b h01 + h rate_b h11, as a polynomial in theta

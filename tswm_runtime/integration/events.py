@@ -16,12 +16,12 @@ Rules (lessons from the peers' issue trackers: scipy 9228, 17066, 18039):
   flow, dg/dt = g_t + g_y f, is taken at every step end by one forward difference
   (``guard_rates``: one guard call, instead of the three interior samples). A step is
   left unsampled when every guard is armed, on its side by more than gtol at both
-  ends, and the cubic Hermite interpolant of its end values and rates stays away from
-  zero: its lowest value is at least min(|g_a|, |g_b|) - (4/27) h (approach rate at
-  t_a + departure rate at t_b), and that dip may use at most CLEAR_MARGIN of the
-  distance (``clear_of_zero``). A double crossing or a dip to zero inside the step
-  shows in the end rates (g heads for zero at t_a, or comes from it at t_b), so such
-  a step is sampled as before.
+  ends, and the cubic Hermite interpolant of its end values and rates (exact for a
+  cubic in t) stays on that side: its lowest point on the step (at an end or where
+  its derivative vanishes) lies below the nearer end value by at most CLEAR_MARGIN of
+  that value (``clear_of_zero``). A double crossing or a dip to zero inside the step
+  shows in the end rates (g heads for zero at t_a and comes back from it at t_b), so
+  such a step is sampled as before.
 * A guard that is zero at the segment start (|g| <= gtol) is disarmed until it
   has left zero; so a restart on a switching surface does not fire again. If it
   leaves zero to the side its direction leads to (a restart on the surface in
@@ -50,7 +50,6 @@ from tswm_runtime.integration.cache_guard import njit
 
 GUARD_SUBINTERVALS = 4  # Guard samples per step: 3 interior points + the step end.
 RATE_STEP = 1e-6  # The guard rates' difference step, relative to the step size (at least 64 ulp of t).
-HERMITE_DIP = 4.0 / 27.0  # max of theta (1 - theta)^2 on [0, 1]: a cubic Hermite's slope weight.
 CLEAR_MARGIN = 0.5  # An unsampled step's predicted dip uses at most half the guards' distance to zero.
 ROOT_EPS_FACTOR = 4.0  # Root time tolerance floor: 4 eps, relative to max(1, |t|).
 _EPS = np.finfo(np.float64).eps
@@ -100,15 +99,42 @@ def guard_rates(guards, mode, t, y, f, p, g, h, y_tmp, g_tmp, rates):
 
 
 @njit(cache=True, error_model="numpy")
+def _hermite_lowest(s, g_a, g_b, slope_a, slope_b):
+    """Lowest value of s H(theta) on [0, 1], H the cubic with H(0) = g_a, H(1) = g_b,
+    H'(0) = slope_a, H'(1) = slope_b (slopes per unit theta): its ends and the roots of H'."""
+    a2 = 3.0 * (g_b - g_a) - 2.0 * slope_a - slope_b
+    a3 = 2.0 * (g_a - g_b) + slope_a + slope_b
+    lowest = min(s * g_a, s * g_b)
+    A, B, C = 3.0 * a3, 2.0 * a2, slope_a  # H'(theta) = A theta^2 + B theta + C
+    r1, r2 = np.nan, np.nan
+    if A == 0.0:
+        if B != 0.0:
+            r1 = -C / B
+    else:
+        disc = B * B - 4.0 * A * C
+        if disc >= 0.0:
+            q = -0.5 * (B + np.copysign(np.sqrt(disc), B))
+            r1 = q / A
+            if q != 0.0:
+                r2 = C / q
+    for theta in (r1, r2):
+        if 0.0 < theta < 1.0:
+            lowest = min(lowest, s * (g_a + theta * (slope_a + theta * (a2 + theta * a3))))
+    return lowest
+
+
+@njit(cache=True, error_model="numpy")
 def clear_of_zero(g_a, g_b, rate_a, rate_b, h, sgn, gtol):
     """True if no guard can reach zero inside the step [t_a, t_a + h] (module docstring):
-    each is armed and beyond gtol on its side at both ends, and its cubic Hermite
-    interpolant dips by at most CLEAR_MARGIN of its smaller distance to zero."""
+    each is armed and beyond gtol on its side at both ends, and the cubic Hermite
+    interpolant of its end values and rates dips below the smaller end value by at
+    most CLEAR_MARGIN of it."""
     for k in range(g_a.size):
         s = sgn[k]
         distance = min(s * g_a[k], s * g_b[k])
-        dip = HERMITE_DIP * h * (max(0.0, -s * rate_a[k]) + max(0.0, s * rate_b[k]))
-        if s == 0 or not (distance > gtol and dip <= CLEAR_MARGIN * distance):
+        if s == 0 or not distance > gtol:
+            return False
+        if not _hermite_lowest(s, g_a[k], g_b[k], h * rate_a[k], h * rate_b[k]) >= (1.0 - CLEAR_MARGIN) * distance:
             return False
     return True
 
