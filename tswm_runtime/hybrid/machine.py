@@ -35,6 +35,7 @@ from numba import types
 
 from tswm_runtime.hybrid import impact as collision
 from tswm_runtime.integration import cache_guard, painleve, segment
+from tswm_runtime.integration.borrow import borrowed
 from tswm_runtime.integration.cache_guard import njit
 from tswm_runtime.integration.signatures import (GUARDS_SIG, JAC_SIG, MATRIX, RHS_SIG, VECTOR, GuardsFunction,
                                                  JacFunction, RhsFunction, compiled)
@@ -549,8 +550,10 @@ def integrate_hybrid(method, attempt, rhs, jac, guards, observe, impact, p, tabl
             and out.p.shape[0] == out.t.size and out.p.shape[1] == p.size
             and log.state.shape[1] == n + quad.size and tables.guard_direction.shape[0] == tables.kind.size):
         return INVALID_INPUT, t0, 0, -1, NEED_NOTHING, -1
+    p, tables, y0, quad, tol, out, log, mon, counters = borrowed((p, tables, y0, quad, tol, out, log, mon, counters))
     y, q = y0.copy(), quad.copy()
     g, y_tmp, f = np.empty(n_guards), np.empty(n), np.empty(n)
+    scratch = segment.segment_work(n, n_guards, quad.size, mon.shape[0])
     frame, jump = np.empty(IMPACT_FRAME), np.empty(JUMP_WIDTH)
     m_free = _mode(M_FREE, 0, 0, tables)
     mesh = _guard(G_MESH_N, tables.guard_kind) >= 0  # compliant flanks: no impacts, contact by overlap
@@ -589,7 +592,8 @@ def integrate_hybrid(method, attempt, rhs, jac, guards, observe, impact, p, tabl
         k_singular = k_d if singular and k_d >= 0 and tables.guard_direction[mode, k_d] != 0 else -1
         ev = EventSettings(tables.guard_direction[mode], 0.0, 0.0, True, k_singular, True)
         seg_status, t_new, k, i, h = segment.run(method, attempt, rhs, jac, guards, observe, mode, p, t, t_end, tol,
-                                                 max(max_steps - steps, 0), h, ev, out, i, y, q, mon, counters)
+                                                 max(max_steps - steps, 0), h, ev, out, i, y, q, mon, counters,
+                                                 scratch)
         singular = True
         stalled = seg_status == segment.STEP_TOO_SMALL or seg_status == segment.NOT_FINITE
         if k_singular >= 0 and stalled and counters[segment.N_STEPS] > 0:

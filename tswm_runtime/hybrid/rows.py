@@ -8,6 +8,7 @@ functions row by row from Python cost about 3 us a row.
 import numpy as np
 
 from tswm_runtime.integration import cache_guard
+from tswm_runtime.integration.borrow import borrowed
 from tswm_runtime.integration.signatures import MATRIX, VECTOR, GuardsFunction
 from numba import types
 
@@ -17,6 +18,7 @@ ROWS_SIG = types.none(GuardsFunction, VECTOR, MATRIX, types.int64[::1], MATRIX, 
 @cache_guard.compile_cached(ROWS_SIG, error_model="numpy", nogil=True)
 def fill_rows(outputs, t, y, mode, p, n_states, out):
     """out[r] = outputs(mode[r], t[r], y[r, :n_states], p[r]) for every row r."""
+    t, y, mode, p, out = borrowed((t, y, mode, p, out))  # the row views cost no reference counting
     state = np.empty(n_states)
     for r in range(t.size):
         state[:] = y[r, :n_states]

@@ -22,10 +22,10 @@ from numba.core.registry import CPUDispatcher
 
 from tswm_runtime.common.files import write_atomic
 
-KERNEL_SOURCES = ("integration/structures.py", "integration/control.py", "integration/dopri5.py",
-                  "integration/rosenbrock.py", "integration/events.py", "integration/segment.py", "integration/single.py",
-                  "integration/painleve.py", "integration/steady.py", "hybrid/machine.py", "hybrid/impact.py", "hybrid/batch.py",
-                  "hybrid/rows.py")
+KERNEL_SOURCES = ("integration/borrow.py", "integration/structures.py", "integration/control.py",
+                  "integration/dopri5.py", "integration/rosenbrock.py", "integration/events.py", "integration/segment.py",
+                  "integration/single.py", "integration/painleve.py", "integration/steady.py", "hybrid/machine.py",
+                  "hybrid/impact.py", "hybrid/batch.py", "hybrid/rows.py")
 
 
 class CacheIOWarning(UserWarning):

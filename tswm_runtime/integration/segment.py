@@ -37,6 +37,7 @@ from numba import types
 from tswm_runtime.integration import cache_guard, control, dopri5, events, painleve, rosenbrock, steady
 from tswm_runtime.integration.cache_guard import njit
 from tswm_runtime.integration.signatures import JAC_SIG, VECTOR, RhsFunction, compiled
+from tswm_runtime.integration.borrow import borrowed
 from tswm_runtime.integration.structures import INTS, STEP_WORK, TOLERANCES, Step, StepWork
 
 # Method codes.
@@ -356,9 +357,27 @@ def _refine(observe, mode, p, mon, obs, win, y_tmp):
         win.s[k] = 0
 
 
+#: The scratch arrays of ``run`` (``segment_work``): allocated once by its caller and reused by every segment.
+SegmentWork = namedtuple("SegmentWork", "work f_a y_a y_b f_b err y_ev y_tmp y_pert q_tmp G g_tmp sgn cand ignore "
+                                        "rate_a rate_b obs win")
+
+
+@njit(cache=True, error_model="numpy")
+def segment_work(n, m, n_quad, n_obs):
+    """Scratch arrays for ``run``: n states, m guards, n_quad integrals, n_obs monitored observables."""
+    return SegmentWork(
+        StepWork(np.empty((dopri5.N_STAGES + 1, n)), np.zeros((n, 4)), np.empty((n, n)), np.empty(n),
+                 np.empty((n, n)), np.empty(n, np.int64)),
+        np.empty(n), np.empty(n), np.empty(n), np.empty(n), np.empty(n), np.empty(n), np.empty(n), np.empty(n),
+        np.empty(n_quad), np.empty((events.GUARD_SUBINTERVALS + 1, m)), np.empty(m), np.zeros(m, np.int64),
+        np.zeros(m, np.bool_), np.zeros(m, np.bool_), np.empty(m), np.empty(m), np.empty(n_obs),
+        MaxWindow(np.zeros((n_obs, 2, 3)), np.zeros((n_obs, 2, n)), np.zeros((n_obs, 2, n, 4)),
+                  np.zeros(n_obs, np.int64)))
+
+
 @njit(cache=True, error_model="numpy")
 def run(method, attempt, rhs, jac, guards, observe, mode, p, t0, t_end, tol, max_steps, h0, ev, out, i, y,
-        quad, mon, counters):
+        quad, mon, counters, scratch):
     """The step loop of one segment; y is the current state (updated in place).
 
     attempt: the method's step, ``attempt_function(method)``.
@@ -367,24 +386,18 @@ def run(method, attempt, rhs, jac, guards, observe, mode, p, t0, t_end, tol, max
     it towards 0 fast, -1: none); out: Outputs (rows from i on are filled);
     observe and mon: observables tracked for their maxima (mon.shape[0] of them,
     none if 0); quad: the integral of y, carried along if quad.size == y.size.
+    scratch: ``segment_work(y.size, guards, quad.size, mon.shape[0])``. Every array
+    argument is borrowed (``borrow``) for the step loop.
     Returns (status, t, event index, next output index, proposed next step).
     """
     n = y.size
     m = ev.directions.size
-    work = StepWork(np.empty((dopri5.N_STAGES + 1, n)), np.zeros((n, 4)), np.empty((n, n)), np.empty(n),
-                    np.empty((n, n)), np.empty(n, np.int64))
-    f_a, y_b, f_b, err = np.empty(n), np.empty(n), np.empty(n), np.empty(n)
-    y_a = np.empty(n)
-    y_ev, y_tmp, y_pert, q_tmp = np.empty(n), np.empty(n), np.empty(n), np.empty(quad.size)
-    G = np.empty((events.GUARD_SUBINTERVALS + 1, m))
+    y, p, quad, mon, counters, tol, ev, out, scratch = borrowed((y, p, quad, mon, counters, tol, ev, out, scratch))
+    (work, f_a, y_a, y_b, f_b, err, y_ev, y_tmp, y_pert, q_tmp, G, g_tmp, sgn, cand, ignore, rate_a, rate_b, obs,
+     win) = scratch
     g_b = G[events.GUARD_SUBINTERVALS]
-    g_tmp, sgn, cand = np.empty(m), np.zeros(m, np.int64), np.zeros(m, np.bool_)
-    rate_a, rate_b = np.empty(m), np.empty(m)  # the guards' rates at the step's ends
-    ignore = np.zeros(m, np.bool_)
     n_mon = mon.shape[0]
-    obs = np.empty(n_mon)
-    win = MaxWindow(np.zeros((n_mon, 2, 3)), np.zeros((n_mon, 2, n)), np.zeros((n_mon, 2, n, 4)),
-                    np.zeros(n_mon, np.int64))
+    win.s[:] = 0
     k_sing = ev.singular
     t = t0
     if n_mon > 0:

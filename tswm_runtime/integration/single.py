@@ -9,7 +9,8 @@ from numba import types
 
 from tswm_runtime.integration import cache_guard
 from tswm_runtime.integration.cache_guard import njit
-from tswm_runtime.integration.segment import DOPRI5, INVALID_INPUT, N_COUNTERS, ROSENBROCK23, AttemptFunction, run
+from tswm_runtime.integration.segment import (DOPRI5, INVALID_INPUT, N_COUNTERS, ROSENBROCK23, AttemptFunction, run,
+                                              segment_work)
 from tswm_runtime.integration.signatures import MATRIX, VECTOR, GuardsFunction, JacFunction, RhsFunction
 from tswm_runtime.integration.structures import EVENT_SETTINGS, TOLERANCES, Outputs
 
@@ -81,7 +82,8 @@ def integrate_segment(method, attempt, rhs, jac, guards, mode, p, t0, y0, t_end,
     while i < t_out.size and t_out[i] <= t0:
         y_out[i, :] = y0
         i += 1
+    scratch = segment_work(y0.size, ev.directions.size, 0, 0)
     status, t, k, i, h_next = run(method, attempt, rhs, jac, guards, guards, mode, p, t0, t_end, tol, max_steps, h0,
-                                  ev, out, i, y_stop, np.empty(0), np.empty((0, 3)), counters)
+                                  ev, out, i, y_stop, np.empty(0), np.empty((0, 3)), counters, scratch)
     return status, t, k, i - i_out, h_next
 
