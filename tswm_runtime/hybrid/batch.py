@@ -8,9 +8,9 @@ function arguments (``signatures``), so, like ``integrate_hybrid``, the batch
 function is compiled once with an explicit signature, cached on disk and reused
 for every model (numba's ``parallel=True`` accepts function-typed arguments: the
 prange body is outlined into a gufunc that takes the function pointers as
-arguments). Calling ``integrate_hybrid`` from Python costs ~115 us per call for
-unboxing the function-typed arguments; inside this loop a case costs only its
-integration. ``integrate_hybrid`` itself is such an argument (``INTEGRATE``): called
+arguments). Calling ``integrate_hybrid`` from Python costs about 20 us per call for
+unboxing its arguments (a run to t_end = 1e-9 s through its entry point, session 7);
+inside this loop a case costs only its integration. ``integrate_hybrid`` itself is such an argument (``INTEGRATE``): called
 through its address, its compiled code is not linked into this kernel, whose cold
 compile then skips re-optimizing the whole mode machine (issue 13: 24 s of 72).
 

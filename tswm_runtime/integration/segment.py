@@ -35,9 +35,9 @@ import numba
 from numba import types
 
 from tswm_runtime.integration import cache_guard, control, dopri5, events, painleve, rosenbrock, steady
+from tswm_runtime.integration.borrow import borrowed
 from tswm_runtime.integration.cache_guard import njit
 from tswm_runtime.integration.signatures import JAC_SIG, VECTOR, RhsFunction, compiled
-from tswm_runtime.integration.borrow import borrowed
 from tswm_runtime.integration.structures import INTS, STEP_WORK, TOLERANCES, Step, StepWork
 
 # Method codes.
