@@ -69,6 +69,13 @@ def test_verdicts_report_the_measured_factor():
     assert bench_report.speedup_verdicts(rows)[0]["verdict"] == "missed: 15x, 3.33x short of the 50x target"
     rows[4]["t_med"] = 0.5
     assert bench_report.speedup_verdicts(rows)[0]["verdict"] == "met: 100x faster (target 50x)"
+    assert v[1e-6]["floor"] == "not measured"
+    rows.append(dict(case="c", solver=bench_report.TSWM_FIXED_COST, err=math.nan, t_med=0.005))
+    v = {r["error"]: r for r in bench_report.speedup_verdicts(rows)}  # RK45 fastest: 0.2 s at 1e-6, 0.317 s at 1e-9
+    assert v[1e-6]["target_allows_s"] == pytest.approx(0.004) and v[1e-6]["fixed_cost_s"] == 0.005
+    assert v[1e-6]["floor"] == "out of reach: a call without steps takes 1.25x the target's time"
+    assert v[1e-9]["target_allows_s"] == pytest.approx(0.2 * 2 ** (2 / 3) / 50)
+    assert v[1e-9]["floor"] == "room for integration: 0.00135 s"
     assert bench_report.threshold_text(5000.0, 20000.0, "cases/s") == \
         "missed: 5000 cases/s, 4x below the target 20000"
     assert bench_report.threshold_text(3.0, 2.0, "x", higher_is_better=False).startswith("missed: 3 x, 1.5x above")
@@ -78,11 +85,15 @@ def test_tiny_run_writes_the_report(tmp_path, capsys):
     assert bench.main(quick=True, output=tmp_path, case_names=["decelerate-and-stick"], peers=("RK45",),
                       tols=(1e-5, 1e-8), repeats=1, sweep_n=2, cases=16) == 0
     runs = pd.read_csv(tmp_path / "runs.csv")
-    assert set(runs["solver"]) == {"tswm simulate", "tswm simulate points=2", "tswm sweep per case", "RK45"}
+    assert set(runs["solver"]) == {"tswm simulate", "tswm simulate points=2", "tswm sweep per case", "RK45",
+                                   bench_report.TSWM_FIXED_COST}
     assert (runs["status"] == "finished").all() and (runs["repeats"] == 1).all()
+    fixed = runs[runs["solver"] == bench_report.TSWM_FIXED_COST]
+    assert len(fixed) == 1 and fixed["err"].isna().all() and (fixed["nfev"] > 0).all()
     assert (runs["t_min"] <= runs["t_med"]).all() and (runs["t_med"] <= runs["t_max"]).all()
     verdicts = pd.read_csv(tmp_path / "verdicts.csv")
     assert list(verdicts["error"]) == [1e-6, 1e-9]
+    assert (verdicts["fixed_cost_s"] == fixed["t_med"].iloc[0]).all()
     md = (tmp_path / "work-precision.md").read_text()
     assert "loadavg_before" in md and "cpu" in md and "cases/s" in md
     assert (tmp_path / "work-precision.png").stat().st_size > 1000

@@ -36,6 +36,17 @@ def test_limits_are_the_documented_ones():
         simulate("paper", points=MAX_POINTS + 1)
 
 
+def test_remembered_settings_do_not_let_a_lookalike_through():
+    """simulate() remembers settings that passed; values equal in Python but not valid (True and
+    1.0 for 1) are still refused after the valid one ran, and -0.0 stays -0.0."""
+    assert simulate("paper", points=1, t_end=1e-3).settings["points"] == 1
+    for bad in (True, 1.0):
+        with pytest.raises(SimulationInputError, match=r"points = (True|1\.0): must be an integer"):
+            simulate("paper", points=bad, t_end=1e-3)
+    assert math.copysign(1.0, simulate("paper", points=2, t_end=1e-3, x1=0.0).settings["x1"]) == 1.0
+    assert math.copysign(1.0, simulate("paper", points=2, t_end=1e-3, x1=-0.0).settings["x1"]) == -1.0
+
+
 @pytest.mark.parametrize("command", [["generate", "paper"], ["simulate", "paper", "--no-plot"],
                                      ["sweep", "paper", "--grid", "F2=1:2:2", "--no-progress"],
                                      ["paper", "--no-derivation", "--no-progress"]])

@@ -32,19 +32,24 @@ from pathlib import Path
 
 from tswm_runtime.apps import bench_report as report
 from tswm_runtime.common import provenance
-from tswm_runtime.apps.bench_cases import CASES, errors, reference, run_peer, run_simulate, run_sweep
+from tswm_runtime.apps.bench_cases import (CASES, FIXED_COST_T_END, errors, reference, run_fixed_cost, run_peer,
+                                           run_simulate, run_sweep)
 from tswm_runtime.apps.bench_peers import available_methods
 
 TOLS_FULL = (1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8, 1e-9, 1e-10, 1e-11)
 TOLS_QUICK = (1e-4, 1e-6, 1e-8, 1e-10)
 ATOL_PER_RTOL = 1e-3  # atol = rtol * 1e-3 for every solver (v1 ~ 7 m/s)
 THROUGHPUT_RTOL = 1e-6
+NO_ERRORS = dict.fromkeys(("err_S1", "err_v1", "err_x1", "err_t", "err"), math.nan)  # a failed run, the fixed cost
 
 
 def configurations(cases, tols, peers, sweep_n):
-    """[(case, solver, rtol, call, divisor)]: every solver at every tolerance on every case."""
+    """[(case, solver, rtol, call, divisor)]: every solver at every tolerance on every case, and per
+    case tswm's fixed cost per call (``run_fixed_cost``, at rtol 1e-6)."""
     out = []
     for case in cases:
+        out.append((case, report.TSWM_FIXED_COST, THROUGHPUT_RTOL,
+                    partial(run_fixed_cost, case, THROUGHPUT_RTOL, THROUGHPUT_RTOL * ATOL_PER_RTOL), 1))
         for rtol in tols:
             atol = rtol * ATOL_PER_RTOL
             out.append((case, report.TSWM_SIMULATE, rtol, partial(run_simulate, case, rtol, atol), 1))
@@ -74,11 +79,11 @@ def measure(configs, repeats, log=print):
     for (case, solver, rtol, _, _), out, ts in zip(configs, outcomes, times):
         row = {"case": case.name, "solver": solver, "rtol": rtol, "atol": rtol * ATOL_PER_RTOL}
         if isinstance(out, Exception):
-            row |= {k: math.nan for k in ("err_S1", "err_v1", "err_x1", "err_t", "err")}
+            row |= NO_ERRORS
             row |= {"t_med": math.nan, "t_min": math.nan, "t_max": math.nan, "repeats": 0, "events": -1,
                     "nfev": -1, "status": f"failed: {out}"}
         else:
-            row |= errors(out, reference(case))
+            row |= errors(out, reference(case)) if solver != report.TSWM_FIXED_COST else NO_ERRORS
             row |= {"t_med": statistics.median(ts), "t_min": min(ts), "t_max": max(ts), "repeats": len(ts),
                     "events": len(out.events) if out.events is not None else "n/a", "nfev": out.nfev,
                     "status": "finished"}
@@ -302,7 +307,9 @@ def main(quick: bool = False, output: str | os.PathLike = "tswm-report/bench", c
 def _markdown(info, refs, t_ref, rows, verdicts, thr, flat, cold, empty, tols, repeats, sweep_n, total) -> str:
     fmt = {"rtol": "{:.0e}", "atol": "{:.0e}"} | {k: "{:.2e}" for k in ("err_S1", "err_v1", "err_x1", "err_t", "err")} \
         | {k: "{:.3e}" for k in ("t_med", "t_min", "t_max")}
-    vfmt = {"error": "{:.0e}", "tswm_s": "{:.3e}", "peer_s": "{:.3e}"}
+    vfmt = {"error": "{:.0e}", "tswm_s": "{:.3e}", "peer_s": "{:.3e}", "target_allows_s": "{:.3e}",
+            "fixed_cost_s": "{:.3e}"}
+    without_floor = [k for k in verdicts[0] if k not in ("target_allows_s", "fixed_cost_s", "floor")]
     n_met = sum(v["verdict"].startswith("met") for v in verdicts)
     md = ["# tswm work-precision benchmark", "",
           "Machine: " + ", ".join(f"{k} {v}" for k, v in info.items()), "",
@@ -328,8 +335,13 @@ def _markdown(info, refs, t_ref, rows, verdicts, thr, flat, cold, empty, tols, r
           "Time to reach the error: log-log interpolation on each solver's work-precision front "
           "(`bench_report.cost_at`), never extrapolated.", "",
           report.md_table(verdicts, list(verdicts[0]), vfmt), "",
+          f"target_allows_s is the fastest peer's time over {report.SPEEDUP_TARGET:g}; fixed_cost_s the median "
+          f"of the same `simulate()` call run to t_end = {FIXED_COST_T_END:g} s (`bench_cases.run_fixed_cost`, "
+          "in the same rounds): input checks, one step, the 1001 output rows and the Result, no integration. "
+          "Where it exceeds target_allows_s, no integrator, however fast, meets the target in this "
+          "protocol (every call runs after a call of another solver, with the caches that left).", "",
           "For information, the same with `simulate(..., points=2)` (not the target's configuration):", "",
-          report.md_table(report.speedup_verdicts(rows, tswm="tswm simulate points=2"), list(verdicts[0]), vfmt),
+          report.md_table(report.speedup_verdicts(rows, tswm="tswm simulate points=2"), without_floor, vfmt),
           "", f"### Sweep throughput at rtol {THROUGHPUT_RTOL:g} (target {report.SWEEP_TARGET:g} cases/s)", "",
           report.md_table([thr], list(thr), {"cases_per_s": "{:.0f}", "s_median": "{:.3f}", "s_min": "{:.3f}",
                                             "s_max": "{:.3f}"}), "",

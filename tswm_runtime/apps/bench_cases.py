@@ -80,6 +80,21 @@ def run_simulate(case: Case, rtol: float, atol: float, points: int | None = None
                    float(r.x1[-1] - r.x1[0]))
 
 
+FIXED_COST_T_END = 1e-9  # s: one step, no event, no maximum inside
+
+
+def run_fixed_cost(case: Case, rtol: float, atol: float) -> Outcome:
+    """simulate() on the case's scene as ``run_simulate`` calls it (default output: 1001 points),
+    but to t_end = FIXED_COST_T_END: what a call costs without integrating (checks, one step,
+    output rows, the Result). Its Outcome is not compared with the reference."""
+    from tswm_runtime.apps.simulate import simulate
+
+    r = simulate(case.scene, dict(case.params), rtol=rtol, atol=atol, v1=case.v0, t_end=FIXED_COST_T_END)
+    if r.status != "finished":
+        raise RuntimeError(f"tswm: {r.status}: {r.message}")
+    return Outcome(r.S1_max, float(r.v1[-1]), None, r.nfev, float(r.x1[-1] - r.x1[0]))
+
+
 def run_sweep(case: Case, rtol: float, atol: float, n: int) -> Outcome:
     """tswm's sweep of n identical cases (all cores), one whole call; the Outcome of the
     first row (the sweep table has no event times: events empty, counted in nfev only)."""

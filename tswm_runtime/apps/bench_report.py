@@ -12,6 +12,7 @@ SPEEDUP_LEVELS = (1e-6, 1e-9)
 SWEEP_TARGET = 20_000.0  # cases/s on 2 cores at rtol 1e-6
 FLAT_TARGET = 2.0  # cost(T = 100 s) / cost(T = 1 s) at most this on an equilibrium tail
 TSWM_SIMULATE = "tswm simulate"
+TSWM_FIXED_COST = "tswm simulate, no steps"  # bench_cases.run_fixed_cost: the same call to t_end = 1e-9 s
 ERR_FLOOR = 1e-17  # errors of exactly 0 are drawn and interpolated at this floor
 
 
@@ -39,20 +40,24 @@ def _points(rows, case, solver):
 
 
 def speedup_verdicts(rows, tswm=TSWM_SIMULATE, levels=SPEEDUP_LEVELS, target=SPEEDUP_TARGET):
-    """Per case and error level: tswm's cost, the fastest peer's, the measured factor and
-    the verdict text (met, or missed by how much)."""
+    """Per case and error level: tswm's cost, the fastest peer's, the measured factor, the
+    verdict text (met, or missed by how much), and what the target allows a call against what
+    a call costs without integrating (``TSWM_FIXED_COST``'s median, NaN if not measured)."""
     out = []
     peers = [s for s in dict.fromkeys(r["solver"] for r in rows) if not s.startswith("tswm")]
     for case in dict.fromkeys(r["case"] for r in rows):
+        fixed = next((r["t_med"] for r in rows if r["case"] == case and r["solver"] == TSWM_FIXED_COST), math.nan)
         for level in levels:
             t_tswm = cost_at(_points(rows, case, tswm), level)
             costs = {p: cost_at(_points(rows, case, p), level) for p in peers}
             costs = {p: c for p, c in costs.items() if not math.isnan(c)}
             best = min(costs, key=costs.get) if costs else None
             factor = costs[best] / t_tswm if best and not math.isnan(t_tswm) else math.nan
+            allowed = costs.get(best, math.nan) / target
             out.append({"case": case, "error": level, "tswm": tswm, "tswm_s": t_tswm, "fastest_peer": best,
                         "peer_s": costs.get(best, math.nan), "factor": factor,
-                        "verdict": speedup_text(factor, target, t_tswm, best, _smallest(rows, case, tswm))})
+                        "verdict": speedup_text(factor, target, t_tswm, best, _smallest(rows, case, tswm)),
+                        "target_allows_s": allowed, "fixed_cost_s": fixed, "floor": floor_text(allowed, fixed)})
     return out
 
 
@@ -76,6 +81,16 @@ def speedup_text(factor: float, target: float, t_tswm: float = 1.0, best: str | 
     if factor >= target:
         return f"met: {factor:.3g}x faster (target {target:g}x)"
     return f"missed: {factor:.3g}x, {target / factor:.3g}x short of the {target:g}x target"
+
+
+def floor_text(allowed: float, fixed: float) -> str:
+    """Whether the target's time per call leaves room for integrating at all, given what a call
+    costs without integrating."""
+    if math.isnan(allowed) or math.isnan(fixed):
+        return "not measured"
+    if fixed >= allowed:
+        return f"out of reach: a call without steps takes {fixed / allowed:.3g}x the target's time"
+    return f"room for integration: {allowed - fixed:.3g} s"
 
 
 def threshold_text(measured: float, target: float, unit: str, higher_is_better: bool = True) -> str:

@@ -62,6 +62,7 @@ GROUPS = {
     "integrate": ("the integration kernels (the hybrid mode machine, output rows)",
                   [("integration/segment.py", "no_jacobian", False),
                    ("hybrid/machine.py", "integrate_hybrid", True),
+                   ("hybrid/entry.py", "integrate_at", True),
                    ("hybrid/rows.py", "fill_rows", True)]),
     "batch": ("the parallel sweep kernel", [("hybrid/batch.py", "run_batch", True)]),
     "dopri5": ("the dopri5 step", [("integration/segment.py", "dopri5_attempt", True)]),

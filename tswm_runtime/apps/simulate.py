@@ -2,7 +2,7 @@
 
 ``simulate("paper", {"F2": -5000.0})`` loads the generated module of a shipped scene
 (or takes a module), validates every input with a message that names it, runs
-``hybrid.integrate_hybrid`` and evaluates a1, S1, S2, F1, F2 at the output times.
+the mode machine (``entry.integrate``) and evaluates a1, S1, S2, F1, F2 at the output times.
 """
 from __future__ import annotations
 
@@ -16,9 +16,9 @@ import numpy as np
 from tswm_runtime.apps import coldstart
 
 coldstart.announce(("integrate",))  # before the next imports compile the kernels, if not cached
-from tswm_runtime.hybrid import machine as hybrid  # noqa: E402
+from tswm_runtime.hybrid import entry  # noqa: E402
 from tswm_runtime.hybrid.rows import fill_rows  # noqa: E402
-from tswm_runtime.integration.signatures import GUARDS_SIG  # noqa: E402
+from tswm_runtime.integration.signatures import GUARDS_SIG, address  # noqa: E402
 
 from tswm_runtime.integration import segment  # noqa: E402
 
@@ -116,7 +116,27 @@ def x1_column(module: ModuleType) -> int:
 
 
 def settings(module: ModuleType, overrides: dict) -> dict:
-    """The run settings: the scene's [run] table with ``overrides`` applied, validated."""
+    """The run settings: the scene's [run] table with ``overrides`` applied, validated (a new dict;
+    settings that passed are remembered per module, like ``_VALID_ROWS``: validating cost ~5 us)."""
+    try:  # the key tells 1 from True and 1.0, and 0.0 from -0.0 (equal in Python, not here)
+        key = (module, tuple((k, v.hex() if type(v) is float else (type(v), v)) for k, v in overrides.items()))
+        known = _VALID_SETTINGS.get(key)
+    except TypeError:  # an unhashable value: validated below, which names it
+        key = known = None
+    if known is not None:
+        return dict(known)
+    run = _validated(module, overrides)
+    if key is not None:
+        if len(_VALID_SETTINGS) >= 1024:
+            _VALID_SETTINGS.clear()
+        _VALID_SETTINGS[key] = dict(run)
+    return run
+
+
+_VALID_SETTINGS: dict = {}
+
+
+def _validated(module: ModuleType, overrides: dict) -> dict:
     run = {"gap": 0.0, **module.RUN, "points": DEFAULT_POINTS, "max_events": DEFAULT_MAX_EVENTS, "hmax": math.inf}
     for key, value in overrides.items():
         _check(key in run, "setting", key, lambda: f"one of {', '.join(run)}")
@@ -212,14 +232,15 @@ def _output_times(t_end: float, points: int) -> np.ndarray:
 
 
 _ENTRY_POINTS: dict = {}
+_PREPARED: set = set()  # methods whose step is compiled or loaded in this process
 
 
 def _entry_point(kernel):
     """The compiled code of a kernel that ``compile_cached`` compiled for exactly one signature.
     Calling it skips the dispatcher, which types every argument on every call to pick the
-    overload (about 40 us for integrate_hybrid's 19 arguments, most of it the four function
-    arguments); that is safe only because ``hybrid.integrate`` and ``simulate`` build every
-    argument with the signature's exact types. The dispatcher itself if there is no single one."""
+    overload (about 40 us for the mode machine's arguments when they still held functions);
+    that is safe only because ``entry.integrate`` and ``simulate`` build every argument with
+    the signature's exact types. The dispatcher itself if there is no single one."""
     entry = _ENTRY_POINTS.get(id(kernel))
     if entry is None:
         try:
@@ -251,17 +272,19 @@ def simulate(model: str | ModuleType, params: dict | None = None, *, interruptib
     n = len(module.STATES)
     y0, quad = initial_state(module, run)
     t_out = _output_times(run["t_end"], run["points"])
-    coldstart.announce((run["method"],))
-    segment.attempt_function(METHODS[run["method"]])  # the method's step compiles on its first run, if not cached
-    coldstart.done()
-    status, t_stop, n_ev, last, need, first, out, log, mon, counters = hybrid.integrate(
+    if run["method"] not in _PREPARED:  # the method's step compiles on its first run, if not cached: say so first
+        coldstart.announce((run["method"],))
+        segment.attempt_function(METHODS[run["method"]])
+        coldstart.done()
+        _PREPARED.add(run["method"])
+    status, t_stop, n_ev, last, need, first, out, log, mon, counters = entry.integrate(
         METHODS[run["method"]], module, p, modes.tables(module), y0, run["t_end"], rtol=run["rtol"],
         atol=run["atol"], t_out=t_out, max_events=run["max_events"], quad=quad, hmax=run["hmax"],
         max_steps=run["max_steps"], call=_direct_in_a_thread if interruptible else _direct)
-    keep = out.mode >= 0
-    if keep.all():  # the run reached t_end: every row is filled (and every array C-contiguous already)
+    if out.mode[-1] >= 0:  # rows fill in time order: every row is filled (every array C-contiguous already)
         t_kept, y_kept, p_rows, modes_kept = t_out, out.y, out.p, out.mode
     else:
+        keep = out.mode >= 0
         t_kept, y_kept, p_rows, modes_kept = (np.ascontiguousarray(a[keep])
                                               for a in (t_out, out.y, out.p, out.mode))
     y_stop = log.state[n_ev - 1, :n].copy() if n_ev else y0
@@ -272,8 +295,8 @@ def simulate(model: str | ModuleType, params: dict | None = None, *, interruptib
                     None if math.isnan(log.jump[e, 0]) else Jump(*map(float, log.jump[e])),
                     dict(zip(module.STATES, map(float, log.state[e, :n]))))
               for e in range(n_ev)]
-    rows = np.empty((t_kept.size, len(module.OUTPUTS)))
-    _entry_point(fill_rows)(hybrid.compiled(module.outputs, GUARDS_SIG), t_kept, y_kept, modes_kept, p_rows, n, rows)
+    rows = np.empty((len(module.OUTPUTS), t_kept.size))
+    _entry_point(fill_rows)(address(module.outputs, GUARDS_SIG), t_kept, y_kept, modes_kept, p_rows, n, rows)
     return Result.build(module, p, p_rows, run, t_kept, y_kept, modes_kept, rows, events, log.state[:n_ev, :n],
                         mon, counters, hybrid_status=status, t_stop=t_stop,
                         first_mode=first, message=status_message(module, status, t_stop, y_stop, last,

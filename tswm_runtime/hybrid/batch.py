@@ -30,7 +30,7 @@ from numba import prange, types
 from tswm_runtime.hybrid import machine as hybrid
 
 from tswm_runtime.integration import cache_guard, segment
-from tswm_runtime.integration.signatures import MATRIX, VECTOR, GuardsFunction, JacFunction, RhsFunction
+from tswm_runtime.integration.signatures import MATRIX, VECTOR, GuardsFunction, JacFunction, RhsFunction, compiled
 from tswm_runtime.integration.structures import JUMP_WIDTH, MODE_TABLES, TOLERANCES, EventLog, Outputs
 
 F_T_STOP, F_S1M, F_TS1M, F_S2M, F_TS2M, F_X1, F_V1, F_IMPACT_E = range(8)
@@ -39,7 +39,7 @@ I_STATUS, I_EVENTS, I_STEPS, I_REJECTED, I_RHS, I_JAC, I_FIRST, I_NMODES, I_IMPA
 N_I = 9
 
 #: hybrid.integrate_hybrid as the first-class function value run_batch takes.
-INTEGRATE = hybrid.compiled(hybrid.integrate_hybrid, hybrid.HYBRID_SIG)
+INTEGRATE = compiled(hybrid.integrate_hybrid, hybrid.HYBRID_SIG)
 
 BATCH_SIG = types.none(
     types.FunctionType(hybrid.HYBRID_SIG),  # integrate: INTEGRATE

@@ -37,10 +37,9 @@ from tswm_runtime.hybrid import impact as collision
 from tswm_runtime.integration import cache_guard, painleve, segment
 from tswm_runtime.integration.borrow import borrowed
 from tswm_runtime.integration.cache_guard import njit
-from tswm_runtime.integration.signatures import (GUARDS_SIG, JAC_SIG, MATRIX, RHS_SIG, VECTOR, GuardsFunction,
-                                                 JacFunction, RhsFunction, compiled)
-from tswm_runtime.integration.structures import (EVENT_LOG, JUMP_WIDTH, MODE_TABLES, OUTPUTS, TOLERANCES, EventLog,
-                                                 EventSettings, Outputs, Tolerances)
+from tswm_runtime.integration.signatures import MATRIX, VECTOR, GuardsFunction, JacFunction, RhsFunction
+from tswm_runtime.integration.structures import (EVENT_LOG, JUMP_WIDTH, MODE_TABLES, OUTPUTS, TOLERANCES,
+                                                 EventSettings)
 
 # Guard kinds (modes.GUARD_KINDS maps the generated GUARDS names to these).
 (G_PHI, G_V1, G_D, G_JAM, G_CONE_F, G_CONE_B, G_FLANK_N, G_LAW, G_SLIDE_A, G_SLIDE_B, G_TRIP, G_GAP_A, G_GAP_B,
@@ -676,31 +675,3 @@ def integrate_hybrid(method, attempt, rhs, jac, guards, observe, impact, p, tabl
             break
     return status, t, n_ev, mode, need, first
 
-
-def _call(kernel, args, counters):
-    return kernel(*args)
-
-
-def integrate(method, model, p, tables, y0, t_end, *, rtol, atol, t_out, max_events, quad=None, t0=0.0,
-              mode0=-1, hmin=0.0, hmax=np.inf, max_steps=100_000, call=_call):
-    """integrate_hybrid with keyword arguments: builds the structures and work arrays from
-    plain values and returns (status, t_stop, n_events, last mode, need, first mode,
-    Outputs, EventLog, mon, counters). model: the generated module; p is written (latches).
-    call(kernel, args, counters) runs the kernel (e.g. in a thread, watching counters)."""
-    y0 = np.ascontiguousarray(y0, dtype=np.float64)
-    quad = np.empty(0) if quad is None else np.ascontiguousarray(quad, dtype=np.float64)
-    width = y0.size + quad.size
-    t_out = np.ascontiguousarray(t_out, dtype=np.float64)
-    out = Outputs(t_out, np.full((t_out.size, width), np.nan), np.empty(t_out.size, np.int64),
-                  np.empty((t_out.size, p.size)))
-    log = EventLog(np.empty(max_events), np.empty((max_events, 3), np.int64), np.empty((max_events, width)),
-                   np.zeros((max_events, JUMP_WIDTH)))
-    mon, counters = np.zeros((len(model.OBSERVABLES), 3)), np.zeros(segment.N_COUNTERS, np.int64)
-    tol = Tolerances(float(rtol), np.array(np.broadcast_to(np.asarray(atol, np.float64), y0.shape)),
-                     float(hmin), float(hmax))
-    jac = model.jac  # DOPRI5 calls it only to confirm an equilibrium before holding it (steady)
-    args = (method, segment.attempt_function(method), compiled(model.rhs, RHS_SIG), compiled(jac, JAC_SIG),
-            compiled(model.guards, GUARDS_SIG), compiled(model.observe, GUARDS_SIG), compiled(model.impact, GUARDS_SIG),
-            p, tables, float(t0), y0, quad, int(mode0), float(t_end), tol, int(max_steps), out, log, mon, counters)
-    result = call(integrate_hybrid, args, counters)
-    return (*result, out, log, mon, counters)

@@ -25,7 +25,7 @@ from tswm_runtime.common.files import write_atomic
 KERNEL_SOURCES = ("integration/borrow.py", "integration/structures.py", "integration/control.py",
                   "integration/dopri5.py", "integration/rosenbrock.py", "integration/events.py", "integration/segment.py",
                   "integration/single.py", "integration/painleve.py", "integration/steady.py", "hybrid/machine.py",
-                  "hybrid/impact.py", "hybrid/batch.py", "hybrid/rows.py")
+                  "hybrid/impact.py", "hybrid/batch.py", "hybrid/rows.py", "hybrid/entry.py", "integration/addresses.py")
 
 
 class CacheIOWarning(UserWarning):

@@ -231,7 +231,8 @@ def _write_samples(out, i, step, t_hi, y_hi, quad, q_tmp):
             events.dense_eval(step.y_a, step.h, step.Q, theta, out.y[i, :n])
         if quad.size > 0:
             events.dense_integral(step.y_a, step.h, step.Q, theta, q_tmp)
-            out.y[i, n:] = quad + q_tmp
+            for j in range(quad.size):  # elementwise: ``quad + q_tmp`` would allocate per row
+                out.y[i, n + j] = quad[j] + q_tmp[j]
         i += 1
     return i
 
@@ -242,8 +243,8 @@ def _hold_samples(out, i, t, t_hi, y, quad):
     n = y.size
     while i < out.t.size and out.t[i] <= t_hi:
         out.y[i, :n] = y
-        if quad.size > 0:
-            out.y[i, n:] = quad + y * (out.t[i] - t)
+        for j in range(quad.size):
+            out.y[i, n + j] = quad[j] + y[j] * (out.t[i] - t)
         i += 1
     return i
 

@@ -59,3 +59,10 @@ def compiled(function, signature):
     if key not in _ADDRESSES:
         _ADDRESSES[key] = (function, signature, CompileResultWAP(function.get_compile_result(signature)))
     return _ADDRESSES[key][2]
+
+
+def address(function, signature):
+    """The address of ``function``'s compiled code for ``signature`` (its C wrapper), for a kernel
+    to call through ``addresses.function_at``; the function itself while numba's jit is off."""
+    value = compiled(function, signature)
+    return value if config.DISABLE_JIT else value.address

@@ -222,13 +222,13 @@ class Result:
               events, event_states, mon, counters, *, hybrid_status: int, t_stop: float, first_mode: int,
               message: str) -> Result:
         """Assemble the result; ``y``: states (and their integral) at each output point; ``rows``:
-        (a1, S1, S2, F1, F2) there, each evaluated with the mode and the latched laws in force
+        a1, S1, S2, F1, F2 there (one row each), each evaluated with the mode and the latched laws in force
         there (``p_rows``); ``event_states``: the states at each event (before an impact)."""
         states = {name: np.ascontiguousarray(y[:, k]) for k, name in enumerate(module.STATES)}
         x1 = states.get("x1", y[:, len(module.STATES)] if y.shape[1] > len(module.STATES) else np.empty(0))
         v1 = states["v1"]
         gap, gap_rate = states.get("gap", np.empty(0)), states.get("gap_rate", np.empty(0))
-        a1, S1, S2, F1, F2 = (np.ascontiguousarray(rows[:, k]) for k in range(5))
+        a1, S1, S2, F1, F2 = rows[:5]
         event_a1 = np.full(len(events), np.nan)
         for e, event in enumerate(events):
             if event.to_mode is not None:
@@ -310,10 +310,10 @@ def _inconsistent(module: ModuleType, t_stop: float, y_stop: np.ndarray, last: i
 def status_message(module: ModuleType, status: int, t_stop: float, y_stop: np.ndarray, last: int,
                    need: int, events: list[Event], p: np.ndarray) -> str:
     """A sentence saying how the run ended, naming what to change when it failed."""
-    declared = [m for m, d in zip(module.MODES, getattr(module, "MODE_DECLARED", [True] * len(module.MODES))) if d]
-    at = f"t = {t_stop:.9g} s"
     if status == hybrid.FINISHED:
         return f"reached t_end = {t_stop:.9g} s with {len(events)} mode changes"
+    declared = [m for m, d in zip(module.MODES, getattr(module, "MODE_DECLARED", [True] * len(module.MODES))) if d]
+    at = f"t = {t_stop:.9g} s"
     if status == hybrid.UNDECLARED and need == hybrid.NEED_FLANK:
         return (f"the contact force on the scene's only flank vanishes at {at} (phi = 0): body 2 "
                 f"would lift off, which a one-sided scene cannot model; add the other flank to "

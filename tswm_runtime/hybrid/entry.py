@@ -1,0 +1,88 @@
+"""The mode machine called from Python: ``integrate`` builds its arguments from plain values.
+
+``integrate_at`` is ``machine.integrate_hybrid`` with its seven functions (the machine itself,
+the method's step, the model's rhs, jac, guards, observe, impact) given as addresses
+(``integration.addresses``): numba unboxes a function-typed argument through Python, 1-2 us
+each and several times that right after other code has run, an address in nanoseconds. The
+machine is called through its address too, so its compiled code is not linked into this
+small kernel (as ``batch.run_batch`` calls it).
+"""
+import numpy as np
+from numba import types
+
+from tswm_runtime.hybrid.machine import HYBRID_SIG, integrate_hybrid
+from tswm_runtime.integration import cache_guard, segment
+from tswm_runtime.integration.addresses import function_at, guards_at, jac_at, rhs_at
+from tswm_runtime.integration.signatures import GUARDS_SIG, JAC_SIG, MATRIX, RHS_SIG, VECTOR, address
+from tswm_runtime.integration.structures import (EVENT_LOG, JUMP_WIDTH, MODE_TABLES, OUTPUTS, TOLERANCES, EventLog,
+                                                 Outputs, Tolerances)
+
+_machine_at = function_at(types.FunctionType(HYBRID_SIG))
+_attempt_at = function_at(segment.AttemptFunction)
+
+ENTRY_SIG = HYBRID_SIG.return_type(
+    types.UniTuple(types.int64, 7), types.int64,  # the functions' addresses (``functions``), method
+    VECTOR, MODE_TABLES,  # p (its latches are written), tables
+    types.float64, VECTOR, VECTOR, types.int64, types.float64,  # t0, y0, quad, mode0, t_end
+    TOLERANCES, types.int64,  # tol, max_steps
+    OUTPUTS, EVENT_LOG,  # out, log
+    MATRIX, types.int64[::1],  # mon, counters
+)
+
+
+@cache_guard.compile_cached(ENTRY_SIG, error_model="numpy", nogil=True)
+def integrate_at(functions, method, p, tables, t0, y0, quad, mode0, t_end, tol, max_steps, out, log, mon, counters):
+    """``integrate_hybrid`` with its functions at the addresses ``functions`` (see ``functions``)."""
+    machine, attempt, rhs, jac, guards, observe, impact = functions
+    return _machine_at(machine)(method, _attempt_at(attempt), rhs_at(rhs), jac_at(jac), guards_at(guards),
+                                guards_at(observe), guards_at(impact), p, tables, t0, y0, quad, mode0, t_end, tol,
+                                max_steps, out, log, mon, counters)
+
+
+def functions(method: int, model) -> tuple:
+    """The addresses ``integrate_at`` takes: the mode machine, ``method``'s step, and the model's
+    rhs, jac, guards, observe and impact (DOPRI5 calls jac only to confirm an equilibrium
+    before holding it, ``steady``). Remembered per method and model functions."""
+    key = (method, model.rhs, model.jac, model.guards, model.observe, model.impact)
+    known = _FUNCTIONS.get(key)
+    if known is None:
+        attempt = segment.attempt_function(method)  # compiled, or loaded from the cache, on first use
+        known = (address(integrate_hybrid, HYBRID_SIG), getattr(attempt, "address", attempt),  # jit off: itself
+                 address(model.rhs, RHS_SIG), address(model.jac, JAC_SIG), address(model.guards, GUARDS_SIG),
+                 address(model.observe, GUARDS_SIG), address(model.impact, GUARDS_SIG))
+        if len(_FUNCTIONS) >= 256:
+            _FUNCTIONS.clear()
+        _FUNCTIONS[key] = known
+    return known
+
+
+_FUNCTIONS: dict = {}
+
+
+def _call(kernel, args, counters):
+    return kernel(*args)
+
+
+def integrate(method, model, p, tables, y0, t_end, *, rtol, atol, t_out, max_events, quad=None, t0=0.0,
+              mode0=-1, hmin=0.0, hmax=np.inf, max_steps=100_000, call=_call):
+    """integrate_hybrid with keyword arguments: builds the structures and work arrays from
+    plain values and returns (status, t_stop, n_events, last mode, need, first mode,
+    Outputs, EventLog, mon, counters). model: the generated module; p is written (latches).
+    atol: a number or one per state. call(kernel, args, counters) runs the kernel (e.g. in a
+    thread, watching counters)."""
+    y0 = np.ascontiguousarray(y0, dtype=np.float64)
+    quad = np.empty(0) if quad is None else np.ascontiguousarray(quad, dtype=np.float64)
+    width = y0.size + quad.size
+    t_out = np.ascontiguousarray(t_out, dtype=np.float64)
+    out = Outputs(t_out, np.full((t_out.size, width), np.nan), np.empty(t_out.size, np.int64),
+                  np.empty((t_out.size, p.size)))
+    log = EventLog(np.empty(max_events), np.empty((max_events, 3), np.int64), np.empty((max_events, width)),
+                   np.zeros((max_events, JUMP_WIDTH)))
+    mon, counters = np.zeros((len(model.OBSERVABLES), 3)), np.zeros(segment.N_COUNTERS, np.int64)
+    atol = (np.full(y0.size, atol, dtype=np.float64) if np.ndim(atol) == 0
+            else np.array(np.broadcast_to(np.asarray(atol, np.float64), y0.shape)))
+    tol = Tolerances(float(rtol), atol, float(hmin), float(hmax))
+    args = (functions(method, model), method, p, tables, float(t0), y0, quad, int(mode0), float(t_end), tol,
+            int(max_steps), out, log, mon, counters)
+    result = call(integrate_at, args, counters)
+    return (*result, out, log, mon, counters)
