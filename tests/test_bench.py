@@ -81,6 +81,21 @@ def test_verdicts_report_the_measured_factor():
     assert bench_report.threshold_text(3.0, 2.0, "x", higher_is_better=False).startswith("missed: 3 x, 1.5x above")
 
 
+def test_rounds_time_every_configuration_once_each_in_its_own_order():
+    """No configuration always follows the same one (a call finds the caches its predecessor left)."""
+    from tswm_runtime.apps.bench_peers import Outcome
+
+    calls = []
+    configs = [(RUNUP, bench_report.TSWM_FIXED_COST, 1e-6, lambda i=i: calls.append(i) or Outcome(0.0, 0.0, None, 1), 1)
+               for i in range(8)]
+    rows = bench.measure(configs, repeats=3, log=lambda *a: None)
+    assert calls[:8] == list(range(8)) and all(r["repeats"] == 3 for r in rows)
+    rounds = [calls[8 * k:8 * k + 8] for k in (1, 2, 3)]
+    assert all(sorted(r) == list(range(8)) for r in rounds)
+    predecessors = {i: {r[r.index(i) - 1] for r in rounds if r.index(i) > 0} for i in range(8)}
+    assert len({tuple(r) for r in rounds}) == 3 and any(len(p) > 1 for p in predecessors.values())
+
+
 def test_tiny_run_writes_the_report(tmp_path, capsys):
     assert bench.main(quick=True, output=tmp_path, case_names=["decelerate-and-stick"], peers=("RK45",),
                       tols=(1e-5, 1e-8), repeats=1, sweep_n=2, cases=16) == 0

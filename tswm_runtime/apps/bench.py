@@ -12,9 +12,12 @@ Every solver is timed the way a user calls it, one whole call in this process:
 
 against an independent reference (``quadrature``, per case). Each configuration gets
 one untimed warm-up call (numba's cache, imports; its outcome gives the errors), then
-``repeats`` rounds over all configurations in turn (each round starting one further
-on), so that load drifts hit every solver alike; medians with min and max. The
-targets of issue 13 are reported with the measured factor, never asserted.
+``repeats`` rounds over all configurations, each round in its own shuffled order (seeded
+by the round), so that load drifts hit every solver alike and no configuration always
+follows the same one: a call finds the caches as another solver left them, and in a fixed
+order the peers would always follow another scipy call and each tswm variant the same
+neighbour. Medians with min and max. The targets of issue 13 are reported with the
+measured factor, never asserted.
 
 Run: ``tswm bench [--quick] [-o DIR]`` or ``python tools/bench_work_precision.py``.
 """
@@ -23,6 +26,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import random
 import statistics
 import subprocess
 import sys
@@ -70,7 +74,9 @@ def measure(configs, repeats, log=print):
             log(f"  {solver} rtol {rtol:g} on {case.name} failed: {error}")
     live = [i for i, o in enumerate(outcomes) if not isinstance(o, Exception)]
     for rep in range(repeats):
-        for i in live[rep % max(len(live), 1):] + live[:rep % max(len(live), 1)]:
+        order = live.copy()
+        random.Random(rep).shuffle(order)
+        for i in order:
             t0 = time.perf_counter()
             configs[i][3]()
             times[i].append((time.perf_counter() - t0) / configs[i][4])
@@ -320,7 +326,8 @@ def _markdown(info, refs, t_ref, rows, verdicts, thr, flat, cold, empty, tols, r
           f"peers as a careful user writes them (`tswm_runtime/apps/bench_peers.py`: span split at load times, "
           f"directed terminal events, restart with the new flank, phi event armed only where phi can "
           f"vanish). One untimed warm-up call per configuration, then {repeats} rounds over all "
-          f"configurations in turn; median (min, max) seconds per call. Tolerances "
+          f"configurations, each in its own shuffled order (seeded; no configuration always follows the same "
+          f"one, so none always finds the caches warm from a relative); median (min, max) seconds per call. Tolerances "
           f"{', '.join(f'{t:g}' for t in tols)}; atol = rtol x {ATOL_PER_RTOL:g} for every solver.", "",
           "Errors against the independent quadrature reference (`tswm_runtime/apps/quadrature.py`, 34 "
           f"digits, {t_ref:.1f} s for all cases): err_S1 relative error of max |S1|; err_v1 error of "
