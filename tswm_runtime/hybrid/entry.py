@@ -13,21 +13,14 @@ from numba import types
 from tswm_runtime.hybrid.machine import HYBRID_SIG, integrate_hybrid
 from tswm_runtime.integration import cache_guard, segment
 from tswm_runtime.integration.addresses import function_at, guards_at, jac_at, rhs_at
-from tswm_runtime.integration.signatures import GUARDS_SIG, JAC_SIG, MATRIX, RHS_SIG, VECTOR, address
-from tswm_runtime.integration.structures import (EVENT_LOG, JUMP_WIDTH, MODE_TABLES, OUTPUTS, TOLERANCES, EventLog,
-                                                 Outputs, Tolerances)
+from tswm_runtime.integration.signatures import GUARDS_SIG, JAC_SIG, RHS_SIG, address
+from tswm_runtime.integration.structures import JUMP_WIDTH, EventLog, Outputs, Tolerances
 
 _machine_at = function_at(types.FunctionType(HYBRID_SIG))
 _attempt_at = function_at(segment.AttemptFunction)
 
-ENTRY_SIG = HYBRID_SIG.return_type(
-    types.UniTuple(types.int64, 7), types.int64,  # the functions' addresses (``functions``), method
-    VECTOR, MODE_TABLES,  # p (its latches are written), tables
-    types.float64, VECTOR, VECTOR, types.int64, types.float64,  # t0, y0, quad, mode0, t_end
-    TOLERANCES, types.int64,  # tol, max_steps
-    OUTPUTS, EVENT_LOG,  # out, log
-    MATRIX, types.int64[::1],  # mon, counters
-)
+#: integrate_hybrid's signature with its method and seven functions replaced by (addresses, method).
+ENTRY_SIG = HYBRID_SIG.return_type(types.UniTuple(types.int64, 7), types.int64, *HYBRID_SIG.args[7:])
 
 
 @cache_guard.compile_cached(ENTRY_SIG, error_model="numpy", nogil=True)
