@@ -1,11 +1,13 @@
 """Compiled functions handed to a kernel as addresses (tswm_runtime.integration.addresses)."""
 import numpy as np
 import pytest
-from numba import njit
+from numba import njit, types
 from numba.core.errors import TypingError
 
-from tswm_runtime.integration.addresses import guards_at
-from tswm_runtime.integration.signatures import GUARDS_SIG, address
+from tswm_runtime.integration.addresses import function_at, guards_at
+from tswm_runtime.integration.signatures import GUARDS_SIG, address, jit_address
+
+HALF_SIG = types.float64(types.float64)
 
 
 @njit(GUARDS_SIG)
@@ -32,3 +34,26 @@ def test_an_address_that_is_no_integer_is_a_typing_error_naming_function_at():
 
     with pytest.raises(TypingError, match="function_at: an integer address, not float64"):
         wrong(1.5)
+
+
+@njit(HALF_SIG)
+def _half(x):
+    if x < 0.0:
+        raise ValueError("x < 0")
+    return 0.5 * x
+
+
+_half_at = function_at(types.FunctionType(HALF_SIG), raises=True)
+
+
+@njit
+def _call_half(where, where_jit, x):
+    return _half_at(where, where_jit)(x)
+
+
+def test_a_function_given_its_numba_address_passes_its_exception_on():
+    """The C wrapper alone would print the error and return 0.0: no silent result."""
+    where, where_jit = address(_half, HALF_SIG), jit_address(_half, HALF_SIG)
+    assert _call_half(where, where_jit, 3.0) == 1.5
+    with pytest.raises(ValueError, match="x < 0"):
+        _call_half(where, where_jit, -1.0)

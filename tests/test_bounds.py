@@ -2,6 +2,7 @@
 naming the option and the allowed range (exit 2, no traceback)."""
 import math
 
+import numpy as np
 import pytest
 
 from derivation.scene import SceneError, parse_scene
@@ -43,8 +44,9 @@ def test_remembered_settings_do_not_let_a_lookalike_through():
     for bad in (True, 1.0):
         with pytest.raises(SimulationInputError, match=r"points = (True|1\.0): must be an integer"):
             simulate("paper", points=bad, t_end=1e-3)
-    assert math.copysign(1.0, simulate("paper", points=2, t_end=1e-3, x1=0.0).settings["x1"]) == 1.0
-    assert math.copysign(1.0, simulate("paper", points=2, t_end=1e-3, x1=-0.0).settings["x1"]) == -1.0
+    for zero in (0.0, np.float64(0.0)):
+        assert math.copysign(1.0, simulate("paper", points=2, t_end=1e-3, x1=zero).settings["x1"]) == 1.0
+        assert math.copysign(1.0, simulate("paper", points=2, t_end=1e-3, x1=-zero).settings["x1"]) == -1.0
 
 
 @pytest.mark.parametrize("command", [["generate", "paper"], ["simulate", "paper", "--no-plot"],

@@ -4,8 +4,8 @@ Writes tswm_runtime/apps/compile_times.json (read by ``tswm_runtime.apps.coldsta
 for each group of kernels and each shipped model, each measured in a fresh process with a
 fresh NUMBA_CACHE_DIR:
 
-    integrate     import hybrid.machine and hybrid.rows (compiles integrate_hybrid, fill_rows
-                  and no_jacobian), everything cold
+    integrate     import hybrid.entry and hybrid.rows (compiles integrate_hybrid, integrate_at,
+                  fill_rows and no_jacobian), everything cold
     batch         import hybrid.batch (run_batch, parallel) with the integrate group cached
     METHOD        segment.attempt_function(METHOD): the step of dopri5, rosenbrock23, with the
                   integrate group cached
@@ -55,11 +55,11 @@ def main() -> int:
     load_before = os.getloadavg()
     seconds = {}
     with tempfile.TemporaryDirectory() as cache:
-        seconds["integrate"] = timed("import tswm_runtime.hybrid.machine, tswm_runtime.hybrid.rows", cache,
+        seconds["integrate"] = timed("import tswm_runtime.hybrid.entry, tswm_runtime.hybrid.rows", cache,
                                      "import numpy, numba")
         print(f"integrate {seconds['integrate']:.1f} s", flush=True)
         seconds["batch"] = timed("import tswm_runtime.hybrid.batch", cache,
-                                 "import tswm_runtime.hybrid.machine, tswm_runtime.hybrid.rows")
+                                 "import tswm_runtime.hybrid.entry, tswm_runtime.hybrid.rows")
         print(f"batch {seconds['batch']:.1f} s", flush=True)
         for name, code in (("dopri5", "DOPRI5"), ("rosenbrock23", "ROSENBROCK23")):  # simulate.METHODS
             seconds[name] = timed(f"segment.attempt_function(segment.{code})", cache,

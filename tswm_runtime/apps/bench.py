@@ -343,10 +343,12 @@ def _markdown(info, refs, t_ref, rows, verdicts, thr, flat, cold, empty, tols, r
           "(`bench_report.cost_at`), never extrapolated.", "",
           report.md_table(verdicts, list(verdicts[0]), vfmt), "",
           f"target_allows_s is the fastest peer's time over {report.SPEEDUP_TARGET:g}; fixed_cost_s the median "
-          f"of the same `simulate()` call run to t_end = {FIXED_COST_T_END:g} s (`bench_cases.run_fixed_cost`, "
-          "in the same rounds): input checks, one step, the 1001 output rows and the Result, no integration. "
-          "Where it exceeds target_allows_s, no integrator, however fast, meets the target in this "
-          "protocol (every call runs after a call of another solver, with the caches that left).", "",
+          f"of the case's `simulate()` call (its scene, parameters, v1(0), default output) run to t_end = "
+          f"{FIXED_COST_T_END:g} s at rtol {THROUGHPUT_RTOL:g} (`bench_cases.run_fixed_cost`, in the same shuffled "
+          "rounds, shown for both error levels): input checks, one step, the 1001 output rows and the Result, no "
+          "integration. Where it exceeds target_allows_s, no integrator, however fast, meets the target in "
+          "this protocol (each call finds the caches as the configuration before it in the shuffled order "
+          "left them).", "",
           "For information, the same with `simulate(..., points=2)` (not the target's configuration):", "",
           report.md_table(report.speedup_verdicts(rows, tswm="tswm simulate points=2"), without_floor, vfmt),
           "", f"### Sweep throughput at rtol {THROUGHPUT_RTOL:g} (target {report.SWEEP_TARGET:g} cases/s)", "",

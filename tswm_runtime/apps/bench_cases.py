@@ -89,7 +89,7 @@ def run_fixed_cost(case: Case, rtol: float, atol: float) -> Outcome:
     output rows, the Result). Its Outcome is not compared with the reference."""
     from tswm_runtime.apps.simulate import simulate
 
-    r = simulate(case.scene, dict(case.params), rtol=rtol, atol=atol, v1=case.v0, t_end=FIXED_COST_T_END)
+    r = simulate(case.scene, dict(case.params), rtol=rtol, atol=atol, **{**case.overrides(), "t_end": FIXED_COST_T_END})
     if r.status != "finished":
         raise RuntimeError(f"tswm: {r.status}: {r.message}")
     return Outcome(r.S1_max, float(r.v1[-1]), None, r.nfev, float(r.x1[-1] - r.x1[0]))

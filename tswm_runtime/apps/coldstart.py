@@ -2,7 +2,7 @@
 compiling them takes (issue 13: "with an empty cache, a message within 1 s that says what is
 being compiled and about how long").
 
-The integrators (``integrate_hybrid``, ``fill_rows``; for sweeps
+The integrators (``integrate_hybrid``, ``integrate_at``, ``fill_rows``; for sweeps
 ``run_batch``) and a generated model's entry functions (``rhs``, ``jac``, ``guards``,
 ``observe``, ``outputs``) are compiled eagerly, with explicit signatures, when their modules
 are imported; a method's step (``segment.attempt_function``) at its first run. Before that, ``announce`` asks numba's own cache machinery whether each

@@ -409,7 +409,7 @@ def lostmotion_point(printed_rows: list[dict], score: dict, best_score: dict, be
     if score["agree"] == score["cells"]:
         text += "With it every printed cell lies within the tolerance."
     else:
-        text += (f"Even so no plausible L explains the table: the printed values minus the computed ones are "
+        text += ("Even so no plausible L explains the table: the printed values minus the computed ones are "
                  + "; ".join(short) + " of the printed values, and "
                  + (f"no L in the bounds does better (the misfit grid's lowest cost over {lo * 1e3:g}-{hi * 1e3:g} mm, "
                     f"{prof['grid_best_cost']:.4g}, is not below the fit's {prof['fit_cost']:.4g})."

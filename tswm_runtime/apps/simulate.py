@@ -119,7 +119,7 @@ def settings(module: ModuleType, overrides: dict) -> dict:
     """The run settings: the scene's [run] table with ``overrides`` applied, validated (a new dict;
     settings that passed are remembered per module, like ``_VALID_ROWS``: validating cost ~5 us)."""
     try:  # the key tells 1 from True and 1.0, and 0.0 from -0.0 (equal in Python, not here)
-        key = (module, tuple((k, v.hex() if type(v) is float else (type(v), v)) for k, v in overrides.items()))
+        key = (module, tuple((k, type(v), float(v).hex() if isinstance(v, float) else v) for k, v in overrides.items()))
         known = _VALID_SETTINGS.get(key)
     except TypeError:  # an unhashable value: validated below, which names it
         key = known = None

@@ -1,11 +1,12 @@
 """The mode machine called from Python: ``integrate`` builds its arguments from plain values.
 
-``integrate_at`` is ``machine.integrate_hybrid`` with its seven functions (the machine itself,
-the method's step, the model's rhs, jac, guards, observe, impact) given as addresses
-(``integration.addresses``): numba unboxes a function-typed argument through Python, 1-2 us
-each and several times that right after other code has run, an address in nanoseconds. The
-machine is called through its address too, so its compiled code is not linked into this
-small kernel (as ``batch.run_batch`` calls it).
+``integrate_at`` is ``machine.integrate_hybrid`` with its six functions (the method's step,
+the model's rhs, jac, guards, observe, impact) given as addresses (``integration.addresses``):
+numba unboxes a function-typed argument through Python, 1-2 us each and several times that
+right after other code has run, an address in nanoseconds. The machine itself is called
+through its addresses too, so its compiled code is not linked into this small kernel (as
+``batch.run_batch`` calls it), and through its numba-ABI one, so that its exceptions (a
+MemoryError from its work arrays) reach Python.
 """
 import numpy as np
 from numba import types
@@ -13,34 +14,36 @@ from numba import types
 from tswm_runtime.hybrid.machine import HYBRID_SIG, integrate_hybrid
 from tswm_runtime.integration import cache_guard, segment
 from tswm_runtime.integration.addresses import function_at, guards_at, jac_at, rhs_at
-from tswm_runtime.integration.signatures import GUARDS_SIG, JAC_SIG, RHS_SIG, address
+from tswm_runtime.integration.signatures import GUARDS_SIG, JAC_SIG, RHS_SIG, address, jit_address
 from tswm_runtime.integration.structures import JUMP_WIDTH, EventLog, Outputs, Tolerances
 
-_machine_at = function_at(types.FunctionType(HYBRID_SIG))
+_machine_at = function_at(types.FunctionType(HYBRID_SIG), raises=True)
 _attempt_at = function_at(segment.AttemptFunction)
 
-#: integrate_hybrid's signature with its method and seven functions replaced by (addresses, method).
-ENTRY_SIG = HYBRID_SIG.return_type(types.UniTuple(types.int64, 7), types.int64, *HYBRID_SIG.args[7:])
+#: integrate_hybrid's signature with its method and six functions replaced by (addresses, method).
+ENTRY_SIG = HYBRID_SIG.return_type(types.UniTuple(types.int64, 8), types.int64, *HYBRID_SIG.args[7:])
 
 
 @cache_guard.compile_cached(ENTRY_SIG, error_model="numpy", nogil=True)
 def integrate_at(functions, method, p, tables, t0, y0, quad, mode0, t_end, tol, max_steps, out, log, mon, counters):
     """``integrate_hybrid`` with its functions at the addresses ``functions`` (see ``functions``)."""
-    machine, attempt, rhs, jac, guards, observe, impact = functions
-    return _machine_at(machine)(method, _attempt_at(attempt), rhs_at(rhs), jac_at(jac), guards_at(guards),
-                                guards_at(observe), guards_at(impact), p, tables, t0, y0, quad, mode0, t_end, tol,
-                                max_steps, out, log, mon, counters)
+    machine, machine_jit, attempt, rhs, jac, guards, observe, impact = functions
+    integrate = _machine_at(machine, machine_jit)
+    return integrate(method, _attempt_at(attempt), rhs_at(rhs), jac_at(jac), guards_at(guards), guards_at(observe),
+                     guards_at(impact), p, tables, t0, y0, quad, mode0, t_end, tol, max_steps, out, log, mon, counters)
 
 
 def functions(method: int, model) -> tuple:
-    """The addresses ``integrate_at`` takes: the mode machine, ``method``'s step, and the model's
-    rhs, jac, guards, observe and impact (DOPRI5 calls jac only to confirm an equilibrium
-    before holding it, ``steady``). Remembered per method and model functions."""
+    """The addresses ``integrate_at`` takes: the mode machine (C wrapper and numba ABI),
+    ``method``'s step, and the model's rhs, jac, guards, observe and impact (DOPRI5 calls jac
+    only to confirm an equilibrium before holding it, ``steady``). Remembered per method and
+    model functions."""
     key = (method, model.rhs, model.jac, model.guards, model.observe, model.impact)
     known = _FUNCTIONS.get(key)
     if known is None:
         attempt = segment.attempt_function(method)  # compiled, or loaded from the cache, on first use
-        known = (address(integrate_hybrid, HYBRID_SIG), getattr(attempt, "address", attempt),  # jit off: itself
+        known = (address(integrate_hybrid, HYBRID_SIG), jit_address(integrate_hybrid, HYBRID_SIG),
+                 getattr(attempt, "address", attempt),  # jit off: the function itself
                  address(model.rhs, RHS_SIG), address(model.jac, JAC_SIG), address(model.guards, GUARDS_SIG),
                  address(model.observe, GUARDS_SIG), address(model.impact, GUARDS_SIG))
         if len(_FUNCTIONS) >= 256:
@@ -67,7 +70,7 @@ def integrate(method, model, p, tables, y0, t_end, *, rtol, atol, t_out, max_eve
     quad = np.empty(0) if quad is None else np.ascontiguousarray(quad, dtype=np.float64)
     width = y0.size + quad.size
     t_out = np.ascontiguousarray(t_out, dtype=np.float64)
-    out = Outputs(t_out, np.full((t_out.size, width), np.nan), np.empty(t_out.size, np.int64),
+    out = Outputs(t_out, np.full((t_out.size, width), np.nan), np.full(t_out.size, -1, np.int64),
                   np.empty((t_out.size, p.size)))
     log = EventLog(np.empty(max_events), np.empty((max_events, 3), np.int64), np.empty((max_events, width)),
                    np.zeros((max_events, JUMP_WIDTH)))

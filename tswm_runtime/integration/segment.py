@@ -391,7 +391,6 @@ def run(method, attempt, rhs, jac, guards, observe, mode, p, t0, t_end, tol, max
     argument is borrowed (``borrow``) for the step loop.
     Returns (status, t, event index, next output index, proposed next step).
     """
-    n = y.size
     m = ev.directions.size
     y, p, quad, mon, counters, tol, ev, out, scratch = borrowed((y, p, quad, mon, counters, tol, ev, out, scratch))
     (work, f_a, y_a, y_b, f_b, err, y_ev, y_tmp, y_pert, q_tmp, G, g_tmp, sgn, cand, ignore, rate_a, rate_b, obs,

@@ -66,3 +66,13 @@ def address(function, signature):
     to call through ``addresses.function_at``; the function itself while numba's jit is off."""
     value = compiled(function, signature)
     return value if config.DISABLE_JIT else value.address
+
+
+def jit_address(function, signature):
+    """The address of ``function``'s compiled code for ``signature`` in numba's own calling
+    convention, which passes exceptions on (``addresses.function_at(..., raises=True)``); None
+    while numba's jit is off."""
+    if config.DISABLE_JIT:
+        return None
+    result = compiled(function, signature).cres
+    return result.library.get_pointer_to_function(result.fndesc.llvm_func_name)
