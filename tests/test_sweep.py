@@ -29,6 +29,9 @@ def _check_rows_match_simulate(scene, table, overrides):
             assert row["v1"] == r.v1[-1] and row["x1"] == pytest.approx(r.x1[-1], rel=1e-14, abs=1e-300)
         if r.KD1 is not None:
             assert row["KD1"] == r.KD1 and row["KD2"] == r.KD2
+            Ft1, Ft2 = (params.get(k, module.FIXED.get(k)) for k in ("Ft1", "Ft2"))  # KD = |S max| / Ft, eq. (10)
+            assert row["KD1"] == pytest.approx(abs(row["S1m"]) / Ft1, rel=1e-15)
+            assert row["KD2"] == pytest.approx(abs(row["S2m"]) / Ft2, rel=1e-15)
 
 
 def test_sweep_rows_equal_simulate_runup():
@@ -130,3 +133,19 @@ def test_parse_grid_single_value_and_duplicates():
     assert parse_grid(["F2=-5"], module)["F2"].tolist() == [-5.0]
     with pytest.raises(SweepInputError, match="twice"):
         parse_grid(["F2=1:2:2", "F2=3"], module)
+
+
+def test_mode_sequences_are_spelt_per_case_and_long_ones_end_in_an_ellipsis():
+    from types import SimpleNamespace
+
+    from tswm_runtime.apps.sweep import SEQ_LEN, sequence_texts
+
+    module = SimpleNamespace(MODE_REGIME=("tractive", "stick", "free flight"))
+    seq = np.full((4, SEQ_LEN), -1)
+    seq[0, :3] = [0, 1, 2]                 # a third mode written but not counted: left out
+    seq[1, :] = [0, 2] * (SEQ_LEN // 2)   # exactly SEQ_LEN modes: nothing left out
+    seq[2, :] = seq[1]                    # one mode more than kept
+    n_modes = np.array([2, SEQ_LEN, SEQ_LEN + 1, 0])
+    regimes, codes = sequence_texts(module, seq, n_modes)
+    assert list(regimes) == ["TS", "TG" * (SEQ_LEN // 2), "TG" * (SEQ_LEN // 2) + "…", ""]
+    assert list(codes) == ["0 1", " ".join(["0 2"] * (SEQ_LEN // 2)), " ".join(["0 2"] * (SEQ_LEN // 2)) + " …", ""]
