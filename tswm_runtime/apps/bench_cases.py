@@ -67,13 +67,15 @@ def _tswm_kind(guard: str) -> str:
     return "load" if guard.startswith("load") else guard
 
 
-def run_simulate(case: Case, rtol: float, atol: float, points: int | None = None) -> Outcome:
+def run_simulate(case: Case, rtol: float, atol: float, points: int | None = None,
+                 t_end: float | None = None) -> Outcome:
     """tswm as a user calls it: simulate(scene, params, rtol=, atol=, ...) (default output:
-    1001 points), then max |S1|, v1(t_end) and the events from the Result."""
+    1001 points; ``points``, ``t_end`` override the case's), then max |S1|, v1(t_end) and the
+    events from the Result."""
     from tswm_runtime.apps.simulate import simulate
 
-    extra = {} if points is None else {"points": points}
-    r = simulate(case.scene, dict(case.params), rtol=rtol, atol=atol, **case.overrides(), **extra)
+    extra = {k: v for k, v in (("points", points), ("t_end", t_end)) if v is not None}
+    r = simulate(case.scene, dict(case.params), rtol=rtol, atol=atol, **{**case.overrides(), **extra})
     if r.status != "finished":
         raise RuntimeError(f"tswm: {r.status}: {r.message}")
     return Outcome(r.S1_max, float(r.v1[-1]), [(_tswm_kind(e.guard), e.t) for e in r.events], r.nfev,
@@ -84,15 +86,9 @@ FIXED_COST_T_END = 1e-9  # s: one step, no event, no maximum inside
 
 
 def run_fixed_cost(case: Case, rtol: float, atol: float) -> Outcome:
-    """simulate() on the case's scene as ``run_simulate`` calls it (default output: 1001 points),
-    but to t_end = FIXED_COST_T_END: what a call costs without integrating (checks, one step,
-    output rows, the Result). Its Outcome is not compared with the reference."""
-    from tswm_runtime.apps.simulate import simulate
-
-    r = simulate(case.scene, dict(case.params), rtol=rtol, atol=atol, **{**case.overrides(), "t_end": FIXED_COST_T_END})
-    if r.status != "finished":
-        raise RuntimeError(f"tswm: {r.status}: {r.message}")
-    return Outcome(r.S1_max, float(r.v1[-1]), None, r.nfev, float(r.x1[-1] - r.x1[0]))
+    """``run_simulate`` to t_end = FIXED_COST_T_END: what a call costs without integrating
+    (checks, one step, output rows, the Result). Its Outcome is not compared with the reference."""
+    return run_simulate(case, rtol, atol, t_end=FIXED_COST_T_END)
 
 
 def run_sweep(case: Case, rtol: float, atol: float, n: int) -> Outcome:

@@ -231,8 +231,19 @@ def _output_times(t_end: float, points: int) -> np.ndarray:
     return _time_grid(t_end, points).copy()
 
 
-_ENTRY_POINTS: dict = {}
+def method_step(method: str):
+    """The step of ``method`` (a METHODS name), ``segment.attempt_function``: on its first use in
+    this process it compiles, if not cached, after ``coldstart`` has said so."""
+    if method not in _PREPARED:
+        coldstart.announce((method,))
+        segment.attempt_function(METHODS[method])
+        coldstart.done()
+        _PREPARED.add(method)
+    return segment.attempt_function(METHODS[method])
+
+
 _PREPARED: set = set()  # methods whose step is compiled or loaded in this process
+_ENTRY_POINTS: dict = {}
 
 
 def _entry_point(kernel):
@@ -272,11 +283,7 @@ def simulate(model: str | ModuleType, params: dict | None = None, *, interruptib
     n = len(module.STATES)
     y0, quad = initial_state(module, run)
     t_out = _output_times(run["t_end"], run["points"])
-    if run["method"] not in _PREPARED:  # the method's step compiles on its first run, if not cached: say so first
-        coldstart.announce((run["method"],))
-        segment.attempt_function(METHODS[run["method"]])
-        coldstart.done()
-        _PREPARED.add(run["method"])
+    method_step(run["method"])
     status, t_stop, n_ev, last, need, first, out, log, mon, counters = entry.integrate(
         METHODS[run["method"]], module, p, modes.tables(module), y0, run["t_end"], rtol=run["rtol"],
         atol=run["atol"], t_out=t_out, max_events=run["max_events"], quad=quad, hmax=run["hmax"],

@@ -51,9 +51,9 @@ from tswm_runtime.model import checks, modes  # noqa: E402
 from tswm_runtime.model.contract import load_module  # noqa: E402
 from tswm_runtime.common.files import write_atomic  # noqa: E402
 from tswm_runtime.results.result import STATUS_NAMES  # noqa: E402
-from tswm_runtime.integration import segment  # noqa: E402
 from tswm_runtime.integration.structures import Tolerances  # noqa: E402
-from tswm_runtime.apps.simulate import METHODS, initial_state, settings, unknown_parameter, with_latches  # noqa: E402
+from tswm_runtime.apps.simulate import (METHODS, initial_state, method_step, settings, unknown_parameter,  # noqa: E402
+                                        with_latches)
 
 coldstart.done()
 
@@ -229,11 +229,7 @@ def run_cases(module: ModuleType, P: np.ndarray, run: dict):
     seq = np.full((cases, SEQ_LEN), -1, np.int64)
     if valid.any():
         f, i, sq = out_f[valid], out_i[valid], seq[valid]
-        method = METHODS[run["method"]]
-        coldstart.announce((run["method"],))
-        attempt = segment.attempt_function(method)  # the method's step compiles on its first run, if not cached
-        coldstart.done()
-        batch.run_batch(batch.INTEGRATE, method, attempt, module.rhs, module.jac, module.guards, module.observe,
+        batch.run_batch(batch.INTEGRATE, METHODS[run["method"]], method_step(run["method"]), module.rhs, module.jac, module.guards, module.observe,
                         module.impact, np.ascontiguousarray(full[valid]), modes.tables(module), y0, quad,
                         run["t_end"], Tolerances(run["rtol"], np.full(y0.size, run["atol"]), 0.0, run["hmax"]),
                         run["max_steps"], run["max_events"], len(module.OBSERVABLES), f, i, sq)
