@@ -28,7 +28,7 @@ from derivation import mechanics
 from derivation.mechanics import S1, S2, t
 from derivation.model import Model, compose_laws as _compose, param_symbol
 from derivation.scene import NAME, SceneError
-from tswm_runtime.common.files import EditedModuleError, write_atomic
+from tswm_common.files import EditedModuleError, write_atomic
 
 GENERATOR_VERSION = "0.1.0"
 HEADER_LINES = 5
@@ -133,7 +133,7 @@ def generator_digest() -> str:
     root = resources.files("derivation")
     for name in GENERATOR_SOURCES:
         h.update(name.encode() + root.joinpath(*name.split("/")).read_bytes())
-    h.update(b"units.py" + (resources.files("tswm_runtime") / "common" / "units.py").read_bytes())   # scene units
+    h.update(b"units.py" + (resources.files("tswm_common") / "units.py").read_bytes())   # scene units
     return h.hexdigest()
 
 

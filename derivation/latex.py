@@ -7,7 +7,7 @@ import subprocess
 import tempfile
 from pathlib import Path
 
-from tswm_runtime.common.files import write_atomic
+from tswm_common.files import write_atomic
 
 TEX_PACKAGES = "texlive-latex-base texlive-latex-recommended"
 

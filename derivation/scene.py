@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import NoReturn
 
-from tswm_runtime.common import units
+from tswm_common import units
 
 DEG = math.pi / 180
 FLANKS = ("a", "b")

@@ -1,11 +1,11 @@
-"""Compiled functions handed to a kernel as addresses (tswm_runtime.integration.addresses)."""
+"""Compiled functions handed to a kernel as addresses (tswm_runtime.jit.addresses)."""
 import numpy as np
 import pytest
 from numba import njit, types
 from numba.core.errors import TypingError
 
-from tswm_runtime.integration.addresses import function_at, guards_at
-from tswm_runtime.integration.signatures import GUARDS_SIG, address, jit_address
+from tswm_runtime.jit.addresses import function_at, guards_at
+from tswm_runtime.jit.signatures import GUARDS_SIG, address, jit_address
 
 HALF_SIG = types.float64(types.float64)
 

@@ -6,9 +6,10 @@ import math
 import pandas as pd
 import pytest
 
-from tswm_runtime.apps import bench, bench_report
-from tswm_runtime.apps.bench_cases import CASES, errors, reference, run_peer
-from tswm_runtime.apps.bench_peers import PeerGaveUp, available_methods, peer_run
+from tswm_runtime.bench import bench
+from tswm_runtime.bench import report as bench_report
+from tswm_runtime.bench.cases import CASES, errors, reference, run_peer
+from tswm_runtime.bench.peers import PeerGaveUp, available_methods, peer_run
 from tswm_runtime.cli import main
 
 RUNUP, FLANK, STICK = CASES["run-up then load"], CASES["flank switch near V0"], CASES["decelerate-and-stick"]
@@ -83,7 +84,7 @@ def test_verdicts_report_the_measured_factor():
 
 def test_rounds_time_every_configuration_once_each_in_its_own_order():
     """No configuration always follows the same one (a call finds the caches its predecessor left)."""
-    from tswm_runtime.apps.bench_peers import Outcome
+    from tswm_runtime.bench.peers import Outcome
 
     calls = []
     configs = [(RUNUP, bench_report.TSWM_FIXED_COST, 1e-6, lambda i=i: calls.append(i) or Outcome(0.0, 0.0, None, 1), 1)

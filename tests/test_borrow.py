@@ -1,4 +1,4 @@
-"""Borrowed views (tswm_runtime.integration.borrow): the same memory, without an owner."""
+"""Borrowed views (tswm_runtime.jit.borrow): the same memory, without an owner."""
 from collections import namedtuple
 
 import numpy as np
@@ -8,7 +8,7 @@ from numba.core import cgutils
 from numba.core.errors import TypingError
 from numba.extending import intrinsic
 
-from tswm_runtime.integration.borrow import borrowed
+from tswm_runtime.jit.borrow import borrowed
 
 Pair = namedtuple("Pair", "scale values")
 

@@ -7,7 +7,7 @@ import pytest
 
 from derivation.scene import SceneError, parse_scene
 from tswm_runtime.cli import main
-from tswm_runtime.apps.simulate import MAX_EVENTS, MAX_POINTS, SimulationInputError, simulate
+from tswm_runtime.simulation.simulate import MAX_EVENTS, MAX_POINTS, SimulationInputError, simulate
 
 from test_injection import PAPER
 
@@ -98,7 +98,8 @@ def test_paper_and_bench_refuse_unusable_sizes_and_cases(argv, named, capsys, tm
 def test_promises_page_states_the_limits_the_code_enforces():
     from pathlib import Path
 
-    from tswm_runtime.apps import simulate as sim, sweep
+    from tswm_runtime.simulation import simulate as sim
+    from tswm_runtime.sweeps import sweep
 
     page = (Path(__file__).resolve().parents[1] / "docs" / "promises.md").read_text()
     rows = {

@@ -11,10 +11,10 @@ from hypothesis import given, settings, strategies as st
 from derivation.codegen import body_is_intact, generate_module, module_name
 from derivation.model import build_model
 from derivation.scene import load_scene, shipped_scenes
-from tswm_runtime.integration import signatures
+from tswm_runtime.jit import signatures
 from tswm_runtime.cli import main
 from tswm_runtime.model.contract import check_module, load_module
-from tswm_runtime.apps.paper_gear import kloss, rho as rho_paper
+from tswm_runtime.reference.paper_gear import kloss, rho as rho_paper
 from hard_cases.reference import printed as hand_literal
 
 GENERATED = Path(__file__).resolve().parents[1] / "generated"

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-from tswm_runtime.apps import coldstart
+from tswm_runtime.jit import coldstart
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -55,9 +55,9 @@ def test_an_empty_cache_is_cold_and_checking_it_compiles_nothing(tmp_path):
 
 WARM_CHECK = """
 import json
-from tswm_runtime.apps import coldstart
-from tswm_runtime.apps.simulate import simulate
-from tswm_runtime.integration.cache_guard import kernel_digest
+from tswm_runtime.jit import coldstart
+from tswm_runtime.simulation.simulate import simulate
+from tswm_runtime.jit.cache_guard import kernel_digest
 
 model = coldstart.model_source("paper")   # (None once the module is imported)
 simulate("paper", points=2)   # compiled now, or loaded: in numba's cache either way
@@ -84,7 +84,7 @@ def test_a_warm_cache_is_found_and_a_stale_kernel_marker_is_not():
 def test_a_run_compiles_or_loads_only_the_step_of_its_own_method():
     """The methods' steps are first-class function arguments of the mode machine, compiled (or
     loaded from the cache) on a method's first run: a dopri5 run never compiles rosenbrock23."""
-    code = ("from tswm_runtime.apps.simulate import simulate\n"
+    code = ("from tswm_runtime.simulation.simulate import simulate\n"
             "from tswm_runtime.integration import segment\n"
             "simulate('paper', method='dopri5', points=2)\n"
             "print(len(segment.dopri5_attempt.signatures), len(segment.rosenbrock23_attempt.signatures))")
@@ -111,7 +111,7 @@ def test_the_message_names_what_is_compiled_and_a_measured_time():
     (["-m", "tswm_runtime.cli", "simulate", "paper"], ("integration kernels", "the model `paper`")),
     (["-m", "tswm_runtime.cli", "sweep", "paper", "--samples", "4", "--range", "F2=-20000:5000"],
      ("integration kernels", "sweep kernel", "the model `paper`")),
-    (["-c", "from tswm_runtime.apps.simulate import simulate; simulate('paper')"], ("integration kernels",)),
+    (["-c", "from tswm_runtime.simulation.simulate import simulate; simulate('paper')"], ("integration kernels",)),
 ], ids=["cli-simulate", "cli-sweep", "api-simulate"])
 def test_a_first_run_with_an_empty_cache_says_what_it_compiles(tmp_path, argv, expected):
     line = _first_stderr_line([sys.executable, *argv], tmp_path)

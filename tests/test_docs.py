@@ -4,7 +4,7 @@ import subprocess
 from pathlib import Path
 
 from derivation.scene import shipped_scenes
-from tswm_runtime.apps.paper_data import TABLE3_PRINTED
+from tswm_runtime.paper.data import TABLE3_PRINTED
 
 ROOT = Path(__file__).resolve().parents[1]
 CHECKED = ("README.md", "docs", "derivation", "tswm_runtime", "tests", "tools", "pyproject.toml")
@@ -37,7 +37,7 @@ def test_every_docs_file_named_in_the_repository_exists():
 
 
 def test_paper_md_table3_is_paper_data():
-    """docs/paper.md's Table 3 and tswm_runtime/apps/paper_data.py hold the same printed numbers."""
+    """docs/paper.md's Table 3 and tswm_runtime/paper/data.py hold the same printed numbers."""
     text = (ROOT / "docs" / "paper.md").read_text()
     rows = [[c.strip() for c in line.strip().strip("|").split("|")]
             for line in text[text.index("## Table 3"):].splitlines() if re.match(r"\| \d+ \|", line)]

@@ -1,6 +1,6 @@
 """Calibration (tswm fit) against measurements made by the independent quadrature reference.
 
-The "measurements" come from ``tswm_runtime.apps.quadrature`` (the hand-written force balance
+The "measurements" come from ``tswm_runtime.reference.quadrature`` (the hand-written force balance
 solved by mpmath quadrature at 34 digits; it imports nothing else of tswm) for the paper's
 gear at a known m2, so a fit that recovers m2 shows that the model, the batch, the
 residuals and the optimiser agree with physics written independently, not with themselves.
@@ -12,9 +12,9 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from tswm_runtime.apps import quadrature as q
-from tswm_runtime.apps.fit import PENALTY, FitInputError, fit, read_measured
-from tswm_runtime.apps.fit_report import write_outputs
+from tswm_runtime.reference import quadrature as q
+from tswm_runtime.fitting.fit import PENALTY, FitInputError, fit, read_measured
+from tswm_runtime.fitting.report import write_outputs
 from tswm_runtime.cli import main
 from tswm_runtime.model.contract import load_module
 

@@ -10,8 +10,8 @@ import math
 import numpy as np
 import pytest
 
-from tswm_runtime.apps.paper_gear import cones
-from tswm_runtime.apps.simulate import simulate
+from tswm_runtime.reference.paper_gear import cones
+from tswm_runtime.simulation.simulate import simulate
 
 SCENE = """
 name = "closed-form"

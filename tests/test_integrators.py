@@ -16,8 +16,8 @@ from tswm_runtime.integration import events as ev
 from tswm_runtime.integration import rosenbrock as ros
 from tswm_runtime.integration import segment as seg
 from tswm_runtime.integration.single import integrate_segment
-from tswm_runtime.integration.signatures import GUARDS_SIG, JAC_SIG, RHS_SIG
-from tswm_runtime.integration.structures import EventSettings, Tolerances
+from tswm_runtime.jit.signatures import GUARDS_SIG, JAC_SIG, RHS_SIG
+from tswm_runtime.jit.structures import EventSettings, Tolerances
 
 METHODS = [seg.DOPRI5, seg.ROSENBROCK23]
 METHOD_IDS = ["dopri5", "rosenbrock23"]

@@ -11,9 +11,9 @@ import sys
 import numpy as np
 import pytest
 
-from tswm_runtime.apps import paper_report as pr
-from tswm_runtime.apps.paper_data import FIGURE2, TABLE3_PRINTED, printed
-from tswm_runtime.apps.simulate import simulate
+from tswm_runtime.paper import report as pr
+from tswm_runtime.paper.data import FIGURE2, TABLE3_PRINTED, printed
+from tswm_runtime.simulation.simulate import simulate
 
 NEED_CHROMIUM = os.environ.get("CI") == "true"   # CI installs chromium and must render the report
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")

@@ -6,11 +6,11 @@ from pathlib import Path
 
 import pytest
 
-from tswm_runtime.integration import cache_guard
+from tswm_runtime.jit import cache_guard
 
 ROOT = Path(__file__).parents[1]
 KERNEL_USER = '''
-from tswm_runtime.integration.cache_guard import compile_cached
+from tswm_runtime.jit.cache_guard import compile_cached
 
 @compile_cached("float64(float64)")
 def twice(x):
@@ -62,7 +62,7 @@ def test_a_stale_kernel_digest_purges_the_kernel_caches_once_and_only_there(tmp_
 def test_a_module_loaded_by_path_runs_again_from_its_cache(tmp_path):
     """numba rebuilds a cached function's module by name: load_module must register it."""
     shutil.copy(ROOT / "generated" / "paper.py", tmp_path / "paper.py")
-    code = ("from tswm_runtime.apps.simulate import simulate; "
+    code = ("from tswm_runtime.simulation.simulate import simulate; "
             f"print(simulate({str(tmp_path / 'paper.py')!r}, {{'F2': -1000.0}}).status)")
     assert _python(code, tmp_path).strip() == "finished"
     assert list(tmp_path.glob("__pycache__/*.nbi")), "the model was cached"

@@ -6,7 +6,7 @@ from importlib.resources import files
 
 import pytest
 
-from tswm_runtime.common import units
+from tswm_common import units
 from derivation.scene import SceneError, load_scene, parse_scene, shipped_scenes
 
 # A valid scene as {section: {key: TOML value text}}; "" is the top level.

@@ -17,7 +17,7 @@ from matplotlib.image import imread
 import generated
 from tswm_runtime.cli import main
 from tswm_runtime.results.export import SERIES
-from tswm_runtime.apps.simulate import simulate
+from tswm_runtime.simulation.simulate import simulate
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 
@@ -318,7 +318,7 @@ def test_the_simulation_path_imports_neither_sympy_nor_derivation(tmp_path):
         "import sys\n"
         "from tswm_runtime.cli import main\n"
         f"assert main(['simulate', 'paper', '--t-end', '0.01', '--points', '5', '-o', {str(tmp_path)!r}]) == 0\n"
-        "from tswm_runtime.apps.sweep import sweep\n"
+        "from tswm_runtime.sweeps.sweep import sweep\n"
         "sweep('paper', [[200.0, -1000.0]], {'t_end': 0.01})\n"
         "print(sorted({m.split('.')[0] for m in sys.modules} & {'sympy', 'derivation'}))\n")
     out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, check=True).stdout

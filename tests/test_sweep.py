@@ -9,8 +9,8 @@ import pytest
 from tswm_runtime.cli import main
 from tswm_runtime.model.contract import load_module
 from tswm_runtime.results.result import STATUS_NAMES
-from tswm_runtime.apps.simulate import simulate
-from tswm_runtime.apps.sweep import REGIME_LETTERS, SweepInputError, grid_cases, parse_grid, sweep
+from tswm_runtime.simulation.simulate import simulate
+from tswm_runtime.sweeps.sweep import REGIME_LETTERS, SweepInputError, grid_cases, parse_grid, sweep
 
 LETTER = REGIME_LETTERS
 
@@ -138,7 +138,7 @@ def test_parse_grid_single_value_and_duplicates():
 def test_mode_sequences_are_spelt_per_case_and_long_ones_end_in_an_ellipsis():
     from types import SimpleNamespace
 
-    from tswm_runtime.apps.sweep import SEQ_LEN, sequence_texts
+    from tswm_runtime.sweeps.sweep import SEQ_LEN, sequence_texts
 
     module = SimpleNamespace(MODE_REGIME=("tractive", "stick", "free flight"))
     seq = np.full((4, SEQ_LEN), -1)

@@ -8,10 +8,11 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from tswm_runtime.apps import chunks, sweep as sweep_module
+from tswm_runtime.sweeps import chunks
+from tswm_runtime.sweeps import sweep as sweep_module
 from tswm_runtime.cli import main
 from tswm_runtime.model.contract import load_module
-from tswm_runtime.apps.sweep import grid_cases, parse_grid, sweep
+from tswm_runtime.sweeps.sweep import grid_cases, parse_grid, sweep
 
 SETTINGS = {"v1": 2.0}
 

@@ -13,9 +13,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tswm_runtime.apps import coldstart, warmup
-from tswm_runtime.apps import sweep as sweep_app
-from tswm_runtime.apps.simulate import simulate
+from tswm_runtime.jit import coldstart
+from tswm_runtime.startup import warmup
+from tswm_runtime.sweeps import sweep as sweep_app
+from tswm_runtime.simulation.simulate import simulate
 from tswm_runtime.cli import main
 from tswm_runtime.model.contract import load_module
 
@@ -32,7 +33,7 @@ INTERPRETED = """
 import json, sys
 import numba
 numba.config.DISABLE_JIT = True
-from tswm_runtime.apps.simulate import simulate
+from tswm_runtime.simulation.simulate import simulate
 out = {}
 for scene in sys.argv[1:]:
     for method in ("dopri5", "rosenbrock23"):
@@ -92,7 +93,7 @@ def test_a_cold_cli_sweep_is_interpreted_and_gives_the_compiled_table(tmp_path):
     needed); its table is the compiled sweep's for the same rows (the chunk keys prove the rows)."""
     import pandas as pd
 
-    from tswm_runtime.apps.sweep import sample_cases, sweep
+    from tswm_runtime.sweeps.sweep import sample_cases, sweep
 
     out = tmp_path / "out"
     run = subprocess.run([sys.executable, "-m", "tswm_runtime.cli", "sweep", "paper", "--samples", "6", "--range",
@@ -148,7 +149,7 @@ def test_a_second_background_compile_leaves_at_once_while_the_lock_is_held(tmp_p
                           capture_output=True, text=True, cwd=ROOT, env=env, check=True).stdout.strip()
     with open(lock, "a") as handle:
         fcntl.flock(handle, fcntl.LOCK_EX)
-        run = subprocess.run([sys.executable, "-m", "tswm_runtime.apps.warmup", "integrate", "--model", "paper"],
+        run = subprocess.run([sys.executable, "-m", "tswm_runtime.startup.warmup", "integrate", "--model", "paper"],
                              capture_output=True, text=True, cwd=ROOT, env=env, timeout=60)
     assert run.returncode == 0 and "holds the lock" in run.stdout, run.stderr
     assert not list(tmp_path.rglob("*.nbi"))
@@ -172,7 +173,7 @@ def test_a_sweep_compiles_first_when_interpreting_its_cases_would_take_longer(mo
 def test_python_only_arithmetic_in_an_interpreted_run_reruns_the_command_compiled(monkeypatch):
     """x / 0.0 on Python floats raises where compiled code (error_model numpy) gives inf: the
     command is run again, compiled, with the same arguments."""
-    import tswm_runtime.apps.simulate as sim
+    import tswm_runtime.simulation.simulate as sim
 
     reruns = []
     monkeypatch.setattr(warmup, "interpret_if_cold",
@@ -188,7 +189,7 @@ def test_python_only_arithmetic_in_an_interpreted_run_reruns_the_command_compile
 
 
 def test_an_error_in_the_kernel_thread_reaches_the_caller():
-    from tswm_runtime.apps.simulate import _in_a_thread
+    from tswm_runtime.simulation.simulate import _in_a_thread
 
     def kernel():
         raise OverflowError("math range error")

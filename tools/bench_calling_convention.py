@@ -31,7 +31,7 @@ ROOT = Path(__file__).resolve().parents[1]
 MODEL_SOURCE = textwrap.dedent('''
     """Harmonic oscillator in the generated-module contract (benchmark model)."""
     from numba import float64, int64, njit
-    from tswm_runtime.integration.signatures import GUARDS_SIG, JAC_SIG, RHS_SIG, RhsFunction, VECTOR
+    from tswm_runtime.jit.signatures import GUARDS_SIG, JAC_SIG, RHS_SIG, RhsFunction, VECTOR
 
     @njit(RHS_SIG, cache=True)
     def rhs(mode, t, y, p, dy):

@@ -23,7 +23,7 @@ from derivation.codegen import compose_laws, generate_module
 from derivation.model import build_model, param_symbol
 from derivation.scene import load_scene, parse_scene
 from tswm_runtime.model.contract import load_module
-from tswm_runtime.integration.signatures import RhsFunction
+from tswm_runtime.jit.signatures import RhsFunction
 
 ROOT = Path(__file__).resolve().parents[1]
 CALLS = 2_000_000

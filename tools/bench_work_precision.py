@@ -1,7 +1,7 @@
 """Work-precision report: tswm (simulate(), sweep()) against careful-user peers (scipy's
 solve_ivp, SUNDIALS CVODE via scikit-sundae), error against the independent quadrature
 reference versus median wall time per whole call, sweep throughput, and the issue-13
-targets with measured factors. The code lives in tswm_runtime/apps/bench.py (also behind
+targets with measured factors. The code lives in tswm_runtime/bench/bench.py (also behind
 `tswm bench`). Run:
     .venv/bin/python tools/bench_work_precision.py [--quick] [-o DIR] [--cases N]
 """
@@ -10,7 +10,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from tswm_runtime.apps import bench
+from tswm_runtime.bench import bench
 
 if __name__ == "__main__":
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])

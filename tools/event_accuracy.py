@@ -7,8 +7,8 @@ still runs up) in units of rtol, and the held equilibrium tail at T = 100 s.
 
 Run: ``python tools/event_accuracy.py``
 """
-from tswm_runtime.apps import quadrature as q
-from tswm_runtime.apps.simulate import simulate
+from tswm_runtime.reference import quadrature as q
+from tswm_runtime.simulation.simulate import simulate
 
 METHODS = ("dopri5", "rosenbrock23")
 

@@ -1,6 +1,6 @@
 """Measure numba's compile times with an empty cache and store them for the cold-start message.
 
-Writes tswm_runtime/apps/compile_times.json (read by ``tswm_runtime.apps.coldstart``): seconds
+Writes tswm_runtime/apps/compile_times.json (read by ``tswm_runtime.jit.coldstart``): seconds
 for each group of kernels and each shipped model, each measured in a fresh process with a
 fresh NUMBA_CACHE_DIR:
 
@@ -29,7 +29,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
-OUT = ROOT / "tswm_runtime" / "apps" / "compile_times.json"
+OUT = ROOT / "tswm_runtime" / "jit" / "compile_times.json"
 
 
 def timed(code: str, cache_dir: str, setup: str = "") -> float:
@@ -68,7 +68,7 @@ def main() -> int:
         for scene in args.scenes.split(","):
             seconds[f"model:{scene}"] = timed(
                 f"simulate(load_module({scene!r}), points=2)", cache,
-                "from tswm_runtime.apps.simulate import simulate\n"
+                "from tswm_runtime.simulation.simulate import simulate\n"
                 "from tswm_runtime.model.contract import load_module")
             print(f"model {scene} {seconds[f'model:{scene}']:.1f} s", flush=True)
     info = {**provenance.machine(), "numba": numba.__version__, "python": sys.version.split()[0],

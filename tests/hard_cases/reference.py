@@ -1,7 +1,7 @@
 """An independent reference for the paper's gear: hand-written formulas and scipy.
 
 Nothing here comes from derivation/ or generated/: the hand formulas of
-``tswm_runtime.apps.paper_gear`` (force balance of a sliding wedge, Kloss' motor curve,
+``tswm_runtime.reference.paper_gear`` (force balance of a sliding wedge, Kloss' motor curve,
 the paper's friction law) and scipy's DOP853 at tight tolerance with its own event
 location for phi = 0.
 """
@@ -10,7 +10,7 @@ import math
 import numpy as np
 from scipy.integrate import solve_ivp
 
-from tswm_runtime.apps.paper_gear import M1, accel, phi
+from tswm_runtime.reference.paper_gear import M1, accel, phi
 
 TIGHT = dict(method="DOP853", rtol=1e-12, atol=1e-14)
 

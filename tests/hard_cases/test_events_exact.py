@@ -2,7 +2,7 @@
 
 Expected values come from the independent quadrature reference (``quadrature``: the
 force balance written by hand, solved by quadrature in v1 at 34 digits) or from scipy's
-DOP853 at rtol 1e-13 on hand formulas (``tswm_runtime.apps.paper_gear``), never from tswm.
+DOP853 at rtol 1e-13 on hand formulas (``tswm_runtime.reference.paper_gear``), never from tswm.
 """
 import math
 
@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from tswm_runtime.apps import quadrature as q
-from tswm_runtime.apps import paper_gear as gear
-from tswm_runtime.apps.simulate import SimulationInputError, simulate
+from tswm_runtime.reference import quadrature as q
+from tswm_runtime.reference import paper_gear as gear
+from tswm_runtime.simulation.simulate import SimulationInputError, simulate
 
 METHODS = ("dopri5", "rosenbrock23")
 # tswm guard -> the reference's event kind
@@ -225,7 +225,7 @@ def test_cli_refuses_a_free_value_out_of_range_with_exit_2(capsys):
 
 
 def test_sweep_records_invalid_cases_and_goes_on():
-    from tswm_runtime.apps.sweep import sweep
+    from tswm_runtime.sweeps.sweep import sweep
 
     P = np.array([[-100.0, -5000.0], [0.0, -5000.0], [100.0, -5000.0]])  # (m2, F2)
     table = sweep("paper", P, {"t_end": 0.05}).table
@@ -244,7 +244,7 @@ def test_every_status_message_builds_for_every_mode():
     from tswm_runtime.hybrid import machine as hybrid
     from tswm_runtime.model.contract import load_module
     from tswm_runtime.results.result import STATUS_NAMES, Event, status_message
-    from tswm_runtime.apps.simulate import parameter_vector
+    from tswm_runtime.simulation.simulate import parameter_vector
 
     for scene in ("paper-runup", "seating", "paper-literal", "one-sided", "backlash", "mesh", "lost-motion"):
         m = load_module(scene)

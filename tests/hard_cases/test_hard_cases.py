@@ -11,8 +11,8 @@ import pytest
 from scipy.integrate import solve_ivp
 
 from hard_cases import reference as ref
-from tswm_runtime.apps import paper_gear as gear
-from tswm_runtime.apps.simulate import simulate
+from tswm_runtime.reference import paper_gear as gear
+from tswm_runtime.simulation.simulate import simulate
 
 PAPER = Path(__file__).parents[2] / "derivation" / "scenes" / "paper.toml"
 TABLE3 = [(m2, F2) for m2 in (100.0, 200.0, 300.0) for F2 in (-5000.0, -10000.0, -15000.0)]

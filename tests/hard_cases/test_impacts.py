@@ -12,7 +12,7 @@ import math
 import numpy as np
 import pytest
 
-from tswm_runtime.apps.simulate import simulate
+from tswm_runtime.simulation.simulate import simulate
 from tswm_runtime.hybrid.impact import OK, collide
 
 from hard_cases.reference import energy_residual, impact_drops
@@ -323,8 +323,8 @@ def test_a_sweep_counts_the_impacts_and_their_energy(lab):
     """The sweep's impacts and impact_energy columns, per case, against the closed forms of the
     first test: e = 0 takes one impact and ends the normal motion (the lost energy is that
     impact's); e = 1 loses nothing however often it bounces."""
-    from tswm_runtime.apps.simulate import settings
-    from tswm_runtime.apps.sweep import run_cases
+    from tswm_runtime.simulation.simulate import settings
+    from tswm_runtime.sweeps.sweep import run_cases
 
     m1, m2, F1, c = 10.0, 100.0, 50.0, 1e-4
     names = lab.PARAM_NAMES

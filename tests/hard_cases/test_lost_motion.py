@@ -11,7 +11,7 @@ import math
 import numpy as np
 import pytest
 
-from tswm_runtime.apps.simulate import simulate
+from tswm_runtime.simulation.simulate import simulate
 
 from hard_cases.reference import energy_residual, impact_drops
 from hard_cases.test_impacts import COS, GAMMA, SIN, TIGHT, sliding_a_accel
@@ -258,7 +258,7 @@ def test_a_pickup_that_cannot_stop_the_stem_jams(lab):
     (dv1/dP = -tan(gamma - rho) / D > 0), so the wheel gives way forward: with a heavy stem
     falling back onto it, d(v3 - v2)/dP = 1/m3 - tan(gamma) dv1/dP <= 0 and no impulse stops the
     approach (the impulse counterpart of D <= 0). Written by hand; the run's message names it."""
-    from tswm_runtime.apps.simulate import parameter_vector
+    from tswm_runtime.simulation.simulate import parameter_vector
     from tswm_runtime.hybrid.impact import JAMMED, OK, pickup
     from tswm_runtime.hybrid.machine import INCONSISTENT, NEED_NOTHING
     from tswm_runtime.results.result import Event, Jump, status_message
@@ -282,8 +282,8 @@ def test_a_sweep_counts_the_pickups_and_their_energy(lab):
     """The sweep's impacts and impact_energy columns against the hand pickup: e = 0 picks the stem
     up in one impact (rigid wedge, rho = 5 deg) for any travel; e = 1 without friction bounces
     and loses nothing but the last, plastic, bounce's speck of energy."""
-    from tswm_runtime.apps.simulate import settings
-    from tswm_runtime.apps.sweep import run_cases
+    from tswm_runtime.simulation.simulate import settings
+    from tswm_runtime.sweeps.sweep import run_cases
 
     rho = math.radians(5.0)
     cases = [dict(lost_motion_travel=L, friction_rho=rho, lost_motion_restitution=0.0) for L in (1e-3, 3e-3)]

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from tswm_runtime.apps.simulate import simulate
+from tswm_runtime.simulation.simulate import simulate
 
 from hard_cases.test_impacts import COS, LAB, SIN, normal_accel
 

@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from tswm_runtime.apps import quadrature as q
-from tswm_runtime.apps import paper_gear as gear
+from tswm_runtime.reference import quadrature as q
+from tswm_runtime.reference import paper_gear as gear
 
 DOP = dict(method="DOP853", rtol=1e-13, atol=1e-15, dense_output=True)
 

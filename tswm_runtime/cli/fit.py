@@ -6,22 +6,25 @@ import math
 import sys
 import time
 
+from tswm_runtime.cli.common import (UsageError, add_setting_options, output_directory, setting_error,
+                                     setting_overrides)
+
 FIT_SETTINGS = ("t_end", "rtol", "atol", "method", "max_steps", "max_events", "points")
 
 
-def _fit(args: argparse.Namespace) -> int:
+def run(args: argparse.Namespace) -> int:
     start = time.perf_counter()
-    from tswm_runtime.cli import UsageError, _load_model, output_directory, setting_error, setting_overrides
-    from tswm_runtime.apps.fit import FitInputError, fit
-    from tswm_runtime.apps.fit_report import write_outputs
-    from tswm_runtime.apps.simulate import SimulationInputError
+    from tswm_runtime.model.scenes import load_model
+    from tswm_runtime.fitting.fit import FitInputError, fit
+    from tswm_runtime.fitting.report import write_outputs
+    from tswm_runtime.simulation.simulate import SimulationInputError
 
     output_directory(args.output)
     try:
         import pandas  # noqa: F401  (reads the measured file)
     except ModuleNotFoundError:
         raise UsageError("tswm fit reads CSV and Parquet with pandas and pyarrow: pip install -e '.[sweep]'") from None
-    module = _load_model(args.scene)
+    module = load_model(args.scene)
     overrides = setting_overrides(args, FIT_SETTINGS)
     try:
         result = fit(module, args.measured, args.free, overrides=overrides, starts=args.starts,
@@ -57,9 +60,6 @@ def _fit(args: argparse.Namespace) -> int:
 
 
 def add_parser(sub) -> None:
-    """Add ``fit`` to the ``tswm`` subparsers."""
-    from tswm_runtime.cli import add_setting_options
-
     fit = sub.add_parser(
         "fit", help="identify free parameters from measured peaks or time histories (least squares)",
         description="Fit free parameters of a scene to measured values: peaks (one row per case: known "
@@ -89,4 +89,4 @@ def add_parser(sub) -> None:
                      help="write DIR/fit-report.md, fit.json, misfit.png (default tswm-report/fit)")
     fit.add_argument("--no-plot", action="store_true", help="no misfit grid and no misfit.png")
     fit.add_argument("--no-progress", action="store_true", help="no progress bars")
-    fit.set_defaults(run=_fit)
+    fit.set_defaults(run=run)

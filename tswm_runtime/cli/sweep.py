@@ -1,26 +1,27 @@
-"""The ``tswm sweep`` and ``tswm bench`` subcommands (argument parsing only; the work is
-imported when a command runs)."""
+"""``tswm sweep``: a scene over a grid or random samples of its free parameters, in chunks
+(argument parsing here; the work is imported when the command runs)."""
 from __future__ import annotations
 
 import argparse
 import sys
 from pathlib import Path
 
+from tswm_runtime.cli.common import (UsageError, add_setting_options, output_directory, prepare_kernels, run_method,
+                                     setting_error, setting_overrides)
+
 SWEEP_SETTINGS = ("t_end", "rtol", "atol", "method", "max_steps", "max_events")
 
 
-def _sweep(args: argparse.Namespace) -> int:
-    from tswm_runtime.cli import (UsageError, _load_model, output_directory, prepare_kernels, run_method,
-                                  setting_error, setting_overrides)
-
+def run(args: argparse.Namespace) -> int:
     output_directory(args.output)
     spec, cold = prepare_kernels(args.scene, ("integrate", "batch"))
-    from tswm_runtime.apps import warmup
-    from tswm_runtime.apps.simulate import SimulationInputError
-    from tswm_runtime.apps.sweep import (SweepInputError, SweepInterrupted, check_size, grid_cases, grid_size,
+    from tswm_runtime.model.scenes import load_model
+    from tswm_runtime.simulation.simulate import SimulationInputError
+    from tswm_runtime.startup import warmup
+    from tswm_runtime.sweeps.sweep import (SweepInputError, SweepInterrupted, check_size, grid_cases, grid_size,
                                     parse_grid, parse_ranges, sample_cases, sweep)
 
-    module = _load_model(spec)
+    module = load_model(spec)
     overrides = setting_overrides(args, SWEEP_SETTINGS)
     try:
         if args.grid and args.samples is not None:
@@ -92,21 +93,7 @@ def _sweep(args: argparse.Namespace) -> int:
     return 0
 
 
-def _bench(args: argparse.Namespace) -> int:
-    from tswm_runtime.apps import bench
-    from tswm_runtime.cli import UsageError, output_directory
-    from tswm_runtime.apps.sweep import MAX_SWEEP_CASES
-
-    output_directory(args.output)
-    if args.cases is not None and not 1 <= args.cases <= MAX_SWEEP_CASES:
-        raise UsageError(f"--cases {args.cases}: must be in [1, {MAX_SWEEP_CASES:.0e}]")
-    return bench.main(quick=args.quick, output=args.output, cases=args.cases)
-
-
-def add_parsers(sub) -> None:
-    """Add ``sweep`` and ``bench`` to the ``tswm`` subparsers."""
-    from tswm_runtime.cli import add_setting_options
-
+def add_parser(sub) -> None:
     sweep = sub.add_parser(
         "sweep", help="run a scene over a grid or random samples of its free parameters, in parallel",
         description="Run a scene over a grid (--grid) or seeded random samples (--samples, --range) of "
@@ -116,7 +103,7 @@ def add_parsers(sub) -> None:
                     "(model, runtime, settings, rows); a rerun reuses only chunks that prove they hold "
                     "the asked rows and recomputes others with a warning. Exit status: 0 done, 1 "
                     "interrupted (complete chunks are kept: rerun to resume), 2 bad input.")
-    sweep.add_argument("scene", help="a shipped scene name or a generated module's .py path")
+    sweep.add_argument("scene", help="a shipped scene name, a scene file (.toml) or a generated module's .py path")
     sweep.add_argument("--grid", action="append", default=[], metavar="NAME=START:STOP:COUNT",
                        help="COUNT values from START to STOP (both included), or NAME=VALUE; repeatable: "
                             "all combinations")
@@ -137,18 +124,4 @@ def add_parsers(sub) -> None:
                        help="delete files in DIR/chunks/ that belong to no chunk of this sweep (stale: another "
                             "model, runtime, setting or grid); without it they are only reported")
     sweep.add_argument("--no-progress", action="store_true", help="no progress bar")
-    sweep.set_defaults(run=_sweep)
-    bench = sub.add_parser(
-        "bench", help="work-precision benchmark against scipy and SUNDIALS, and sweep throughput",
-        description="Error against an independent quadrature reference versus median wall time per whole "
-                    "call for tswm (simulate(), sweep()) and careful-user peers (scipy solve_ivp, CVODE via "
-                    "scikit-sundae) on five cases, configurations interleaved; sweep throughput; the issue-13 "
-                    "targets reported with the measured factor. Writes DIR/work-precision.md, runs.csv, "
-                    "verdicts.csv, bench.json and work-precision.png.")
-    bench.add_argument("--quick", action="store_true",
-                       help="four tolerances, two rounds, a 1000-case throughput grid (about a minute)")
-    bench.add_argument("-o", "--output", default="tswm-report/bench", metavar="DIR",
-                       help="output directory (default tswm-report/bench)")
-    bench.add_argument("--cases", type=int, metavar="N",
-                       help="cases in the sweep-throughput grid (default 10000, --quick 1000)")
-    bench.set_defaults(run=_bench)
+    sweep.set_defaults(run=run)

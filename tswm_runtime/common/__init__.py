@@ -1,1 +1,1 @@
-"""Shared leaves: atomic file writes, units, provenance (versions) of results."""
+"""Runtime leaves: provenance (machine and versions) of results. Imports nothing of tswm."""

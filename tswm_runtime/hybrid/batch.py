@@ -29,9 +29,10 @@ from numba import prange, types
 
 from tswm_runtime.hybrid import machine as hybrid
 
-from tswm_runtime.integration import cache_guard, segment
-from tswm_runtime.integration.signatures import MATRIX, VECTOR, GuardsFunction, JacFunction, RhsFunction, compiled
-from tswm_runtime.integration.structures import JUMP_WIDTH, MODE_TABLES, TOLERANCES, EventLog, Outputs
+from tswm_runtime.jit import cache_guard
+from tswm_runtime.integration import segment
+from tswm_runtime.jit.signatures import MATRIX, VECTOR, GuardsFunction, JacFunction, RhsFunction, compiled
+from tswm_runtime.jit.structures import JUMP_WIDTH, MODE_TABLES, TOLERANCES, EventLog, Outputs
 
 F_T_STOP, F_S1M, F_TS1M, F_S2M, F_TS2M, F_X1, F_V1, F_IMPACT_E = range(8)
 N_F = 8

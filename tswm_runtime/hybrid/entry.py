@@ -12,10 +12,11 @@ import numpy as np
 from numba import types
 
 from tswm_runtime.hybrid.machine import HYBRID_SIG, integrate_hybrid
-from tswm_runtime.integration import cache_guard, segment
-from tswm_runtime.integration.addresses import function_at, guards_at, jac_at, rhs_at
-from tswm_runtime.integration.signatures import GUARDS_SIG, JAC_SIG, RHS_SIG, address, jit_address
-from tswm_runtime.integration.structures import JUMP_WIDTH, EventLog, Outputs, Tolerances
+from tswm_runtime.jit import cache_guard
+from tswm_runtime.integration import segment
+from tswm_runtime.jit.addresses import function_at, guards_at, jac_at, rhs_at
+from tswm_runtime.jit.signatures import GUARDS_SIG, JAC_SIG, RHS_SIG, address, jit_address
+from tswm_runtime.jit.structures import JUMP_WIDTH, EventLog, Outputs, Tolerances
 
 _machine_at = function_at(types.FunctionType(HYBRID_SIG), raises=True)
 _attempt_at = function_at(segment.AttemptFunction)

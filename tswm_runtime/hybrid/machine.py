@@ -34,11 +34,13 @@ import numpy as np
 from numba import types
 
 from tswm_runtime.hybrid import impact as collision
-from tswm_runtime.integration import cache_guard, painleve, segment
-from tswm_runtime.integration.borrow import borrowed
-from tswm_runtime.integration.cache_guard import njit
-from tswm_runtime.integration.signatures import MATRIX, VECTOR, GuardsFunction, JacFunction, RhsFunction
-from tswm_runtime.integration.structures import (EVENT_LOG, JUMP_WIDTH, MODE_TABLES, OUTPUTS, TOLERANCES,
+from tswm_runtime.jit import cache_guard
+from tswm_runtime.integration import painleve
+from tswm_runtime.integration import segment
+from tswm_runtime.jit.borrow import borrowed
+from tswm_runtime.jit.cache_guard import njit
+from tswm_runtime.jit.signatures import MATRIX, VECTOR, GuardsFunction, JacFunction, RhsFunction
+from tswm_runtime.jit.structures import (EVENT_LOG, JUMP_WIDTH, MODE_TABLES, OUTPUTS, TOLERANCES,
                                                  EventSettings)
 
 # Guard kinds (modes.GUARD_KINDS maps the generated GUARDS names to these).

@@ -8,10 +8,10 @@ functions row by row from Python cost about 3 us a row. ``outputs`` comes as its
 """
 import numpy as np
 
-from tswm_runtime.integration import cache_guard
-from tswm_runtime.integration.addresses import guards_at
-from tswm_runtime.integration.borrow import borrowed
-from tswm_runtime.integration.signatures import MATRIX, VECTOR
+from tswm_runtime.jit import cache_guard
+from tswm_runtime.jit.addresses import guards_at
+from tswm_runtime.jit.borrow import borrowed
+from tswm_runtime.jit.signatures import MATRIX, VECTOR
 from numba import types
 
 ROWS_SIG = types.none(types.int64, VECTOR, MATRIX, types.int64[::1], MATRIX, types.int64, MATRIX)

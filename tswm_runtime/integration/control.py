@@ -18,7 +18,7 @@ rejected):
   by 0.7 are rejected up to seven times in a row.
 """
 import numpy as np
-from tswm_runtime.integration.cache_guard import njit
+from tswm_runtime.jit.cache_guard import njit
 
 # Hairer's initial step selection (Sec. II.4): thresholds of scipy's common.py.
 H0_TINY_NORM = 1e-5  # ||y0|| or ||f0|| (scaled) below this: start from H0_FALLBACK.

@@ -16,7 +16,7 @@ Step-size control, shared with the Rosenbrock method, is in ``control``; the
 constants below are this method's (scipy's ``_ivp/rk.py``).
 """
 import numpy as np
-from tswm_runtime.integration.cache_guard import njit
+from tswm_runtime.jit.cache_guard import njit
 
 # Step-size control (values of scipy's _ivp/rk.py).
 SAFETY = 0.9  # Multiply steps computed from the asymptotic error behaviour by this.

@@ -46,7 +46,7 @@ The Illinois iteration is written as pure state-update functions (``bracket_*``)
 so that ``segment`` runs the same iteration on the re-taken full-order step.
 """
 import numpy as np
-from tswm_runtime.integration.cache_guard import njit
+from tswm_runtime.jit.cache_guard import njit
 
 GUARD_SUBINTERVALS = 4  # Guard samples per step: 3 interior points + the step end.
 RATE_STEP = 1e-6  # The guard rates' difference step, relative to the step size (at least 64 ulp of t).

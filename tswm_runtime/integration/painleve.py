@@ -24,9 +24,11 @@ Output rows inside the approach are filled by solving t(sigma) = t_out on
 re-taken steps; the observables' running maxima are updated at step ends.
 """
 import numpy as np
-from tswm_runtime.integration.cache_guard import njit
+from tswm_runtime.jit.cache_guard import njit
 
-from tswm_runtime.integration import control, dopri5, events
+from tswm_runtime.integration import control
+from tswm_runtime.integration import dopri5
+from tswm_runtime.integration import events
 
 ZERO, END, OTHER, CLEAR = 0, 1, 2, 3  # outcomes besides the integrator's failure codes
 TRIGGER_STEPS = 4.0  # The segment loop hands over when D would reach 0 within this many steps,

@@ -28,7 +28,7 @@ increase at most 5x) with the elementary controller shared with DOPRI5. The n x 
 systems (n <= 4) are solved with the small LU with partial pivoting below.
 """
 import numpy as np
-from tswm_runtime.integration.cache_guard import njit
+from tswm_runtime.jit.cache_guard import njit
 
 D = 1.0 / (2.0 + np.sqrt(2.0))  # Diagonal coefficient gamma of the W-method.
 E32 = 6.0 + np.sqrt(2.0)  # Coefficient of (k2 - F1) in the error stage.

@@ -34,11 +34,17 @@ import numpy as np
 import numba
 from numba import types
 
-from tswm_runtime.integration import cache_guard, control, dopri5, events, painleve, rosenbrock, steady
-from tswm_runtime.integration.borrow import borrowed
-from tswm_runtime.integration.cache_guard import njit
-from tswm_runtime.integration.signatures import JAC_SIG, VECTOR, RhsFunction, compiled
-from tswm_runtime.integration.structures import INTS, STEP_WORK, TOLERANCES, Step, StepWork
+from tswm_runtime.jit import cache_guard
+from tswm_runtime.integration import control
+from tswm_runtime.integration import dopri5
+from tswm_runtime.integration import events
+from tswm_runtime.integration import painleve
+from tswm_runtime.integration import rosenbrock
+from tswm_runtime.integration import steady
+from tswm_runtime.jit.borrow import borrowed
+from tswm_runtime.jit.cache_guard import njit
+from tswm_runtime.jit.signatures import JAC_SIG, VECTOR, RhsFunction, compiled
+from tswm_runtime.jit.structures import INTS, STEP_WORK, TOLERANCES, Step, StepWork
 
 # Method codes.
 DOPRI5 = 0  # Dormand-Prince 5(4), explicit (dopri5.py).

@@ -7,12 +7,12 @@ compile it: an eagerly compiled entry point costs seconds on a cold numba cache.
 import numpy as np
 from numba import types
 
-from tswm_runtime.integration import cache_guard
-from tswm_runtime.integration.cache_guard import njit
+from tswm_runtime.jit import cache_guard
+from tswm_runtime.jit.cache_guard import njit
 from tswm_runtime.integration.segment import (DOPRI5, INVALID_INPUT, N_COUNTERS, ROSENBROCK23, AttemptFunction, run,
                                               segment_work)
-from tswm_runtime.integration.signatures import MATRIX, VECTOR, GuardsFunction, JacFunction, RhsFunction
-from tswm_runtime.integration.structures import EVENT_SETTINGS, TOLERANCES, Outputs
+from tswm_runtime.jit.signatures import MATRIX, VECTOR, GuardsFunction, JacFunction, RhsFunction
+from tswm_runtime.jit.structures import EVENT_SETTINGS, TOLERANCES, Outputs
 
 _VEC_I64 = types.int64[::1]
 

@@ -12,7 +12,7 @@ t alone, exactly. The held state is the equilibrium itself, one Newton step from
 integrated one (y - f/J, its error quadratic in |f/J|): the transient's remaining decay,
 below half the tolerance, is what holding gives up.
 """
-from tswm_runtime.integration.cache_guard import njit
+from tswm_runtime.jit.cache_guard import njit
 
 from tswm_runtime.integration import events
 

@@ -11,7 +11,7 @@ import sys
 from pathlib import Path
 from types import ModuleType
 
-from tswm_runtime.integration import cache_guard  # noqa: F401  (numba cache I/O errors never fail a run)
+from tswm_runtime.jit import cache_guard  # noqa: F401  (numba cache I/O errors never fail a run)
 
 CONSTANTS = {
     "SCENE": "scene name",

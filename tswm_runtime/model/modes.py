@@ -16,7 +16,7 @@ import numpy as np
 
 from tswm_runtime.hybrid import machine as hybrid
 from tswm_runtime.model.contract import ContractError
-from tswm_runtime.integration.structures import ModeTables
+from tswm_runtime.jit.structures import ModeTables
 
 class GuardKind(IntEnum):
     """The mode machine's guard kinds (hybrid.G_PHI, ...), for Python."""

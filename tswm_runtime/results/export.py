@@ -15,7 +15,7 @@ from types import ModuleType
 
 import numpy as np
 
-from tswm_runtime.common.files import write_atomic
+from tswm_common.files import write_atomic
 from tswm_runtime.results.result import SERIES, Result
 SCALARS = ("S1_max", "t_S1_max", "S2_max", "t_S2_max", "t_stop", "n_steps", "n_rejected", "nfev", "njev")
 

@@ -1,1 +1,0 @@
-"""Applications: simulate, sweep, the benchmark, the paper report and their references."""

@@ -1,0 +1,130 @@
+"""The benchmark's cases, their independent reference, and how each solver is called.
+
+A case is one run of the paper gear under a piecewise-constant load, given twice: as a
+shipped tswm scene with parameters and run settings, and as the hand-formula data
+(m1, m2, loads, v1(0), t_end) that the peers and the quadrature reference read. The
+reference (``quadrature``: each load segment is v1' = A(v1), solved by quadrature in
+v1 at 34 digits) knows nothing of tswm; it is computed once per case and run.
+
+Every solver returns a ``bench_peers.Outcome`` (max |S1| signed, v1(t_end), events,
+x1(t_end)).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from functools import lru_cache
+
+import numpy as np
+
+from tswm_runtime.bench.peers import Outcome, peer_run
+from tswm_runtime.reference.paper_gear import M1
+
+
+@dataclass(frozen=True)
+class Case:
+    name: str
+    scene: str  # shipped tswm scene
+    params: tuple  # ((name, value), ...) free parameters set (``--set``)
+    loads: tuple  # ((t_from, F2), ...) the same load for the peers and the reference
+    v0: float = 0.0
+    t_end: float = 1.0
+    m1: float = M1
+    m2: float = 200.0
+
+    def overrides(self) -> dict:
+        """tswm run settings beyond the scene's: v1(0) and t_end."""
+        return {"v1": self.v0, "t_end": self.t_end}
+
+
+RUNUP = ((0.0, 0.0), (0.3, -15000.0))
+CASES = {c.name: c for c in (
+    Case("run-up then load", "paper-runup", (), RUNUP),
+    Case("stiff drive m1=0.05", "stiff-drive", (), RUNUP, m1=0.05),
+    Case("flank switch near V0", "paper", (("F2", 200.0),), ((0.0, 200.0),)),
+    Case("decelerate-and-stick", "paper", (("F2", -15000.0),), ((0.0, -15000.0),), v0=2.0),
+    Case("long run T=100", "paper-runup", (), RUNUP, t_end=100.0),
+    Case("load schedule: stall, restart", "load-schedule", (), ((0.0, 0.0), (0.3, -30000.0), (0.6, -2000.0))),
+)}
+
+
+@lru_cache(maxsize=None)
+def reference(case: Case) -> Outcome:
+    """The quadrature reference: max |S1| (signed), v1(t_end), events (cached per case)."""
+    from tswm_runtime.reference import quadrature as q
+
+    tr = q.solve(q.paper_wedge(case.m2, m1=case.m1), list(case.loads), case.v0, case.t_end)
+    if tr.status != "finished":
+        raise RuntimeError(f"reference for {case.name}: {tr.status}")
+    events = [("load" if e.kind in ("load", "breakaway") else e.kind, float(e.t)) for e in tr.events]
+    return Outcome(float(tr.S_extrema()["S1"][0]), float(tr.v_at(case.t_end)), events,
+                   x_end=float(tr.x_at(case.t_end)))
+
+
+def _tswm_kind(guard: str) -> str:
+    if guard in ("phi", "v1"):
+        return guard
+    return "load" if guard.startswith("load") else guard
+
+
+def run_simulate(case: Case, rtol: float, atol: float, points: int | None = None,
+                 t_end: float | None = None) -> Outcome:
+    """tswm as a user calls it: simulate(scene, params, rtol=, atol=, ...) (default output:
+    1001 points; ``points``, ``t_end`` override the case's), then max |S1|, v1(t_end) and the
+    events from the Result."""
+    from tswm_runtime.simulation.simulate import simulate
+
+    extra = {k: v for k, v in (("points", points), ("t_end", t_end)) if v is not None}
+    r = simulate(case.scene, dict(case.params), rtol=rtol, atol=atol, **{**case.overrides(), **extra})
+    if r.status != "finished":
+        raise RuntimeError(f"tswm: {r.status}: {r.message}")
+    return Outcome(r.S1_max, float(r.v1[-1]), [(_tswm_kind(e.guard), e.t) for e in r.events], r.nfev,
+                   float(r.x1[-1] - r.x1[0]))
+
+
+FIXED_COST_T_END = 1e-9  # s: one step, no event, no maximum inside
+
+
+def run_fixed_cost(case: Case, rtol: float, atol: float) -> Outcome:
+    """``run_simulate`` to t_end = FIXED_COST_T_END: what a call costs without integrating
+    (checks, one step, output rows, the Result). Its Outcome is not compared with the reference."""
+    return run_simulate(case, rtol, atol, t_end=FIXED_COST_T_END)
+
+
+def run_sweep(case: Case, rtol: float, atol: float, n: int) -> Outcome:
+    """tswm's sweep of n identical cases (all cores), one whole call; the Outcome of the
+    first row (the sweep table has no event times: events empty, counted in nfev only)."""
+    from tswm_runtime.model.contract import load_module
+    from tswm_runtime.sweeps.sweep import sweep
+
+    module = load_module(case.scene)
+    row = dict(zip(module.PARAM_NAMES, module.PARAM_DEFAULTS)) | dict(case.params)
+    P = np.tile([row[k] for k in module.PARAM_NAMES], (n, 1))
+    table = sweep(case.scene, P, {"rtol": rtol, "atol": atol, **case.overrides()}).table
+    if (table["status"] != "finished").any():
+        raise RuntimeError(f"tswm sweep: {table['status'].value_counts().to_dict()}")
+    first = table.iloc[0]
+    return Outcome(float(first["S1m"]), float(first["v1"]), None, int(first["nfev"]), float(first["x1"]))
+
+
+def run_peer(case: Case, method: str, rtol: float, atol: float) -> Outcome:
+    return peer_run(method, rtol, atol, case.m2, list(case.loads), case.v0, case.t_end, m1=case.m1)
+
+
+def errors(out: Outcome, ref: Outcome) -> dict:
+    """err_S1: relative error of max |S1|; err_v1: error of v1(t_end) relative to
+    max(|v1_ref|, 1 m/s); err_x1: relative error of x1(t_end) (the whole transient, where
+    the others can sit on equilibria); err_t: largest absolute error of the event times
+    when the event kinds agree in order (inf when they do not, NaN when not reported);
+    err: the largest of them."""
+    e = {"err_S1": abs(out.S1 - ref.S1) / abs(ref.S1),
+         "err_v1": abs(out.v_end - ref.v_end) / max(abs(ref.v_end), 1.0),
+         "err_x1": abs(out.x_end - ref.x_end) / abs(ref.x_end)}
+    if out.events is None:
+        e["err_t"] = math.nan
+    elif [k for k, _ in out.events] != [k for k, _ in ref.events]:
+        e["err_t"] = math.inf
+    else:
+        e["err_t"] = max((abs(t - tr) for (_, t), (_, tr) in zip(out.events, ref.events)), default=0.0)
+    e["err"] = max(x for x in e.values() if not math.isnan(x))
+    return e

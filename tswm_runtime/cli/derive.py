@@ -1,0 +1,44 @@
+"""``tswm derive``: derive a scene's model, print its modes and audit, write the document."""
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+
+def add_parser(sub) -> None:
+    derive = sub.add_parser("derive", help="derive a scene's model and write the derivation document")
+    derive.add_argument("scene", help="a shipped scene name (derivation/scenes/*.toml) or a .toml path")
+    derive.add_argument("--latex", metavar="FILE.tex", help="write a standalone LaTeX document")
+    derive.add_argument("--markdown", metavar="FILE.md", help="write the same document as Markdown with $$ math")
+    derive.add_argument("--pdf", nargs="?", const=True, metavar="FILE.pdf",
+                        help="build a PDF with pdflatex (default name: the --latex file's, else SCENE-derivation.pdf)")
+    derive.set_defaults(run=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from derivation.audit import audit
+    from derivation.document import build_document, render
+    from derivation.latex import build_pdf
+    from derivation.model import build_model
+    from derivation.scene import load_scene
+    from tswm_common.files import write_atomic
+
+    scene = load_scene(args.scene)
+    model = build_model(scene)
+    print(f"scene {scene.name} ({scene.source}): equations {scene.equations}, flanks {', '.join(scene.flanks)}")
+    print(f"  modes: {', '.join(f'{m.name} ({m.regime})' for m in model.modes)}")
+    print(f"  states: {', '.join(map(str, model.states))}; free parameters: "
+          f"{', '.join(p.name for p in scene.free_params()) or 'none'}")
+    print("  audit: " + "; ".join(f"eq. {e.equation} {'agrees' if e.agrees else 'differs'}" for e in audit()))
+    if not (args.latex or args.markdown or args.pdf):
+        return 0
+    doc = build_document(model)
+    if args.markdown:
+        print(f"  wrote {write_atomic(args.markdown, render(doc, 'markdown'))}")
+    latex = render(doc, "latex")
+    if args.latex:
+        print(f"  wrote {write_atomic(args.latex, latex)}")
+    if args.pdf:
+        pdf = Path(args.pdf if isinstance(args.pdf, str) else (args.latex or f"{scene.name}-derivation.tex"))
+        print(f"  wrote {build_pdf(latex, pdf.with_suffix('.pdf'))}")
+    return 0

@@ -1,0 +1,160 @@
+"""The outputs of ``tswm fit``: fit-report.md, fit.json and the misfit plot (misfit.png)."""
+from __future__ import annotations
+
+import io
+import json
+import math
+import re
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+if TYPE_CHECKING:
+    from tswm_runtime.fitting.fit import FitResult
+
+
+def misfit_png(res: FitResult) -> bytes:
+    """The misfit plot: cost over one parameter (curve) or two (contour of log10 cost)."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    g = res.misfit
+    fig = Figure(figsize=(7, 5))
+    FigureCanvasAgg(fig)
+    ax = fig.add_subplot()
+    names = g["names"]
+    label = [f"{n} [{res.units[res.names.index(n)]}]".replace(" []", "") for n in names]
+    ends = np.array([s.x for s in res.starts])
+    if len(names) == 1:
+        xs, cost = np.array(g["axes"][0]), np.array(g["cost"])
+        ax.semilogy(xs, np.maximum(cost, 1e-300), "-", color="C0", label="cost 0.5 sum r^2")
+        best = res.estimate[names[0]]
+        ax.axvline(best, color="C3", label=f"optimum {names[0]} = {best:.6g}")
+        lo, hi = res.ci[names[0]]
+        if math.isfinite(lo) and math.isfinite(hi):
+            ax.axvspan(max(lo, xs[0]), min(hi, xs[-1]), color="C3", alpha=0.15,
+                       label=f"{res.confidence:.0%} confidence interval")
+        ax.plot(ends[:, 0], [max(s.cost, 1e-300) for s in res.starts], "kx", label="ends of the starts")
+        ax.set_xlabel(label[0])
+        ax.set_ylabel("cost (log scale)")
+    else:
+        xs, ys = (np.array(a) for a in g["axes"])
+        cost = np.log10(np.maximum(np.array(g["cost"]), 1e-300))
+        cs = ax.contourf(xs, ys, cost.T, levels=20, cmap="viridis")
+        fig.colorbar(cs, ax=ax, label="log10 cost")
+        ax.plot(ends[:, 0], ends[:, 1], "wx", label="ends of the starts")
+        ax.plot([res.estimate[names[0]]], [res.estimate[names[1]]], "r*", ms=14, label="optimum")
+        ax.set_xlabel(label[0])
+        ax.set_ylabel(label[1])
+    extra = f"; {', '.join(g['others_at_optimum'])} at the optimum" if g["others_at_optimum"] else ""
+    ax.set_title(f"tswm fit {res.scene}: misfit over the bounds{extra}", fontsize=10)
+    ax.legend(fontsize=8)
+    buffer = io.BytesIO()
+    fig.savefig(buffer, format="png", dpi=120)
+    return buffer.getvalue()
+
+
+def _md(text: str) -> str:
+    """Escape what Markdown would read as markup (file names are user text)."""
+    return re.sub(r"([\\`*_{}\[\]<>()#+!|])", r"\\\1", text)
+
+
+def report_markdown(res: FitResult) -> str:
+    f = res.to_dict()
+    L = [f"# tswm fit: scene {res.scene}", ""]
+    L.append(f"Measured: {_md(Path(res.measured['file']).name)} ({res.measured['form']}, {res.measured['cases']} "
+             f"case(s), {res.measured['rows']} row(s); quantities {', '.join(res.measured['quantities'])}, compared "
+             f"as {res.measured['compared']}; known per case: {', '.join(res.measured['known']) or 'none'}).")
+    L.append("")
+    L.append("| parameter | estimate | std. error | " f"{res.confidence:.0%} CI | bounds |")
+    L.append("| --- | --- | --- | --- | --- |")
+    for n, u in zip(res.names, res.units):
+        lo, hi = res.ci[n]
+        ci = "unbounded" if not (math.isfinite(lo) and math.isfinite(hi)) else f"[{lo:.6g}, {hi:.6g}]"
+        if math.isnan(lo):
+            ci = "none"
+        L.append(f"| {n} [{u}] | {res.estimate[n]:.8g} | {res.stderr[n]:.3g} | {ci} | "
+                 f"[{res.bounds[n][0]:g}, {res.bounds[n][1]:g}] ({res.bound_source[n]}) |")
+    L.append("")
+    L.append(f"Cost 0.5 sum r^2 = {res.cost:.6g} over {len(res.jacobian)} scaled residuals, {res.dof} degrees of "
+             f"freedom, s^2 = {res.s2:.6g}; singular values of J (columns scaled to the bounds) "
+             f"{', '.join(f'{v:.4g}' for v in res.singular_values)}, condition {res.condition:.4g}, rank {res.rank}.")
+    L.append("")
+    L.append("## Identifiability and warnings")
+    L.append("")
+    L += [f"- {n}" for n in res.notes] or ["- none: every parameter is determined by the data (full-rank J, finite "
+                                           "confidence intervals inside the bounds, starts agree)"]
+    L.append("")
+    if len(res.names) > 1:
+        L.append("## Correlation")
+        L.append("")
+        L.append("| | " + " | ".join(res.names) + " |")
+        L.append("|---" * (len(res.names) + 1) + "|")
+        for n, row in zip(res.names, res.correlation):
+            L.append(f"| {n} | " + " | ".join("n/a" if not math.isfinite(c) else f"{c:+.4f}" for c in row) + " |")
+        L.append("")
+    L.append("## Starts")
+    L.append("")
+    L.append("| start | from | to | cost | status | evaluations | failed cases |")
+    L.append("| --- | --- | --- | --- | --- | --- | --- |")
+    for k, s in enumerate(res.starts):
+        mark = " (best)" if k == res.best_start else ""
+        L.append(f"| {k + 1}{mark} | {', '.join(f'{v:.6g}' for v in s.x0)} | {', '.join(f'{v:.8g}' for v in s.x)} | "
+                 f"{s.cost:.6g} | {s.status} | {s.nfev} | {s.failed_cases} |")
+    L.append("")
+    L.append("## Residuals per case")
+    L.append("")
+    if res.measured["form"] == "peaks":
+        L.append("| case | known | status | quantity | measured | model | residual | relative |")
+        L.append("| --- | --- | --- | --- | --- | --- | --- | --- |")
+        for c in res.cases:
+            known = ", ".join(f"{k} = {v:g}" for k, v in c["known"].items())
+            for q, d in c["quantities"].items():
+                L.append(f"| {c['case']} | {known} | {c['status']} | {q} | {d['measured']:.6g} | {d['model']:.6g} | "
+                         f"{d['residual']:.4g} | {d['relative']:.3g} |")
+    else:
+        L.append("| case | known | status | samples | quantity | RMS measured | RMS residual | max residual "
+                 "| relative |")
+        L.append("| --- | --- | --- | --- | --- | --- | --- | --- | --- |")
+        for c in res.cases:
+            known = ", ".join(f"{k} = {v:g}" for k, v in c["known"].items())
+            for q, d in c["quantities"].items():
+                L.append(f"| {c['case']} | {known} | {c['status']} | {c['samples']} | {q} | {d['rms_measured']:.6g} | "
+                         f"{d['rms_residual']:.4g} | {d['max_residual']:.4g} | {d['relative']:.3g} |")
+    L.append("")
+    L.append("![misfit](misfit.png)" if res.misfit else "")
+    L.append("")
+    L.append("## Settings and provenance")
+    L.append("")
+    run = res.settings
+    L.append(f"- run: t_end {run['t_end']:g} s, {run['method']}, rtol {run['rtol']:g}, atol {run['atol']:g}, "
+             f"max_steps {run['max_steps']}; model runs {res.fit_settings.get('model_runs')}; wall time "
+             f"{res.seconds:.3g} s")
+    fs = res.fit_settings
+    L.append(f"- fit: {fs['method']}, {fs['starts']} start(s) ({fs['sampler']}, seed {fs['seed']}), cost "
+             f"{fs['cost']}, scale per quantity " + ", ".join(f"{q} {v:.6g}" for q, v in res.measured["scale"].items())
+             + f", penalty {fs['penalty']:g} per residual of a failed case")
+    if res.measured["fixed"]:
+        L.append("- fixed at the scene's values: "
+                 + ", ".join(f"{k} = {v:g}" for k, v in res.measured["fixed"].items()))
+    p = res.provenance
+    L.append(f"- scene digest {p['scene_digest']}, model {p['model_digest']}, runtime {p['runtime_version']} "
+             f"({p['runtime_digest'][:16]}), measured file sha256 {res.measured['sha256'][:16]}")
+    L.append("- versions: " + ", ".join(f"{k} {v}" for k, v in f["provenance"]["versions"].items()))
+    L.append("")
+    L.append("A fitted value is the parameter that makes this model reproduce these numbers; it is a fit, "
+             "not a measurement of the parameter.")
+    return "\n".join(L) + "\n"
+
+
+def write_outputs(res: FitResult, directory: str | Path, plot: bool = True) -> list[Path]:
+    """DIR/fit-report.md, fit.json and (with a misfit grid) misfit.png, each written atomically."""
+    from tswm_common.files import write_atomic
+
+    directory = Path(directory)
+    paths = [write_atomic(directory / "fit.json", json.dumps(res.to_dict(), indent=2, allow_nan=False))]
+    if plot and res.misfit:
+        paths.append(write_atomic(directory / "misfit.png", misfit_png(res)))
+    paths.append(write_atomic(directory / "fit-report.md", report_markdown(res)))
+    return paths

@@ -1,0 +1,148 @@
+"""Eager, cached compilation that notices edits in the kernel modules it inlines; ``njit``
+for the kernels' helpers.
+
+numba keys a function's on-disk cache on its own source file only (dependencies are
+not tracked, as numba's caching docs say), while the compiled integrators inline
+dopri5, rosenbrock, events and segment. ``compile_cached`` keeps a sha256 over all
+kernel sources in each directory of kernel caches and purges those caches when it
+differs, so an edited kernel can never run as stale machine code.
+"""
+from __future__ import annotations
+
+import contextlib
+import functools
+import hashlib
+import warnings
+from pathlib import Path
+
+import numba
+from numba import types
+from numba.core import caching
+from numba.core.registry import CPUDispatcher
+
+from tswm_common.files import write_atomic
+
+KERNEL_SOURCES = ("jit/borrow.py", "jit/structures.py", "integration/control.py",
+                  "integration/dopri5.py", "integration/rosenbrock.py", "integration/events.py", "integration/segment.py",
+                  "integration/single.py", "integration/painleve.py", "integration/steady.py", "hybrid/machine.py",
+                  "hybrid/impact.py", "hybrid/batch.py", "hybrid/rows.py", "hybrid/entry.py", "jit/addresses.py")
+
+
+class CacheIOWarning(UserWarning):
+    """numba's on-disk cache could not be read or written; the function runs compiled in memory."""
+
+
+@contextlib.contextmanager
+def _tolerate_cache_io_errors(self):
+    """numba's cache is an optimisation: a cache directory deleted or unwritable while a function
+    compiles (another process cleaning it, a read-only tree) costs the cache, never the run."""
+    try:
+        yield
+    except OSError as error:
+        warnings.warn(f"numba cache {getattr(error, 'filename', '') or ''}: {error.strerror or error}; "
+                      "compiled in memory only", CacheIOWarning, stacklevel=3)
+
+
+caching.Cache._guard_against_spurious_io_errors = _tolerate_cache_io_errors   # load and save both go through it
+
+
+def kernel_digest() -> str:
+    """sha256 over the kernel sources of this package."""
+    h = hashlib.sha256()
+    here = Path(__file__).parents[1]   # tswm_runtime/
+    for name in KERNEL_SOURCES:
+        h.update(name.encode() + (here / name).read_bytes())
+    return h.hexdigest()
+
+
+MARKER = "tswm-kernels.sha256"   # in each directory of kernel caches: the digest they were compiled from
+
+
+def cache_directory(source: Path) -> Path | None:
+    """numba's cache directory for the functions defined in ``source``: the first of numba's
+    cache locators that accepts the file (NUMBA_CACHE_DIR, else __pycache__ beside it, ...)."""
+    for locator_class in caching.CacheImpl._locator_classes:   # numba has no public accessor
+        locator = locator_class.from_function(cache_directory, str(source))
+        if locator is not None:
+            return Path(locator.get_cache_path())
+    return None
+
+
+@functools.lru_cache(maxsize=1)
+def check_kernel_caches() -> None:
+    """Once per process, before the first kernel compiles: in every directory holding kernel
+    caches whose marker is not the kernel digest, delete the caches of every function in the
+    kernel sources (a kernel links its callees' cached machine code, and numba would keep a
+    callee whose own file did not change but whose callee, in another file, did), then write
+    the marker. A directory with the right marker is left alone: compiling a kernel for the
+    first time, or under another NUMBA_CACHE_DIR, purges nothing."""
+    digest = kernel_digest()
+    here = Path(__file__).parents[1]
+    directories: dict[Path, list[str]] = {}
+    for name in KERNEL_SOURCES:
+        directory = cache_directory(here / name)
+        if directory is not None:
+            directories.setdefault(directory, []).append(Path(name).stem)
+    for directory, stems in directories.items():
+        marker = directory / MARKER
+        if marker.exists() and marker.read_text() == digest:
+            continue
+        for stem in stems:
+            for cached in directory.glob(f"{stem}.*.nb[ic]"):
+                with contextlib.suppress(OSError):  # gone already (another process), or read-only
+                    cached.unlink()
+        with contextlib.suppress(OSError):  # a read-only cache directory: numba compiles in memory anyway
+            write_atomic(marker, digest)
+
+
+class _Helper(CPUDispatcher):
+    """A dispatcher for the kernels' helpers (issue 13: each compile of a helper is a full
+    compile, repeated in every caller's link).
+
+    It types the constants it is called with from compiled code as their plain types (int64,
+    not Literal[int](3)): numba's own compiles a callee once per literal value, and once more
+    for a variable that starts as a constant (typing widens it later). And, unless told
+    otherwise, it builds no CPython or C wrapper (``no_cpython_wrapper``, ``no_cfunc_wrapper``:
+    a sixth of the cold compile): such a helper is callable from compiled code only, and
+    calling it from Python raises TypeError (numba would crash).
+    """
+
+    def get_call_template(self, args, kws):
+        return super().get_call_template(tuple(map(types.unliteral, args)),
+                                         {k: types.unliteral(v) for k, v in kws.items()})
+
+    def __call__(self, *args, **kws):
+        if self.targetoptions["no_cpython_wrapper"]:
+            raise TypeError(f"{self.py_func.__qualname__} is a helper of compiled code (cache_guard.njit); "
+                            "pass no_cpython_wrapper=False to call it from Python")
+        return super().__call__(*args, **kws)
+
+
+def njit(*, cache=False, **options):
+    """``numba.njit(cache=cache, **options)`` with the dispatcher above, for the kernels' helpers;
+    ``options`` may turn the wrappers back on (no_cfunc_wrapper=False for a first-class function).
+    The function itself while numba's jit is off, as numba.njit does."""
+    def decorate(py_func):
+        if numba.config.DISABLE_JIT:   # an interpreted run (apps.warmup)
+            return py_func
+        dispatcher = _Helper(py_func=py_func, locals={},
+                             targetoptions={"nopython": True, "boundscheck": None, "no_cpython_wrapper": True,
+                                            "no_cfunc_wrapper": True, **options})
+        if cache:
+            dispatcher.enable_caching()
+        return dispatcher
+    return decorate
+
+
+def compile_cached(signature, **options):
+    """Like ``numba.njit(signature, cache=True, **options)``, with the kernel check above; the
+    function itself while numba's jit is off (an interpreted run, apps.warmup)."""
+    def decorate(py_func):
+        if numba.config.DISABLE_JIT:
+            return py_func
+        check_kernel_caches()
+        dispatcher = numba.njit(cache=True, **options)(py_func)
+        dispatcher.compile(signature)
+        dispatcher.disable_compile()
+        return dispatcher
+    return decorate

@@ -1,0 +1,53 @@
+"""The named structures that carry arguments into the numba kernels, with their numba types.
+
+The kernels are compiled eagerly with explicit signatures (so they are cached once for
+every model), which is why each structure has its numba type beside it. The model's
+functions (rhs, jac, guards, observe) travel as separate first-class function arguments:
+numba does not convert dispatchers inside a tuple.
+"""
+from collections import namedtuple
+
+from numba import types
+
+from tswm_runtime.jit.signatures import MATRIX, VECTOR
+
+INTS = types.int64[::1]
+
+#: Local error tolerances and step bounds: rtol (scalar), atol (per state), hmin, hmax.
+Tolerances = namedtuple("Tolerances", "rtol atol hmin hmax")
+TOLERANCES = types.NamedTuple((types.float64, VECTOR, types.float64, types.float64), Tolerances)
+
+#: What ends a segment besides t_end: per guard its direction (+1 rising, -1 falling, 0
+#: both), guards within gtol of 0 count as zero, ttol widens the root time tolerance,
+#: noise_band drops sign changes within a guard's integration noise, singular is the index
+#: of a guard whose zero cannot be reached in t (D: hand over to the Painleve approach; -1 none),
+#: hold: a stable equilibrium of an autonomous scalar segment is held up to the next guard
+#: crossing in t (``steady``) instead of being stepped through.
+EventSettings = namedtuple("EventSettings", "directions gtol ttol noise_band singular hold")
+EVENT_SETTINGS = types.NamedTuple((INTS, types.float64, types.float64, types.boolean, types.int64,
+                                   types.boolean), EventSettings)
+
+#: Output rows: times (sorted), states (and their integral), mode and parameter vector.
+Outputs = namedtuple("Outputs", "t y mode p")
+OUTPUTS = types.NamedTuple((VECTOR, MATRIX, INTS, MATRIX), Outputs)
+
+#: The event log: time; (guard, from-mode, to-mode or -1 for a stop); state after the event;
+#: for an impact (P_n, P_t, kinetic energy lost, v1 before it), NaN for other events.
+EventLog = namedtuple("EventLog", "t index state jump")
+EVENT_LOG = types.NamedTuple((VECTOR, types.int64[:, ::1], MATRIX, MATRIX), EventLog)
+JUMP_WIDTH = 4
+
+#: A model's modes and guards as integers (``modes.tables``): per mode its kind (sliding,
+#: stick, Filippov), flank, direction, whether the scene declares it; per mode and guard
+#: the guard's direction; per guard its kind and the latch slot of p it sets (-1 none).
+ModeTables = namedtuple("ModeTables", "kind flank direction declared guard_direction guard_kind guard_latch")
+MODE_TABLES = types.NamedTuple((INTS, INTS, INTS, INTS, types.int64[:, ::1], INTS, INTS), ModeTables)
+
+#: Work arrays of one step of either method: stages K, dense-output coefficients Q, the
+#: Jacobian J and df/dt, the LU factors of W = I - h d J and their pivots (Rosenbrock).
+StepWork = namedtuple("StepWork", "K Q J dfdt LU piv")
+STEP_WORK = types.NamedTuple((MATRIX, MATRIX, MATRIX, VECTOR, MATRIX, INTS), StepWork)
+
+#: An accepted step [t_a, t_b = t_a + h]: its start state and derivative, its end state,
+#: and the dense output y(t_a + theta h) = y_a + h sum_j Q[:, j] theta^(j+1).
+Step = namedtuple("Step", "t_a y_a f_a h t_b y_b Q")

@@ -1,0 +1,316 @@
+"""Simulate one scene: check the inputs, run the mode machine, return a ``Result``.
+
+``simulate("paper", {"F2": -5000.0})`` loads the generated module of a shipped scene
+(or takes a module), validates every input with a message that names it, runs
+the mode machine (``entry.integrate``) and evaluates a1, S1, S2, F1, F2 at the output times.
+"""
+from __future__ import annotations
+
+import functools
+import math
+import sys
+from types import ModuleType
+
+import numpy as np
+
+from tswm_runtime.jit import coldstart
+
+coldstart.announce(("integrate",))  # before the next imports compile the kernels, if not cached
+from tswm_runtime.hybrid import entry  # noqa: E402
+from tswm_runtime.hybrid.rows import fill_rows  # noqa: E402
+from tswm_runtime.jit.signatures import GUARDS_SIG, address  # noqa: E402
+
+from tswm_runtime.integration import segment  # noqa: E402
+
+from tswm_runtime.model import checks, modes  # noqa: E402
+from tswm_runtime.model.scenes import load_model  # noqa: E402
+from tswm_runtime.model.values import ValueInputError, si_value  # noqa: E402
+from tswm_runtime.results.result import Event, Jump, Result, status_message  # noqa: E402
+
+coldstart.done()
+
+METHODS = {"dopri5": segment.DOPRI5, "rosenbrock23": segment.ROSENBROCK23}
+RTOL_RANGE = (1e-13, 0.1)
+# atol is absolute on x1 [m] and v1 [m/s]: below 1e-20 the error estimate underflows (NaN steps), above 1 m
+# it accepts any step and the answer is silently wrong.
+ATOL_RANGE = (1e-20, 1.0)
+DEFAULT_POINTS = 1001
+DEFAULT_MAX_EVENTS = 1000
+# Sizes that allocate memory up front (docs/promises.md): output points and the event log.
+MAX_POINTS = 10**6           # about 100 MB of arrays and 150 MB of CSV at the limit
+MAX_EVENTS = 10**6           # about 60 MB of event log at the limit
+MAX_STEPS = 10**9            # a step budget (no memory); keeps it an int64
+BYTES_PER_POINT = 8 * 16     # t, states, mode, a1, S1, S2, F1, F2 ... (estimate for messages)
+BYTES_PER_EVENT = 8 * 7
+
+
+class SimulationInputError(ValueError):
+    """An input to ``simulate`` that is out of its allowed range; the message names it."""
+
+
+def _check(ok: bool, field: str, value, allowed) -> None:
+    """Raise naming ``field`` unless ``ok``; ``allowed``: the rule, or a callable that words it
+    (built only on failure: formatting every rule on every call cost ~8 us of a simulate())."""
+    if not ok:
+        raise SimulationInputError(f"{field} = {value!r}: must be {allowed() if callable(allowed) else allowed}")
+
+
+def _finite(field: str, value) -> float:
+    try:
+        value = float(value)
+    except (TypeError, ValueError):
+        raise SimulationInputError(f"{field} = {value!r}: must be a number") from None
+    _check(math.isfinite(value), field, value, "finite")
+    return value
+
+
+def unknown_parameter(module: ModuleType, name: str) -> str:
+    """Why ``name`` cannot be set: the free parameters, and whether it is a fixed one."""
+    fixed = f"; {name} is fixed in this scene (make it free in the scene file)" if name in module.FIXED else ""
+    free = ", ".join(module.PARAM_NAMES) or "none"
+    return f"scene {module.SCENE!r} has no such free parameter (free: {free}){fixed}"
+
+
+def with_latches(module: ModuleType, P: np.ndarray) -> np.ndarray:
+    """Rows of free parameters extended by the module's latch slots (inf: not yet latched)."""
+    P = np.atleast_2d(np.asarray(P, dtype=np.float64))
+    latches = np.full((P.shape[0], len(getattr(module, "LATCH_NAMES", ()))), np.inf)
+    return np.ascontiguousarray(np.hstack([P, latches]))
+
+
+def parameter_vector(module: ModuleType, params: dict | None) -> np.ndarray:
+    """The free parameters (scene defaults, overridden by ``params``) plus latches (inf),
+    checked against the scene file's rules for them."""
+    values = dict(zip(module.PARAM_NAMES, module.PARAM_DEFAULTS))
+    for name, value in (params or {}).items():
+        if name not in values:
+            raise SimulationInputError(f"parameter {name!r}: {unknown_parameter(module, name)}")
+        try:
+            value = si_value(module, name, value)
+        except ValueInputError as error:
+            raise SimulationInputError(str(error)) from None
+        values[name] = _finite(f"parameter {name}", value)
+    row = tuple(values.values())
+    if (module, row) not in _VALID_ROWS:
+        problem = checks.violations(module, [list(row)])[0]
+        if problem:
+            raise SimulationInputError(problem)
+        if len(_VALID_ROWS) >= 1024:
+            _VALID_ROWS.clear()
+        _VALID_ROWS.add((module, row))
+    # = with_latches(module, [row])[0], built directly (one array instead of four)
+    return np.array(row + (math.inf,) * len(getattr(module, "LATCH_NAMES", ())), dtype=np.float64)
+
+
+# (module, free values) that passed the scene file's rules: repeated calls with the same values
+# (the defaults, most often) skip re-checking them (numpy on one row costs ~15 us a call).
+_VALID_ROWS: set = set()
+
+
+def initial_state(module: ModuleType, run: dict) -> tuple[np.ndarray, np.ndarray]:
+    """(y0, quad): the states at t = 0 (the gap's rate 0: the bodies start together; the stem at
+    rest where it is held), and x1 as the quadrature's start if it is no state."""
+    start = {"x1": run["x1"], "v1": run["v1"], "gap": run.get("gap", 0.0), "gap_rate": 0.0, "x3": 0.0, "v3": 0.0}
+    y0 = np.array([start[name] for name in module.STATES], dtype=np.float64)
+    return y0, (np.array([run["x1"]]) if module.STATES == ("v1",) else np.empty(0))
+
+
+def x1_column(module: ModuleType) -> int:
+    """Where x1 is in a row of states (and their integral): state 0, or the integral of v1."""
+    return 0 if module.STATES[0] == "x1" else len(module.STATES)
+
+
+def settings(module: ModuleType, overrides: dict) -> dict:
+    """The run settings: the scene's [run] table with ``overrides`` applied, validated (a new dict;
+    settings that passed are remembered per module, like ``_VALID_ROWS``: validating cost ~5 us)."""
+    try:  # the key tells 1 from True and 1.0, and 0.0 from -0.0 (equal in Python, not here)
+        key = (module, tuple((k, type(v), float(v).hex() if isinstance(v, float) else v) for k, v in overrides.items()))
+        known = _VALID_SETTINGS.get(key)
+    except TypeError:  # an unhashable value: validated below, which names it
+        key = known = None
+    if known is not None:
+        return dict(known)
+    run = _validated(module, overrides)
+    if key is not None:
+        if len(_VALID_SETTINGS) >= 1024:
+            _VALID_SETTINGS.clear()
+        _VALID_SETTINGS[key] = dict(run)
+    return run
+
+
+_VALID_SETTINGS: dict = {}
+
+
+def _validated(module: ModuleType, overrides: dict) -> dict:
+    run = {"gap": 0.0, **module.RUN, "points": DEFAULT_POINTS, "max_events": DEFAULT_MAX_EVENTS, "hmax": math.inf}
+    for key, value in overrides.items():
+        _check(key in run, "setting", key, lambda: f"one of {', '.join(run)}")
+        if value is not None:
+            run[key] = value
+    _check(run["method"] in METHODS, "method", run["method"], lambda: f"one of {', '.join(METHODS)}")
+    for key in ("t_end", "x1", "v1", "gap", "rtol", "atol", "hmax"):
+        run[key] = float(run[key]) if key == "hmax" else _finite(key, run[key])
+    lo, hi = RTOL_RANGE
+    _check(lo <= run["rtol"] <= hi, "rtol", run["rtol"], lambda: f"in [{lo:g}, {hi:g}]")
+    lo_a, hi_a = ATOL_RANGE
+    _check(lo_a <= run["atol"] <= hi_a, "atol", run["atol"],
+           lambda: f"in [{lo_a:g}, {hi_a:g}] (absolute, in m and m/s)")
+    _check(run["t_end"] > 0.0, "t_end", run["t_end"], "> t0 = 0 s")
+    _check(run["gap"] >= 0.0, "gap", run["gap"], ">= 0 m (the gap from flank a)")
+    _check(run["hmax"] > 0.0, "hmax", run["hmax"], "> 0 s")
+    for key, top in (("max_steps", MAX_STEPS), ("points", MAX_POINTS), ("max_events", MAX_EVENTS)):
+        _check(isinstance(run[key], int) and not isinstance(run[key], bool) and 1 <= run[key] <= top, key,
+               run[key], lambda: _integer_rule(key, top))
+    return run
+
+
+def _integer_rule(key: str, top: int) -> str:
+    return (f"an integer in [1, {top:.0e}]".replace("e+0", "e").replace("e+", "e")
+            + (f" (it sizes memory up front: about {memory_estimate(key, top) / 1e6:.0f} MB at the limit)"
+               if key != "max_steps" else ""))
+
+
+def memory_estimate(key: str, count: int) -> float:
+    """Bytes allocated up front for ``count`` output points or events (an estimate, for messages)."""
+    return count * (BYTES_PER_POINT if key == "points" else BYTES_PER_EVENT)
+
+
+PROGRESS_EVERY = 2.0  # seconds between progress lines of an interruptible run
+
+
+def _in_a_thread(kernel, args: tuple, counters: np.ndarray):
+    """kernel(*args) in a worker thread (the kernel releases the GIL), so that Ctrl-C
+    reaches Python at once (KeyboardInterrupt; the abandoned worker is a daemon thread),
+    and a long run prints its step count (read live from counters) every PROGRESS_EVERY s."""
+    import sys
+    import threading
+    import time
+
+    box = {}
+
+    def work():
+        try:
+            box["out"] = kernel(*args)
+        except BaseException as error:  # noqa: BLE001 - raised again in the calling thread
+            box["error"] = error
+
+    worker = threading.Thread(target=work, daemon=True)
+    start = next_report = time.monotonic() + PROGRESS_EVERY
+    worker.start()
+    while worker.is_alive():
+        worker.join(0.05)
+        if time.monotonic() >= next_report:
+            next_report += PROGRESS_EVERY
+            print(f"  ... running: {int(counters[segment.N_STEPS]):,} steps after "
+                  f"{time.monotonic() - start + PROGRESS_EVERY:.0f} s (Ctrl-C stops)", file=sys.stderr, flush=True)
+    if "error" in box:
+        raise box["error"]
+    return box["out"]
+
+
+_LOADED: dict = {}
+
+
+def _load(model: str):
+    """``load_model(model)``, remembered for a shipped scene name while its module stays the one
+    imported (the import lookup and contract check cost ~8 us a call). A .py or .toml path is
+    loaded afresh on every call."""
+    module = _LOADED.get(model)
+    if module is not None and sys.modules.get(module.__name__) is module:
+        return module
+    coldstart.announce((), model)
+    module = load_model(model)
+    coldstart.done()
+    if not str(model).endswith((".py", ".toml")):
+        _LOADED[model] = module
+    return module
+
+
+@functools.lru_cache(maxsize=32)
+def _time_grid(t_end: float, points: int) -> np.ndarray:
+    return np.linspace(0.0, t_end, points)
+
+
+def _output_times(t_end: float, points: int) -> np.ndarray:
+    """np.linspace(0, t_end, points) as a new array (a copy of a remembered one: the same values)."""
+    return _time_grid(t_end, points).copy()
+
+
+def method_step(method: str):
+    """The step of ``method`` (a METHODS name), ``segment.attempt_function``: on its first use in
+    this process it compiles, if not cached, after ``coldstart`` has said so."""
+    if method not in _PREPARED:
+        coldstart.announce((method,))
+        segment.attempt_function(METHODS[method])
+        coldstart.done()
+        _PREPARED.add(method)
+    return segment.attempt_function(METHODS[method])
+
+
+_PREPARED: set = set()  # methods whose step is compiled or loaded in this process
+_ENTRY_POINTS: dict = {}
+
+
+def _entry_point(kernel):
+    """The compiled code of a kernel that ``compile_cached`` compiled for exactly one signature.
+    Calling it skips the dispatcher, which types every argument on every call to pick the
+    overload (about 40 us for the mode machine's arguments when they still held functions);
+    that is safe only because ``entry.integrate`` and ``simulate`` build every argument with
+    the signature's exact types. The dispatcher itself if there is no single one."""
+    entry = _ENTRY_POINTS.get(id(kernel))
+    if entry is None:
+        try:
+            (signature,) = kernel.signatures
+            entry = kernel.overloads[signature].entry_point
+        except (AttributeError, KeyError, ValueError):
+            entry = kernel
+        _ENTRY_POINTS[id(kernel)] = entry
+    return entry
+
+
+def _direct(kernel, args: tuple, counters: np.ndarray):
+    return _entry_point(kernel)(*args)
+
+
+def _direct_in_a_thread(kernel, args: tuple, counters: np.ndarray):
+    return _in_a_thread(_entry_point(kernel), args, counters)
+
+
+def simulate(model: str | ModuleType, params: dict | None = None, *, interruptible: bool = False,
+             **overrides) -> Result:
+    """Run a scene. ``model``: a shipped scene name, a scene file (.toml), a path to a generated
+    module, or the module; ``params``: free parameters by name, numbers in SI or strings with a
+    unit ("-5 kN"); ``overrides``: run settings (t_end,
+    x1, v1, rtol, atol, method, max_steps, points, max_events, hmax). ``interruptible``:
+    run the kernel in a thread so that Ctrl-C stops a long run at once (the CLI does)."""
+    module = model if isinstance(model, ModuleType) else _load(model)
+    p = parameter_vector(module, params)
+    run = settings(module, overrides)
+    n = len(module.STATES)
+    y0, quad = initial_state(module, run)
+    t_out = _output_times(run["t_end"], run["points"])
+    method_step(run["method"])
+    status, t_stop, n_ev, last, need, first, out, log, mon, counters = entry.integrate(
+        METHODS[run["method"]], module, p, modes.tables(module), y0, run["t_end"], rtol=run["rtol"],
+        atol=run["atol"], t_out=t_out, max_events=run["max_events"], quad=quad, hmax=run["hmax"],
+        max_steps=run["max_steps"], call=_direct_in_a_thread if interruptible else _direct)
+    if out.mode[-1] >= 0:  # rows fill in time order: every row is filled (every array C-contiguous already)
+        t_kept, y_kept, p_rows, modes_kept = t_out, out.y, out.p, out.mode
+    else:
+        keep = out.mode >= 0
+        t_kept, y_kept, p_rows, modes_kept = (np.ascontiguousarray(a[keep])
+                                              for a in (t_out, out.y, out.p, out.mode))
+    y_stop = log.state[n_ev - 1, :n].copy() if n_ev else y0
+    at = x1_column(module)
+    events = [Event(float(log.t[e]), module.GUARDS[log.index[e, 0]], module.MODES[log.index[e, 1]],
+                    module.MODES[log.index[e, 2]] if log.index[e, 2] >= 0 else None,
+                    float(log.state[e, at]), float(log.state[e, n - 1]),
+                    None if math.isnan(log.jump[e, 0]) else Jump(*map(float, log.jump[e])),
+                    dict(zip(module.STATES, map(float, log.state[e, :n]))))
+              for e in range(n_ev)]
+    rows = np.empty((len(module.OUTPUTS), t_kept.size))
+    _entry_point(fill_rows)(address(module.outputs, GUARDS_SIG), t_kept, y_kept, modes_kept, p_rows, n, rows)
+    return Result.build(module, p, p_rows, run, t_kept, y_kept, modes_kept, rows, events, log.state[:n_ev, :n],
+                        mon, counters, hybrid_status=status, t_stop=t_stop,
+                        first_mode=first, message=status_message(module, status, t_stop, y_stop, last,
+                                                                 need, events, p))

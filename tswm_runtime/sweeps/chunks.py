@@ -1,0 +1,116 @@
+"""Sweep chunk files that prove what they hold.
+
+A chunk is a parquet file ``chunks/chunk-NNNNN-HASH.parquet``. Its key, stored inside it
+(schema metadata ``tswm.chunk``) and hashed into its name, holds everything its rows depend
+on: the scene, the model module's body digest (the ``# body-sha256:`` header line of the
+generated file), the runtime's version and a digest of its numerical sources, the run
+settings, and a digest of the chunk's parameter rows. A chunk is reused only when its
+stored key equals the expected one and its parameter columns equal the rows asked for;
+anything else (truncated, foreign, copied over another's name, from another model or
+runtime) is recomputed with a warning. Files in ``chunks/`` that no chunk of this sweep
+expects are stale: reported, and removed on request (``prune``).
+"""
+from __future__ import annotations
+
+import hashlib
+import io
+import json
+from pathlib import Path
+from types import ModuleType
+
+import numpy as np
+
+from tswm_runtime import __version__
+from tswm_runtime.jit.cache_guard import kernel_digest
+from tswm_common.files import write_atomic
+
+KEY_FORMAT = 1
+METADATA_KEY = b"tswm.chunk"
+PATTERN = "chunk-*.parquet"
+RUNTIME_SOURCES = ("model/modes.py", "model/checks.py", "apps/simulate.py", "apps/sweep.py", "apps/chunks.py")   # besides cache_guard's kernels
+
+
+def model_digest(module: ModuleType) -> str:
+    """The module's body digest from its header; without one, a sha256 of its whole file."""
+    path = getattr(module, "__file__", None)
+    if not path:
+        return "no-file:" + getattr(module, "SCENE_DIGEST", module.__name__)
+    source = Path(path).read_bytes()
+    for line in source.decode("utf-8", "replace").splitlines()[:8]:
+        if line.startswith("# body-sha256:"):
+            return line.split(":", 1)[1].strip()
+    return "file-sha256:" + hashlib.sha256(source).hexdigest()
+
+
+def runtime_digest() -> str:
+    """sha256 over the runtime's numerical sources: a changed integrator never reuses old rows."""
+    h = hashlib.sha256(kernel_digest().encode())
+    here = Path(__file__).parents[1]   # tswm_runtime/
+    for name in RUNTIME_SOURCES:
+        h.update(name.encode() + (here / name).read_bytes())
+    return h.hexdigest()
+
+
+def rows_digest(P: np.ndarray) -> str:
+    P = np.ascontiguousarray(P, dtype=np.float64)
+    return hashlib.sha256(repr(P.shape).encode() + P.tobytes()).hexdigest()
+
+
+def chunk_key(module: ModuleType, run: dict, P: np.ndarray, index: int, runtime: str | None = None) -> dict:
+    """Everything a chunk's rows depend on, as a JSON-able dict."""
+    return {"format": KEY_FORMAT, "index": index, "scene": module.SCENE,
+            "scene_digest": getattr(module, "SCENE_DIGEST", None), "model_digest": model_digest(module),
+            "runtime_version": __version__, "runtime_digest": runtime or runtime_digest(),
+            "settings": json.loads(json.dumps(run, sort_keys=True, default=str)),
+            "params": list(module.PARAM_NAMES), "rows": int(P.shape[0]), "rows_digest": rows_digest(P)}
+
+
+def chunk_name(key: dict) -> str:
+    digest = hashlib.sha256(json.dumps(key, sort_keys=True).encode()).hexdigest()[:16]
+    return f"chunk-{key['index']:05d}-{digest}.parquet"
+
+
+def write_chunk(path: Path, table, key: dict) -> Path:
+    """The table as parquet with its key in the schema metadata, written atomically."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    arrow = pa.Table.from_pandas(table, preserve_index=False)
+    arrow = arrow.replace_schema_metadata({**(arrow.schema.metadata or {}),
+                                          METADATA_KEY: json.dumps(key, sort_keys=True).encode()})
+    buffer = io.BytesIO()
+    pq.write_table(arrow, buffer)
+    return write_atomic(path, buffer.getvalue())
+
+
+def read_chunk(path: Path, key: dict, P: np.ndarray, columns: list[str]):
+    """(table, None) when the file holds exactly the chunk ``key`` describes, else (None, why not)."""
+    import pyarrow.parquet as pq
+
+    try:
+        arrow = pq.read_table(path)
+        stored = json.loads((arrow.schema.metadata or {}).get(METADATA_KEY, b"null"))
+        table = arrow.to_pandas()
+    except Exception as error:  # truncated or not parquet at all: any reader error means recompute
+        return None, f"unreadable ({type(error).__name__}: {str(error)[:120]})"
+    if stored is None:
+        return None, "it carries no tswm chunk key (foreign or written by an older tswm)"
+    if stored != key:
+        diff = sorted(k for k in set(key) | set(stored) if key.get(k) != stored.get(k))
+        return None, f"its key differs in {', '.join(diff)}"
+    if list(table.columns) != columns:
+        return None, "its columns differ from this sweep's"
+    names = key["params"]
+    held = table[names].to_numpy(dtype=np.float64) if names else np.empty((len(table), 0))
+    if held.shape != P.shape or not np.array_equal(held, P):
+        return None, "its parameter rows differ from the rows asked for"
+    return table, None
+
+
+def stale_files(directory: Path, expected: set[str]) -> list[Path]:
+    """Chunk files (and leftover temporary files) in ``directory`` that this sweep does not expect."""
+    if not directory.is_dir():
+        return []
+    files = [p for p in directory.iterdir() if p.is_file() and p.name not in expected
+             and (p.match(PATTERN) or p.name.endswith(".tmp"))]
+    return sorted(files)

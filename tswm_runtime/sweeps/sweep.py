@@ -1,0 +1,411 @@
+"""Parameter sweeps: one scene over a grid or random samples of its free parameters.
+
+The cases are split into chunks; each chunk is one call of the parallel numba batch
+(``batch.run_batch``, prange over cases on all cores) and is written atomically to
+``DIR/chunks/chunk-NNNNN-HASH.parquet`` with its key inside (``chunks.py``: the model's
+body digest, the runtime's version and digest, the settings, the rows). A rerun reuses a
+chunk only when the file proves it holds exactly those rows; a truncated, foreign or
+stale one is recomputed with a warning, and files no chunk expects are reported (and
+removed with ``prune``). An interrupted sweep leaves only complete chunks and resumes
+without recomputing them. With a dask.distributed ``Client`` the chunks run as tasks on
+its workers instead.
+
+One row per case: the free parameters, then
+
+    status    'finished' or why the run stopped (result.STATUS_NAMES); 'invalid-parameter'
+              for a row that breaks the scene file's rules for its parameters (not run)
+    problem   '' or, for an invalid row, which rule it breaks
+    t_stop    where the run ended [s]
+    S1m, tS1m, S2m, tS2m   the value of S1 (S2) where |S1| (|S2|) is largest, and its time
+    KD1, KD2  eq. (10) from S1m, S2m when the scene gives Ft1, Ft2 (else NaN)
+    x1, v1    the state at t_stop (NaN when the run stopped inside a step)
+    regimes   the regime code: one letter per phase, in order (REGIME_LETTERS: T tractive,
+              I inverse-tractive, S stick, A/B backward on flank a/b, F sliding along
+              phi = 0, G free flight across the clearance); e.g. 'ST' = stuck, then broke away
+              into tractive sliding
+    modes     the same phases as mode indices into the module's MODES, space separated
+    n_events, steps, rejected, nfev, njev   events logged, accepted and rejected steps,
+              rhs and Jacobian calls
+    impacts, impact_energy   impacts with a normal impulse (scenes with a clearance and
+              rigid flanks) and the kinetic energy they took [J]
+"""
+from __future__ import annotations
+
+import io
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from types import ModuleType
+
+import numpy as np
+
+from tswm_runtime import __version__
+
+from tswm_runtime.sweeps import chunks
+from tswm_runtime.jit import coldstart
+
+coldstart.announce(("integrate", "batch"))  # before the next imports compile the kernels, if not cached
+from tswm_runtime.hybrid import batch  # noqa: E402
+
+from tswm_runtime.model import checks, modes  # noqa: E402
+from tswm_runtime.model.contract import load_module  # noqa: E402
+from tswm_common.files import write_atomic  # noqa: E402
+from tswm_runtime.results.result import STATUS_NAMES  # noqa: E402
+from tswm_runtime.jit.structures import Tolerances  # noqa: E402
+from tswm_runtime.simulation.simulate import (METHODS, initial_state, method_step, settings, unknown_parameter,  # noqa: E402
+                                        with_latches)
+
+coldstart.done()
+
+REGIME_LETTERS = {"tractive": "T", "inverse-tractive": "I", "stick": "S", "backward on flank a": "A",
+                  "backward on flank b": "B", "sliding along phi = 0": "F", "free flight": "G"}
+SEQ_LEN = 32  # modes kept per case; longer sequences end in '…'
+DEFAULT_CHUNK = 512
+# Size bounds (docs/promises.md): above LARGE_SWEEP cases a sweep states its size and needs --large;
+# MAX_SWEEP_CASES is refused outright, and so is a sweep that would write more than MAX_CHUNKS chunk files.
+LARGE_SWEEP = 10**6
+MAX_SWEEP_CASES = 10**7
+MAX_CHUNK_SIZE = 10**6
+MAX_CHUNKS = 10**5
+MAX_SEED = 2**63 - 1
+ROW_BYTES = 220   # bytes per case in chunks + parquet + CSV: 214 measured on a 2000-case paper grid
+INVALID = "invalid-parameter"
+RESULT_COLUMNS = ("status", "problem", "t_stop", "S1m", "tS1m", "S2m", "tS2m", "KD1", "KD2", "x1", "v1",
+                  "regimes", "modes", "n_events", "steps", "rejected", "nfev", "njev", "impacts", "impact_energy")
+
+
+class SweepInputError(ValueError):
+    """A sweep input that cannot be used; the message names it."""
+
+
+def _free(module: ModuleType, name: str, option: str) -> None:
+    if name not in module.PARAM_NAMES:
+        raise SweepInputError(f"{option} {name!r}: {unknown_parameter(module, name)}")
+
+
+def _number(text: str, what: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise SweepInputError(f"{what}: {text!r} is not a number") from None
+    if not math.isfinite(value):
+        raise SweepInputError(f"{what}: {text!r} is not finite")
+    return value
+
+
+def parse_grid(items: list[str], module: ModuleType) -> dict[str, np.ndarray]:
+    """``name=start:stop:count`` (count points, both ends included) or ``name=value``."""
+    grid = {}
+    for item in items:
+        name, sep, spec = (s.strip() for s in item.partition("="))
+        if not sep or not name or not spec:
+            raise SweepInputError(f"--grid {item!r}: expected NAME=START:STOP:COUNT, e.g. F2=-15000:0:11")
+        _free(module, name, "--grid")
+        if name in grid:
+            raise SweepInputError(f"--grid {item!r}: {name} is given twice")
+        parts = spec.split(":")
+        if len(parts) == 1:
+            grid[name] = np.array([_number(parts[0], f"--grid {item!r}")])
+            continue
+        if len(parts) != 3:
+            raise SweepInputError(f"--grid {item!r}: expected NAME=START:STOP:COUNT, e.g. F2=-15000:0:11")
+        start, stop = (_number(v, f"--grid {item!r}") for v in parts[:2])
+        try:
+            count = int(parts[2])
+        except ValueError:
+            raise SweepInputError(f"--grid {item!r}: count {parts[2]!r} is not an integer") from None
+        if not 1 <= count <= MAX_SWEEP_CASES:
+            raise SweepInputError(f"--grid {item!r}: count {count} must be in [1, {MAX_SWEEP_CASES:.0e}]")
+        grid[name] = np.linspace(start, stop, count)
+    return grid
+
+
+def parse_ranges(items: list[str], module: ModuleType) -> dict[str, tuple[float, float]]:
+    """``name=lo:hi`` with lo < hi."""
+    ranges = {}
+    for item in items:
+        name, sep, spec = (s.strip() for s in item.partition("="))
+        parts = spec.split(":")
+        if not sep or not name or len(parts) != 2:
+            raise SweepInputError(f"--range {item!r}: expected NAME=LO:HI, e.g. m2=100:400")
+        _free(module, name, "--range")
+        lo, hi = (_number(v, f"--range {item!r}") for v in parts)
+        if not lo < hi:
+            raise SweepInputError(f"--range {item!r}: lo = {lo:g} must be < hi = {hi:g}")
+        ranges[name] = (lo, hi)
+    return ranges
+
+
+def grid_size(grid: dict[str, np.ndarray]) -> int:
+    """Number of cases of a grid (an exact Python int, computed before anything is allocated)."""
+    return math.prod(int(values.size) for values in grid.values())
+
+
+def check_size(cases: int, chunk_size: int, large: bool = False) -> None:
+    """Refuse a sweep too large to be right or to fit, stating its size; above LARGE_SWEEP ask for --large."""
+    if not 1 <= chunk_size <= MAX_CHUNK_SIZE:
+        raise SweepInputError(f"--chunk-size {chunk_size}: must be in [1, {MAX_CHUNK_SIZE:.0e}]")
+    files = -(-cases // chunk_size)
+    size = (f"{cases} cases, about {cases * ROW_BYTES / 1e6:.3g} MB of parquet and CSV output, {files} chunk "
+            f"file{'s' if files != 1 else ''} of {chunk_size}")
+    if cases > MAX_SWEEP_CASES:
+        raise SweepInputError(f"sweep of {size}: more than the {MAX_SWEEP_CASES:.0e} cases tswm runs in one "
+                              "sweep; split it (several -o directories) or coarsen the grid")
+    if files > MAX_CHUNKS:
+        raise SweepInputError(f"sweep of {size}: more than {MAX_CHUNKS:.0e} chunk files; raise --chunk-size to "
+                              f"at least {-(-cases // MAX_CHUNKS)}")
+    if cases > LARGE_SWEEP and not large:
+        raise SweepInputError(f"sweep of {size}: above {LARGE_SWEEP:.0e} cases; pass --large to run it")
+
+
+def grid_cases(module: ModuleType, grid: dict[str, np.ndarray]) -> np.ndarray:
+    """All combinations (the first grid name varies slowest) as rows of the free parameters;
+    parameters not in the grid keep the scene's defaults."""
+    base = np.array(module.PARAM_DEFAULTS, dtype=np.float64)
+    axes = [grid[name] for name in grid]
+    mesh = np.meshgrid(*axes, indexing="ij") if axes else []
+    n = int(np.prod([a.size for a in axes])) if axes else 1
+    P = np.tile(base, (n, 1))
+    for name, values in zip(grid, mesh):
+        P[:, module.PARAM_NAMES.index(name)] = values.ravel()
+    return P
+
+
+def sample_cases(module: ModuleType, samples: int, ranges: dict, seed: int) -> np.ndarray:
+    """``samples`` rows, each ranged parameter uniform in [lo, hi) (numpy default_rng(seed))."""
+    if not 1 <= samples <= MAX_SWEEP_CASES:
+        raise SweepInputError(f"--samples {samples}: must be in [1, {MAX_SWEEP_CASES:.0e}]")
+    if not 0 <= seed <= MAX_SEED:
+        raise SweepInputError(f"--seed {seed}: must be an integer in [0, 2^63 - 1]")
+    if not ranges:
+        raise SweepInputError("--samples needs at least one --range NAME=LO:HI")
+    rng = np.random.default_rng(seed)
+    P = np.tile(np.array(module.PARAM_DEFAULTS, dtype=np.float64), (samples, 1))
+    for name, (lo, hi) in ranges.items():
+        P[:, module.PARAM_NAMES.index(name)] = rng.uniform(lo, hi, samples)
+    return P
+
+
+def sequence_texts(module: ModuleType, seq: np.ndarray, n_modes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per case, its regimes as letters ("TS") and its mode indices ("0 2"), from its first
+    SEQ_LEN modes (``seq``, padded with -1) and its number of modes (more end in '…'). Each
+    distinct sequence is spelt once: a grid has a few, and spelling 10,000 took 16 ms."""
+    letters = [REGIME_LETTERS.get(r, "?") for r in module.MODE_REGIME]
+    kept = np.where(np.arange(SEQ_LEN) < n_modes[:, None], seq, -1)  # the first n_modes only
+    keys = np.column_stack([kept, n_modes > SEQ_LEN]).astype(np.int64)
+    distinct, which = np.unique(keys.view(np.dtype((np.void, keys.shape[1] * 8))).ravel(), return_inverse=True)
+    regimes, codes = np.empty(distinct.size, object), np.empty(distinct.size, object)
+    for u, key in enumerate(distinct):
+        *modes_of, more = np.frombuffer(key.tobytes(), np.int64).tolist()
+        modes_of = [m for m in modes_of if m >= 0]  # not the padding
+        regimes[u] = "".join(letters[m] for m in modes_of) + ("…" if more else "")
+        codes[u] = " ".join(map(str, modes_of)) + (" …" if more else "")
+    return regimes[which], codes[which]
+
+
+def load_factor_columns(module: ModuleType, S1m, S2m, full: np.ndarray, valid) -> tuple[np.ndarray, np.ndarray]:
+    """(KD1, KD2) of every case (NaN where not run, or without Ft1, Ft2): the generated
+    ``load_factors`` (|S| / Ft, elementwise) evaluated once on the columns as plain Python,
+    with p[k] the k-th parameter of every case; one compiled call per case cost ~1.7 us."""
+    KD1, KD2 = np.full(S1m.size, np.nan), np.full(S1m.size, np.nan)
+    if module.HAS_LOAD_FACTORS and valid.any():
+        python = getattr(module.load_factors, "py_func", module.load_factors)
+        KD1[valid], KD2[valid] = python(S1m[valid], S2m[valid], full[valid].T)
+    return KD1, KD2
+
+
+def run_cases(module: ModuleType, P: np.ndarray, run: dict):
+    """Integrate every row of P (free parameters) in one parallel batch; a DataFrame.
+    Rows that break the scene's parameter rules are not run: status 'invalid-parameter'."""
+    import pandas as pd
+
+    y0, quad = initial_state(module, run)
+    full = with_latches(module, P)
+    cases = P.shape[0]
+    problems = checks.violations(module, P) if cases else []
+    valid = np.array([not reason for reason in problems], dtype=bool)
+    out_f = np.full((cases, batch.N_F), np.nan)
+    out_i = np.zeros((cases, batch.N_I), np.int64)
+    seq = np.full((cases, SEQ_LEN), -1, np.int64)
+    if valid.any():
+        f, i, sq = out_f[valid], out_i[valid], seq[valid]
+        batch.run_batch(batch.INTEGRATE, METHODS[run["method"]], method_step(run["method"]), module.rhs, module.jac, module.guards, module.observe,
+                        module.impact, np.ascontiguousarray(full[valid]), modes.tables(module), y0, quad,
+                        run["t_end"], Tolerances(run["rtol"], np.full(y0.size, run["atol"]), 0.0, run["hmax"]),
+                        run["max_steps"], run["max_events"], len(module.OBSERVABLES), f, i, sq)
+        out_f[valid], out_i[valid], seq[valid] = f, i, sq
+    regimes, mode_codes = sequence_texts(module, seq, out_i[:, batch.I_NMODES])
+    KD1, KD2 = load_factor_columns(module, out_f[:, batch.F_S1M], out_f[:, batch.F_S2M], full, valid)
+    columns = {name: P[:, j] for j, name in enumerate(module.PARAM_NAMES)}
+    columns.update({
+        "status": [STATUS_NAMES[int(s)] if ok else INVALID for s, ok in zip(out_i[:, batch.I_STATUS], valid)],
+        "problem": problems,
+        "t_stop": out_f[:, batch.F_T_STOP], "S1m": out_f[:, batch.F_S1M], "tS1m": out_f[:, batch.F_TS1M],
+        "S2m": out_f[:, batch.F_S2M], "tS2m": out_f[:, batch.F_TS2M], "KD1": KD1, "KD2": KD2,
+        "x1": out_f[:, batch.F_X1], "v1": out_f[:, batch.F_V1], "regimes": regimes, "modes": mode_codes,
+        "n_events": out_i[:, batch.I_EVENTS], "steps": out_i[:, batch.I_STEPS],
+        "rejected": out_i[:, batch.I_REJECTED], "nfev": out_i[:, batch.I_RHS], "njev": out_i[:, batch.I_JAC],
+        "impacts": out_i[:, batch.I_IMPACTS], "impact_energy": out_f[:, batch.F_IMPACT_E],
+    })
+    return pd.DataFrame(columns)
+
+
+def _chunk_task(scene: str, P: np.ndarray, run: dict):
+    """One chunk on a dask worker: load the module there, run the batch."""
+    return run_cases(load_module(scene), P, run)
+
+
+@dataclass
+class SweepOutcome:
+    """What a sweep did: the rows, the files written, chunks computed, reused and rejected
+    (index, why), stale files found (and pruned), warnings for the user."""
+
+    table: object  # pandas.DataFrame
+    parquet: Path | None
+    csv: Path | None
+    computed: list[int] = field(default_factory=list)
+    skipped: list[int] = field(default_factory=list)
+    rejected: list[tuple[int, str]] = field(default_factory=list)
+    stale: list[Path] = field(default_factory=list)
+    pruned: bool = False
+    warnings: list[str] = field(default_factory=list)
+    seconds: float = 0.0
+
+
+class SweepInterrupted(KeyboardInterrupt):
+    """Ctrl-C during a sweep; the message says how many chunks are safe and how to resume."""
+
+
+def _parquet_bytes(table) -> bytes:
+    buffer = io.BytesIO()
+    table.to_parquet(buffer, index=False)
+    return buffer.getvalue()
+
+
+def sweep(model: str | ModuleType, P: np.ndarray, overrides: dict | None = None, *,
+          output: str | Path | None = None, chunk_size: int = DEFAULT_CHUNK, client=None,
+          progress: bool = False, scene_spec: str | None = None, prune: bool = False) -> SweepOutcome:
+    """Run the rows of P (free parameters of the scene, in PARAM_NAMES order).
+
+    output: a directory for chunks/ and SCENE-sweep.parquet/.csv (None: in memory only;
+    no resume). client: a dask.distributed Client to run the chunks on (its workers
+    load the module by ``scene_spec``, a shipped name or a module path). prune: delete
+    stale files in chunks/ (else they are only reported). Ctrl-C raises SweepInterrupted
+    after the chunks finished so far are on disk.
+    """
+    import time
+
+    start = time.perf_counter()
+    if not isinstance(model, ModuleType):
+        coldstart.announce((), model)
+    module = model if isinstance(model, ModuleType) else load_module(model)
+    scene_spec = scene_spec or (model if isinstance(model, str) else module.SCENE)
+    run = settings(module, overrides or {})
+    P = np.ascontiguousarray(P, dtype=np.float64).reshape(-1, len(module.PARAM_NAMES))
+    check_size(P.shape[0], chunk_size, large=True)
+    bounds = [(a, min(a + chunk_size, P.shape[0])) for a in range(0, P.shape[0], chunk_size)]
+    out = Path(output) if output is not None else None
+    runtime = chunks.runtime_digest()
+    keys = [chunks.chunk_key(module, run, P[a:b], i, runtime) for i, (a, b) in enumerate(bounds)]
+    names = [chunks.chunk_name(key) for key in keys]
+    columns = [*module.PARAM_NAMES, *RESULT_COLUMNS]
+    tables: dict[int, object] = {}
+    outcome = SweepOutcome(table=None, parquet=None, csv=None)
+    todo = []
+    for i, name in enumerate(names):
+        path = out / "chunks" / name if out is not None else None
+        if path is None or not path.exists():
+            todo.append(i)
+            continue
+        table, why = chunks.read_chunk(path, keys[i], P[bounds[i][0]:bounds[i][1]], columns)
+        if table is None:
+            outcome.rejected.append((i, why))
+            outcome.warnings.append(f"chunk {i} ({path}): {why}; recomputing it")
+            todo.append(i)
+        else:
+            tables[i] = table
+            outcome.skipped.append(i)
+    if out is not None:
+        _report_stale(outcome, out / "chunks", set(names), prune)
+
+    def finish(i, table):
+        if out is not None:
+            chunks.write_chunk(out / "chunks" / names[i], table, keys[i])
+        tables[i] = table
+        outcome.computed.append(i)
+
+    bar = None
+    if progress and todo:
+        from tqdm import tqdm
+
+        bar = tqdm(total=len(bounds), initial=len(outcome.skipped), unit="chunk", desc=module.SCENE)
+    try:
+        _run_chunks(module, P, run, bounds, todo, finish, client, scene_spec, bar)
+    except KeyboardInterrupt:
+        done = len(outcome.skipped) + len(outcome.computed)
+        where = (f"{done} of {len(bounds)} chunks are complete in {out / 'chunks'}; rerun the same command to "
+                 "resume from them" if out is not None else "nothing was saved (no -o DIR)")
+        raise SweepInterrupted(f"interrupted: {where}") from None
+    finally:
+        if bar:
+            bar.close()
+    frames = [tables[i] for i in range(len(bounds))]
+    outcome.table = (_concat(frames) if frames else run_cases(module, P[:0], run))
+    if out is not None:
+        stem = module.SCENE
+        outcome.parquet = write_atomic(out / f"{stem}-sweep.parquet", _parquet_bytes(outcome.table))
+        outcome.csv = write_atomic(out / f"{stem}-sweep.csv", outcome.table.to_csv(index=False))
+        write_atomic(out / f"{stem}-sweep.json", json.dumps({
+            "scene": module.SCENE, "scene_digest": getattr(module, "SCENE_DIGEST", None),
+            "model_digest": keys[0]["model_digest"] if keys else chunks.model_digest(module),
+            "runtime_version": __version__, "runtime_digest": runtime, "settings": run,
+            "cases": int(P.shape[0]), "chunk_size": chunk_size, "chunks": names,
+            "columns": list(outcome.table.columns)}, indent=2, default=str))
+    outcome.seconds = time.perf_counter() - start
+    return outcome
+
+
+def _concat(frames: list):
+    import pandas as pd
+
+    return pd.concat(frames, ignore_index=True)
+
+
+def _report_stale(outcome: SweepOutcome, directory: Path, expected: set[str], prune: bool) -> None:
+    outcome.stale = chunks.stale_files(directory, expected)
+    if not outcome.stale:
+        return
+    if prune:
+        for path in outcome.stale:
+            path.unlink(missing_ok=True)
+        outcome.pruned = True
+        outcome.warnings.append(f"pruned {len(outcome.stale)} stale file(s) from {directory}")
+    else:
+        outcome.warnings.append(f"{len(outcome.stale)} file(s) in {directory} belong to no chunk of this sweep "
+                                "(another model, runtime, setting or grid, or left by a crash); --prune removes them")
+
+
+def _run_chunks(module, P, run, bounds, todo, finish, client, scene_spec, bar) -> None:
+    """Compute the chunks ``todo`` in this process or on a dask client; ``finish`` stores each."""
+    if client is None:
+        for i in todo:
+            a, b = bounds[i]
+            finish(i, run_cases(module, P[a:b], run))
+            if bar:
+                bar.update()
+        return
+    if not todo:
+        return
+    from distributed import as_completed
+
+    futures = {client.submit(_chunk_task, scene_spec, P[bounds[i][0]:bounds[i][1]], run, pure=False): i
+               for i in todo}
+    try:
+        for future in as_completed(futures):
+            finish(futures[future], future.result())
+            if bar:
+                bar.update()
+    except KeyboardInterrupt:
+        client.cancel(list(futures))
+        raise
