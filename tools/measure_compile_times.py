@@ -1,6 +1,6 @@
 """Measure numba's compile times with an empty cache and store them for the cold-start message.
 
-Writes tswm_runtime/apps/compile_times.json (read by ``tswm_runtime.jit.coldstart``): seconds
+Writes tswm_runtime/jit/compile_times.json (read by ``tswm_runtime.jit.coldstart``): seconds
 for each group of kernels and each shipped model, each measured in a fresh process with a
 fresh NUMBA_CACHE_DIR:
 

@@ -27,7 +27,7 @@ from tswm_common.files import write_atomic
 KEY_FORMAT = 1
 METADATA_KEY = b"tswm.chunk"
 PATTERN = "chunk-*.parquet"
-RUNTIME_SOURCES = ("model/modes.py", "model/checks.py", "apps/simulate.py", "apps/sweep.py", "apps/chunks.py")   # besides cache_guard's kernels
+RUNTIME_SOURCES = ("model/modes.py", "model/checks.py", "simulation/simulate.py", "sweeps/sweep.py", "sweeps/chunks.py")   # besides cache_guard's kernels
 
 
 def model_digest(module: ModuleType) -> str:
