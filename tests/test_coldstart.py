@@ -45,7 +45,7 @@ def _first_stderr_line(argv: list[str], cache: Path, timeout: float = 60.0) -> s
 
 def test_an_empty_cache_is_cold_and_checking_it_compiles_nothing(tmp_path):
     out = _python("import sys, json\n"
-                  "from tswm_runtime.apps import coldstart\n"
+                  "from tswm_runtime.jit import coldstart\n"
                   "cold = coldstart.cold_groups(['integrate', 'batch'])\n"
                   "model = coldstart.model_cold(*coldstart.model_source('paper'))\n"
                   "print(json.dumps([cold, model, 'tswm_runtime.hybrid.machine' in sys.modules]))", tmp_path)

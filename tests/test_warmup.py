@@ -1,5 +1,5 @@
 """A cold numba cache: the CLI runs interpreted while a background process compiles
-(apps.warmup, issue 13's "first result within 15 s"). The interpreted kernels are the same
+(startup.warmup, issue 13's "first result within 15 s"). The interpreted kernels are the same
 source run by Python: they must give the compiled kernels' results. The decisions (interpret
 or compile first, one background compile at a time, rerun compiled on Python-only arithmetic
 errors) are checked on their own."""
@@ -145,7 +145,7 @@ def test_an_unwritable_temporary_directory_costs_the_background_compile_not_the_
 
 def test_a_second_background_compile_leaves_at_once_while_the_lock_is_held(tmp_path):
     env = _env(tmp_path, "foreground")
-    lock = subprocess.run([sys.executable, "-c", "from tswm_runtime.apps import warmup; print(warmup.lock_path())"],
+    lock = subprocess.run([sys.executable, "-c", "from tswm_runtime.startup import warmup; print(warmup.lock_path())"],
                           capture_output=True, text=True, cwd=ROOT, env=env, check=True).stdout.strip()
     with open(lock, "a") as handle:
         fcntl.flock(handle, fcntl.LOCK_EX)
@@ -205,7 +205,7 @@ def test_background_mode_fills_the_cache_and_the_next_run_is_silent(tmp_path):
     argv = [sys.executable, "-m", "tswm_runtime.cli", "simulate", "paper", "--points", "2"]
     first = subprocess.run(argv, capture_output=True, text=True, cwd=ROOT, env=env, timeout=300)
     assert first.returncode == 0 and "background process compiles them" in first.stderr, first.stderr
-    subprocess.run([sys.executable, "-c", "from tswm_runtime.apps import warmup; warmup.wait()"], cwd=ROOT, env=env,
+    subprocess.run([sys.executable, "-c", "from tswm_runtime.startup import warmup; warmup.wait()"], cwd=ROOT, env=env,
                    check=True, timeout=900)
     second = subprocess.run(argv, capture_output=True, text=True, cwd=ROOT, env=env, timeout=300)
     assert second.returncode == 0 and second.stderr == "", second.stderr
