@@ -4,47 +4,19 @@ imports neither; no folder of more than ten modules; docs/architecture.md names 
 exist."""
 from __future__ import annotations
 
-import ast
+import importlib.util
 import re
 from pathlib import Path
 
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-PACKAGES = ("tswm_runtime", "derivation", "tswm_common")
+_spec = importlib.util.spec_from_file_location("import_map", ROOT / "tools" / "import_map.py")
+import_map = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(import_map)
 
-
-def _modules() -> dict[str, Path]:
-    found = {}
-    for package in PACKAGES:
-        for path in (ROOT / package).rglob("*.py"):
-            parts = path.relative_to(ROOT).with_suffix("").parts
-            name = ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
-            found[name] = path
-    return found
-
-
-MODULES = _modules()
-
-
-def _imports(name: str, path: Path) -> set[str]:
-    """Every tswm module that ``name`` imports anywhere in its source (function bodies included)."""
-    package = name if path.name == "__init__.py" else name.rpartition(".")[0]
-    targets = set()
-    for node in ast.walk(ast.parse(path.read_text())):
-        if isinstance(node, ast.Import):
-            targets.update(alias.name for alias in node.names)
-        elif isinstance(node, ast.ImportFrom):
-            base = node.module or ""
-            if node.level:
-                base = ".".join(package.split(".")[: len(package.split(".")) - node.level + 1] + ([base] if base else []))
-            for alias in node.names:
-                sub = f"{base}.{alias.name}"
-                targets.add(sub if sub in MODULES else base)
-    return {t for t in targets if t in MODULES and t != name}
-
-
-GRAPH = {name: _imports(name, path) for name, path in MODULES.items()}
+MODULES = {name: path for name, path in import_map.modules(ROOT).items() if not name.startswith("generated")}
+GRAPH = {name: import_map.imports_of(name, path, MODULES) for name, path in MODULES.items()}
 
 
 def _cycles(graph: dict[str, set[str]]) -> list[list[str]]:
@@ -90,7 +62,7 @@ def test_a_function_level_import_counts():
     tree = Path(ROOT / "tests" / "_probe_module.py")
     try:
         tree.write_text(source)
-        assert "tswm_runtime.cli" in _imports("tests._probe_module", tree)
+        assert "tswm_runtime.cli" in import_map.imports_of("tests._probe_module", tree, MODULES)
     finally:
         tree.unlink()
 
@@ -127,3 +99,35 @@ def test_architecture_page_names_only_modules_that_exist():
     assert named, "the page names no module"
     missing = sorted(n for n in named if not (ROOT / n).exists())
     assert missing == []
+
+
+# The rooms of docs/architecture.md, lowest first: a room imports only from rooms before it.
+ROOM_ORDER = ("tswm_common", "tswm_runtime/common", "tswm_runtime/jit", "tswm_runtime/integration",
+              "tswm_runtime/hybrid", "tswm_runtime/model", "tswm_runtime/results", "tswm_runtime/simulation",
+              "tswm_runtime/sweeps", "tswm_runtime/fitting", "tswm_runtime/reference", "tswm_runtime/bench",
+              "tswm_runtime/paper", "tswm_runtime/startup", "tswm_runtime/cli")
+# Outside the order: derivation/ and generated/ (scene files and documents, imported lazily by the
+# rooms that turn a .toml into a module or write the derivation) and the package face.
+OUTSIDE = {"derivation", "generated", "tswm_runtime"}
+
+
+def test_rooms_import_only_from_lower_rooms():
+    packages = {name.rpartition(".")[0] for name in GRAPH}
+    upward = []
+    for name, targets in GRAPH.items():
+        here = import_map.room(name, packages)
+        if here not in ROOM_ORDER:
+            continue
+        for target in targets:
+            there = import_map.room(target, packages)
+            if there in OUTSIDE or there == here:
+                continue
+            if ROOM_ORDER.index(there) > ROOM_ORDER.index(here):
+                upward.append(f"{name} -> {target}")
+    assert upward == []
+
+
+def test_every_runtime_room_is_in_the_order():
+    packages = {name.rpartition(".")[0] for name in GRAPH}
+    rooms = {import_map.room(name, packages) for name in GRAPH if name.startswith("tswm_runtime.")}
+    assert rooms - set(ROOM_ORDER) - OUTSIDE == set()

@@ -167,7 +167,7 @@ EMPTY_CACHE = [  # (name, TSWM_COLD_START, command line after the interpreter, t
      "cases in"),
     ("tswm simulate paper", "foreground", ["-m", "tswm_runtime.cli", "simulate", "paper"], "status:"),
 ]
-WAIT_FOR_BACKGROUND = "from tswm_runtime.apps import warmup; warmup.wait()"
+WAIT_FOR_BACKGROUND = "from tswm_runtime.startup import warmup; warmup.wait()"
 
 
 def _timed_run(argv, env, result_mark) -> dict:

@@ -35,7 +35,7 @@ def _allowed(typ) -> bool:
     return isinstance(typ, (types.Array, types.Number, types.Boolean, types.NoneType))
 
 
-if numba.config.DISABLE_JIT:   # an interpreted run (apps.warmup): nothing is counted
+if numba.config.DISABLE_JIT:   # an interpreted run (startup.warmup): nothing is counted
     def borrowed(x):
         return x
 else:

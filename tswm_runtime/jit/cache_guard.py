@@ -123,7 +123,7 @@ def njit(*, cache=False, **options):
     ``options`` may turn the wrappers back on (no_cfunc_wrapper=False for a first-class function).
     The function itself while numba's jit is off, as numba.njit does."""
     def decorate(py_func):
-        if numba.config.DISABLE_JIT:   # an interpreted run (apps.warmup)
+        if numba.config.DISABLE_JIT:   # an interpreted run (startup.warmup)
             return py_func
         dispatcher = _Helper(py_func=py_func, locals={},
                              targetoptions={"nopython": True, "boundscheck": None, "no_cpython_wrapper": True,
@@ -136,7 +136,7 @@ def njit(*, cache=False, **options):
 
 def compile_cached(signature, **options):
     """Like ``numba.njit(signature, cache=True, **options)``, with the kernel check above; the
-    function itself while numba's jit is off (an interpreted run, apps.warmup)."""
+    function itself while numba's jit is off (an interpreted run, startup.warmup)."""
     def decorate(py_func):
         if numba.config.DISABLE_JIT:
             return py_func

@@ -52,7 +52,7 @@ def compiled(function, signature):
     once: passing the dispatcher itself costs ~20 us a call to find its compiled code. Keyed
     by identity (both are long-lived: a module's function, a signature constant): hashing a
     numba signature walks its types, ~10 us a call. While numba's jit is off (an interpreted
-    run, apps.warmup) the function itself."""
+    run, startup.warmup) the function itself."""
     if config.DISABLE_JIT:
         return function
     key = (id(function), id(signature))
