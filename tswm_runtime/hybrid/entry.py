@@ -1,7 +1,7 @@
 """The mode machine called from Python: ``integrate`` builds its arguments from plain values.
 
 ``integrate_at`` is ``machine.integrate_hybrid`` with its six functions (the method's step,
-the model's rhs, jac, guards, observe, impact) given as addresses (``integration.addresses``):
+the model's rhs, jac, guards, observe, impact) given as addresses (``jit.addresses``):
 numba unboxes a function-typed argument through Python, 1-2 us each and several times that
 right after other code has run, an address in nanoseconds. The machine itself is called
 through its addresses too, so its compiled code is not linked into this small kernel (as

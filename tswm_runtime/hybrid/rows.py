@@ -4,7 +4,7 @@
 with the row's own mode and parameter vector (the latches in force there), compiled once
 with an explicit signature like the integrators and cached; calling the model's
 functions row by row from Python cost about 3 us a row. ``outputs`` comes as its address
-(``integration.addresses``): unboxing a function-typed argument goes through Python.
+(``jit.addresses``): unboxing a function-typed argument goes through Python.
 """
 import numpy as np
 
