@@ -8,7 +8,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
-from hypothesis import given, settings, strategies as st
+from hypothesis import example, given, settings, strategies as st
 from numba import njit
 from scipy.integrate import RK45, solve_ivp
 
@@ -495,6 +495,9 @@ _VALUES = st.floats(-1e3, 1e3, allow_nan=False, allow_subnormal=False)
 
 
 @settings(max_examples=400, deadline=None)
+@example(g_a=-6.439606410161251e-256, g_b=-6.439606410161251e-256, rate_a=0.0,   # B*B underflowed to 0
+         rate_b=-6.439606410161251e-256, h=4.0, sign=-1)
+@example(g_a=1e200, g_b=1e200, rate_a=0.0, rate_b=1e200, h=4.0, sign=1)   # B*B overflowed to inf
 @given(g_a=_VALUES, g_b=_VALUES, rate_a=_VALUES, rate_b=_VALUES, h=st.floats(1e-6, 10.0), sign=st.sampled_from([-1, 1]))
 def test_a_step_left_unsampled_keeps_its_cubic_away_from_zero(g_a, g_b, rate_a, rate_b, h, sign):
     """Where clear_of_zero leaves a step unsampled, the cubic Hermite interpolant of the guard's

@@ -45,6 +45,8 @@ Rules (lessons from the peers' issue trackers: scipy 9228, 17066, 18039):
 The Illinois iteration is written as pure state-update functions (``bracket_*``)
 so that ``segment`` runs the same iteration on the re-taken full-order step.
 """
+import math
+
 import numpy as np
 from tswm_runtime.jit.cache_guard import njit
 
@@ -101,7 +103,18 @@ def guard_rates(guards, mode, t, y, f, p, g, h, y_tmp, g_tmp, rates):
 @njit(cache=True, error_model="numpy")
 def _hermite_lowest(s, g_a, g_b, slope_a, slope_b):
     """Lowest value of s H(theta) on [0, 1], H the cubic with H(0) = g_a, H(1) = g_b,
-    H'(0) = slope_a, H'(1) = slope_b (slopes per unit theta): its ends and the roots of H'."""
+    H'(0) = slope_a, H'(1) = slope_b (slopes per unit theta): its ends and the roots of H'.
+    The coefficients are scaled by a power of two near their largest magnitude first (exact),
+    so that the discriminant neither underflows for tiny guards nor overflows for huge ones."""
+    largest = max(abs(g_a), abs(g_b), abs(slope_a), abs(slope_b))
+    if largest > 0.0 and np.isfinite(largest):
+        scale = math.ldexp(1.0, -math.frexp(largest)[1])
+        return _hermite_lowest_scaled(s, g_a * scale, g_b * scale, slope_a * scale, slope_b * scale) / scale
+    return _hermite_lowest_scaled(s, g_a, g_b, slope_a, slope_b)
+
+
+@njit(cache=True, error_model="numpy")
+def _hermite_lowest_scaled(s, g_a, g_b, slope_a, slope_b):
     a2 = 3.0 * (g_b - g_a) - 2.0 * slope_a - slope_b
     a3 = 2.0 * (g_a - g_b) + slope_a + slope_b
     lowest = min(s * g_a, s * g_b)
