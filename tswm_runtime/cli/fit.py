@@ -6,25 +6,29 @@ import math
 import sys
 import time
 
-from tswm_runtime.cli.common import (UsageError, add_setting_options, output_directory, setting_error,
-                                     setting_overrides)
+from tswm_runtime.cli.common import (UsageError, add_setting_options, output_directory, prepare_kernels, run_method,
+                                     setting_error, setting_overrides)
 
 FIT_SETTINGS = ("t_end", "rtol", "atol", "method", "max_steps", "max_events", "points")
 
 
 def run(args: argparse.Namespace) -> int:
     start = time.perf_counter()
-    from tswm_runtime.model.scenes import load_model
-    from tswm_runtime.fitting.fit import FitInputError, fit
-    from tswm_runtime.fitting.report import write_outputs
-    from tswm_runtime.simulation.simulate import SimulationInputError
-
     output_directory(args.output)
     try:
         import pandas  # noqa: F401  (reads the measured file)
     except ModuleNotFoundError:
         raise UsageError("tswm fit reads CSV and Parquet with pandas and pyarrow: pip install -e '.[sweep]'") from None
-    module = load_model(args.scene)
+    spec, cold = prepare_kernels(args.scene, ("integrate", "batch"), many_runs=True)
+    from tswm_runtime.fitting.fit import FitInputError, fit
+    from tswm_runtime.fitting.report import write_outputs
+    from tswm_runtime.model.scenes import load_model
+    from tswm_runtime.simulation.simulate import SimulationInputError
+    from tswm_runtime.startup import warmup
+
+    module = load_model(spec)
+    if cold is not None:
+        warmup.begin(cold, run_method(args, module))
     overrides = setting_overrides(args, FIT_SETTINGS)
     try:
         result = fit(module, args.measured, args.free, overrides=overrides, starts=args.starts,
@@ -38,6 +42,10 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError(str(error)) from None
     except SimulationInputError as error:
         raise setting_error(error, overrides) from None
+    except warmup.PYTHON_ONLY_ERRORS as error:
+        if cold is None:
+            raise
+        return warmup.rerun_compiled(args.argv, error)
     print(f"scene {result.scene}: {result.measured['form']} of {result.measured['cases']} case(s) from "
           f"{args.measured}; {len(result.starts)} start(s), {result.fit_settings['model_runs']} model runs, "
           f"{time.perf_counter() - start:.3g} s")

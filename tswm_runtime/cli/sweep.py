@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 import sys
-from pathlib import Path
 
 from tswm_runtime.cli.common import (UsageError, add_setting_options, output_directory, prepare_kernels, run_method,
                                      setting_error, setting_overrides)
@@ -18,46 +17,22 @@ def run(args: argparse.Namespace) -> int:
     from tswm_runtime.model.scenes import load_model
     from tswm_runtime.simulation.simulate import SimulationInputError
     from tswm_runtime.startup import warmup
-    from tswm_runtime.sweeps.sweep import (SweepInputError, SweepInterrupted, check_size, grid_cases, grid_size,
-                                    parse_grid, parse_ranges, sample_cases, sweep)
+    from tswm_runtime.sweeps.sweep import SweepInputError, SweepInterrupted, scheduler_client, sweep, sweep_cases
 
     module = load_model(spec)
     overrides = setting_overrides(args, SWEEP_SETTINGS)
     try:
-        if args.grid and args.samples is not None:
-            raise SweepInputError("give either --grid or --samples with --range, not both")
-        if args.range and args.samples is None:
-            raise SweepInputError("--range needs --samples N")
-        if args.samples is not None:
-            ranges = parse_ranges(args.range, module)
-            check_size(max(args.samples, 1), args.chunk_size, args.large)   # before the samples are drawn
-            P = sample_cases(module, args.samples, ranges, args.seed)
-        elif args.grid:
-            grid = parse_grid(args.grid, module)
-            check_size(grid_size(grid), args.chunk_size, args.large)   # before the grid is built
-            P = grid_cases(module, grid)
-        else:
-            raise SweepInputError("give --grid NAME=START:STOP:COUNT ... or --samples N --range NAME=LO:HI ...")
+        P = sweep_cases(module, args.grid, samples=args.samples, ranges=args.range, seed=args.seed,
+                        chunk_size=args.chunk_size, large=args.large)
         if cold is not None:
             method = run_method(args, module)
             if not warmup.interpreting_is_quicker(cold, module, P, overrides, method):
                 return warmup.rerun_compiled(args.argv)
             warmup.begin(cold, method)
-        client = cluster = None
-        if args.scheduler:
-            from distributed import Client, LocalCluster
-
-            if args.scheduler == "local":
-                cluster = LocalCluster(n_workers=1, threads_per_worker=1, processes=False,
-                                       dashboard_address=None)
-                client = Client(cluster)
-            else:
-                client = Client(args.scheduler)
         try:
-            outcome = sweep(module, P, overrides, output=args.output, chunk_size=args.chunk_size,
-                            client=client, progress=not args.no_progress,
-                            scene_spec=module.__file__ if Path(args.scene).suffix else args.scene,
-                            prune=args.prune)
+            with scheduler_client(args.scheduler) as client:
+                outcome = sweep(module, P, overrides, output=args.output, chunk_size=args.chunk_size,
+                                client=client, progress=not args.no_progress, prune=args.prune)
         except SweepInterrupted as stop:
             print(f"tswm sweep: {stop}", file=sys.stderr)
             return 1
@@ -65,11 +40,6 @@ def run(args: argparse.Namespace) -> int:
             if cold is None or isinstance(error, (SweepInputError, SimulationInputError)):
                 raise
             return warmup.rerun_compiled(args.argv, error)
-        finally:
-            if client is not None:
-                client.close()
-            if cluster is not None:
-                cluster.close()
     except SweepInputError as error:
         raise UsageError(str(error)) from None
     except SimulationInputError as error:
