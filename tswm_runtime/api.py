@@ -30,13 +30,37 @@ def _settings(t_end, rtol, atol, method, max_steps, max_events, points=None) -> 
     return {key: value for key, value in given.items() if value is not None}
 
 
+def _model(scene):
+    """The generated module that ``scene`` names (``scenes.load_model``); if numba has not cached
+    it, the compile is announced first (``coldstart``), as the CLI does."""
+    from types import ModuleType
+
+    from tswm_runtime.jit import coldstart
+    from tswm_runtime.model.scenes import load_model, model_spec
+
+    if isinstance(scene, ModuleType):
+        return scene
+    spec = model_spec(scene)
+    coldstart.announce((), spec)
+    module = load_model(spec)
+    coldstart.done()
+    return module
+
+
 def simulate(scene, params: dict | None = None, *, t_end=None, rtol=None, atol=None, method=None,
-             points=None, max_steps=None, max_events=None):
+             points=None, max_steps=None, max_events=None, output=None, plot: bool = True):
     """One run of ``scene`` (``tswm simulate``): ``params`` {name: value} sets free parameters
-    (``--set``); returns the ``Result`` (arrays, phases, events, maxima, status; ``to_dict``)."""
+    (``--set``); ``output``: a directory for SCENE.csv, .npz, -summary.json and (with ``plot``)
+    .png. Returns the ``Result`` (arrays, phases, events, maxima, status; ``to_dict``)."""
     from tswm_runtime.simulation.simulate import simulate as run
 
-    return run(scene, params, **_settings(t_end, rtol, atol, method, max_steps, max_events, points))
+    module = _model(scene)
+    result = run(module, params, **_settings(t_end, rtol, atol, method, max_steps, max_events, points))
+    if output is not None:
+        from tswm_runtime.results.export import write_outputs
+
+        write_outputs(result, module, output, plot=plot)
+    return result
 
 
 def sweep(scene, grid=None, *, samples: int | None = None, ranges=None, seed: int = 0, output=None,
@@ -48,10 +72,9 @@ def sweep(scene, grid=None, *, samples: int | None = None, ranges=None, seed: in
     directory for the chunks and SCENE-sweep.parquet, .csv and .json (resumable); ``scheduler``:
     a dask scheduler's address, or 'local'. Returns the ``SweepOutcome``; its ``table`` is a
     pandas DataFrame, one row per case (columns: tswm_runtime/sweeps/sweep.py)."""
-    from tswm_runtime.model.scenes import load_model
     from tswm_runtime.sweeps.sweep import scheduler_client, sweep as run, sweep_cases
 
-    module = load_model(scene)
+    module = _model(scene)
     P = sweep_cases(module, grid, samples=samples, ranges=ranges, seed=seed, chunk_size=chunk_size, large=large)
     with scheduler_client(scheduler) as client:
         return run(module, P, _settings(t_end, rtol, atol, method, max_steps, max_events), output=output,
@@ -68,10 +91,9 @@ def fit(scene, measured, free, *, starts: int = 4, sampler: str = "sobol", seed:
     for fit-report.md, fit.json and (with ``plot``) misfit.png. Returns the ``FitResult``."""
     from tswm_runtime.fitting.fit import FitInputError, fit as run
     from tswm_runtime.fitting.report import write_outputs
-    from tswm_runtime.model.scenes import load_model
     from tswm_runtime.sweeps.sweep import SweepInputError, spec_items
 
-    module = load_model(scene)
+    module = _model(scene)
     try:
         items = spec_items(free, "--free")
     except SweepInputError as error:
