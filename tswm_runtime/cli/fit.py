@@ -72,16 +72,17 @@ def add_parser(sub) -> None:
         "fit", help="identify free parameters from measured peaks or time histories (least squares)",
         description="Fit free parameters of a scene to measured values: peaks (one row per case: known "
                     "parameters, S1m, S2m, KD1, KD2) or a time history (columns t, case, S1, S2, v1), from a "
-                    "CSV or Parquet file, with scipy.optimize.least_squares from several starts. Writes "
+                    "CSV or Parquet file (the tables tswm sweep -o and tswm simulate -o write, as written), with scipy.optimize.least_squares from several starts. Writes "
                     "DIR/fit-report.md, fit.json and misfit.png (see docs/fit.md). Exit status: 0 fitted, 1 "
                     "fitted but a case does not finish at the optimum (or no start converged), 2 bad input, "
                     "130 interrupted.")
     fit.add_argument("scene", help="a shipped scene name, a scene file (.toml) or a generated module's .py path")
     fit.add_argument("--measured", required=True, metavar="FILE",
-                     help="the measured table, .csv or .parquet (docs/fit.md)")
+                     help="the measured table, .csv or .parquet: one of docs/fit.md, or as tswm simulate -o or "
+                          "tswm sweep -o wrote it")
     fit.add_argument("--free", action="append", default=[], required=True, metavar="NAME[=LO:HI]",
-                     help="a free parameter to fit, within LO..HI (bare NAME: the scene's range, where it "
-                          "gives one); repeatable")
+                     help="a free parameter to fit, within LO..HI (numbers in SI or with a unit: "
+                          "m2='50 kg:0.6 t'; bare NAME: the scene's range, where it gives one); repeatable")
     fit.add_argument("--starts", type=int, default=4, metavar="K", help="starting points (default 4, at most 64)")
     fit.add_argument("--sampler", choices=("sobol", "lhs"), default="sobol",
                      help="how the starts are spread in the bounds (scipy.stats.qmc; default sobol)")

@@ -68,18 +68,18 @@ def add_parser(sub) -> None:
         "sweep", help="run a scene over a grid or random samples of its free parameters, in parallel",
         description="Run a scene over a grid (--grid) or seeded random samples (--samples, --range) of "
                     "its free parameters on all cores; one row per case (parameters, status, S1/S2 "
-                    "maxima, KD1/KD2, final state, regime code, counts) in DIR/SCENE-sweep.parquet "
+                    "maxima, KD1/KD2, final state, regime code, counts; units in the column names) in DIR/SCENE-sweep.parquet "
                     "and .csv. Work is done in chunks written to DIR/chunks/, each holding its key "
                     "(model, runtime, settings, rows); a rerun reuses only chunks that prove they hold "
                     "the asked rows and recomputes others with a warning. Exit status: 0 done, 1 "
                     "interrupted (complete chunks are kept: rerun to resume), 2 bad input.")
     sweep.add_argument("scene", help="a shipped scene name, a scene file (.toml) or a generated module's .py path")
     sweep.add_argument("--grid", action="append", default=[], metavar="NAME=START:STOP:COUNT",
-                       help="COUNT values from START to STOP (both included), or NAME=VALUE; repeatable: "
-                            "all combinations")
+                       help="COUNT values from START to STOP (both included), or NAME=VALUE; numbers in SI or "
+                            "with a unit (F2='-15 kN:-5 kN:11'); repeatable: all combinations")
     sweep.add_argument("--samples", type=int, metavar="N", help="N random cases (with --range)")
     sweep.add_argument("--range", action="append", default=[], metavar="NAME=LO:HI",
-                       help="with --samples: NAME uniform in [LO, HI); repeatable")
+                       help="with --samples: NAME uniform in [LO, HI) (numbers in SI or with a unit); repeatable")
     sweep.add_argument("--seed", type=int, default=0, help="random seed for --samples (default 0)")
     sweep.add_argument("-o", "--output", metavar="DIR", help="write DIR/chunks/, DIR/SCENE-sweep.parquet, "
                        ".csv and .json (without -o: print the summary only, no resume)")
