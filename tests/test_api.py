@@ -136,10 +136,11 @@ def test_samples_in_ranges_with_units():
     (lambda: tswm.fit("paper-runup", "missing.csv", {"mass": (1, 2)}), "--free 'mass=1:2'"),
     (lambda: tswm.fit("paper-runup", "missing.csv", {"m2": (1, 2, 3)}), "--free m2=(1, 2, 3)"),
     (lambda: tswm.fit("paper-runup", "missing.csv", {"m2": "50 kg:600 s"}), "parameter m2 = '600 s'"),
+    (lambda: tswm.fit("paper-runup", pd.DataFrame(), ["m2=50:600"]), "measured = DataFrame: expected the path"),
     (lambda: tswm.derive("no-such-scene"), "no-such-scene: cannot read scene file"),
 ], ids=["scene", "toml", "py", "unit", "word", "param", "rtol", "t-end-unit", "grid-unit", "grid-name",
         "grid-none", "no-grid", "grid-and-samples", "range-order", "measured", "free-name", "free-triple",
-        "free-unit", "derive"])
+        "free-unit", "measured-frame", "derive"])
 def test_bad_input_is_a_value_error_naming_it(call, named):
     with pytest.raises(ValueError) as caught:
         call()

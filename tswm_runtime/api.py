@@ -12,6 +12,7 @@ kernels nor SymPy. See docs/api.md.
 """
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 
@@ -93,6 +94,8 @@ def fit(scene, measured, free, *, starts: int = 4, sampler: str = "sobol", seed:
     from tswm_runtime.fitting.report import write_outputs
     from tswm_runtime.sweeps.sweep import SweepInputError, spec_items
 
+    if not isinstance(measured, (str, os.PathLike)):
+        raise FitInputError(f"measured = {type(measured).__name__}: expected the path of a .csv or .parquet file")
     module = _model(scene)
     try:
         items = spec_items(free, "--free")
