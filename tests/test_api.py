@@ -233,6 +233,16 @@ def test_a_sweep_row_that_did_not_finish_is_refused(tmp_path, capsys):
     assert "column 'status', data row 1: 'max-steps': that run did not finish" in err and "2 of 2" in err
 
 
+def test_a_sweep_over_the_fitted_parameter_is_refused(tmp_path):
+    path = tmp_path / "paper-runup-sweep.csv"
+    path.write_text("m2 [kg],F2_after [N],t_step [s],status,regimes,S1m [N]\n"
+                    "100.0,-3000.0,0.3,finished,T,500\n200.0,-3000.0,0.3,finished,T,600\n")
+    with pytest.raises(FitInputError, match=r"column 'm2 \[kg\]': the sweep ran 2 values of m2"):
+        read_measured(path, load_module("paper-runup"), ["m2"])
+    measured = read_measured(path, load_module("paper-runup"), ["F2_after"])
+    assert measured.known == ["m2", "t_step"] and measured.params.tolist() == [[100.0, 0.3], [200.0, 0.3]]
+
+
 def test_units_in_hand_made_column_names(tmp_path):
     module = load_module("paper-runup")
     path = tmp_path / "peaks.csv"

@@ -14,8 +14,8 @@ history   a column ``t`` [s]: one row per sample, an optional ``case`` label (ro
 A column name may carry its unit, ``NAME [UNIT]`` ('S1 [N]', 'S1 [kN]', 'm2 [kg]'): a unit of
 the column's quantity (tswm_common.units), converted to SI. The tables tswm writes are read as
 written: ``tswm sweep -o``'s (peaks; it has the columns status and regimes) skips its other
-result columns and the columns of the parameters being fitted, and refuses rows that did
-not finish; ``tswm simulate -o``'s CSV (a history; it has the columns mode and regime) reads
+result columns and the columns of the parameters being fitted (refused if the sweep ran
+several values of one), and refuses rows that did not finish; ``tswm simulate -o``'s CSV (a history; it has the columns mode and regime) reads
 t, S1, S2 and v1, skips the other series it records, and takes the run's other parameter
 values from the SCENE-summary.json written beside it (the scene's values without one).
 
@@ -213,6 +213,15 @@ def _finished_rows(frame, where: str) -> None:
                             f"{FINISHED!r} ({bad.size} of {len(frame)} are not)")
 
 
+def _one_value(frame, header: str, name: str, where: str) -> None:
+    """A fitted parameter's column in a sweep table: the sweep must have run one value of it."""
+    values = frame[header].astype(str).unique()
+    if len(values) > 1:
+        raise FitInputError(f"{where}: column {_show(header)}: the sweep ran {len(values)} values of {name} "
+                            f"({_show(values[0])}, {_show(values[1])}, ...) and the fit estimates one; keep the rows "
+                            f"of one {name}, or fit another parameter")
+
+
 def _named_columns(frame, module: ModuleType, free: list[str], where: str) -> tuple[dict, dict]:
     """{name: header} of the columns to read (units stripped: 'S1 [N]' -> 'S1') and {name: factor to
     SI}; a tswm table's own record is skipped (``_skipped``)."""
@@ -224,6 +233,8 @@ def _named_columns(frame, module: ModuleType, free: list[str], where: str) -> tu
     for header in headers:
         match = UNIT.fullmatch(header)
         name, unit = (match[1], match[2]) if match else (header, None)
+        if name in free and "status" in skipped:
+            _one_value(frame, header, name, where)
         if name in skipped:
             continue
         if name in column:
