@@ -207,7 +207,8 @@ def test_fit_recovers_m2_from_the_tables_sweep_writes(swept, name, tmp_path, cap
     assert code == 0, capsys.readouterr().err
     data = json.loads((tmp_path / "fit.json").read_text())
     assert data["estimate"]["m2"] == pytest.approx(M2_TRUE, rel=1e-6)
-    assert data["measured"]["known"] == ["F2_after", "t_step"] and data["measured"]["quantities"] == ["S1m", "S2m", "KD1", "KD2"]
+    assert data["measured"]["known"] == ["F2_after", "t_step"]
+    assert data["measured"]["quantities"] == ["S1m", "S2m", "KD1", "KD2"]
     assert data["measured"]["cases"] == 4
 
 

@@ -72,7 +72,8 @@ def add_parser(sub) -> None:
         "fit", help="identify free parameters from measured peaks or time histories (least squares)",
         description="Fit free parameters of a scene to measured values: peaks (one row per case: known "
                     "parameters, S1m, S2m, KD1, KD2) or a time history (columns t, case, S1, S2, v1), from a "
-                    "CSV or Parquet file (the tables tswm sweep -o and tswm simulate -o write, as written), with scipy.optimize.least_squares from several starts. Writes "
+                    "CSV or Parquet file (the tables tswm sweep -o and tswm simulate -o write, as written), "
+                    "with scipy.optimize.least_squares from several starts. Writes "
                     "DIR/fit-report.md, fit.json and misfit.png (see docs/fit.md). Exit status: 0 fitted, 1 "
                     "fitted but a case does not finish at the optimum (or no start converged), 2 bad input, "
                     "130 interrupted.")

@@ -68,8 +68,8 @@ def add_parser(sub) -> None:
         "sweep", help="run a scene over a grid or random samples of its free parameters, in parallel",
         description="Run a scene over a grid (--grid) or seeded random samples (--samples, --range) of "
                     "its free parameters on all cores; one row per case (parameters, status, S1/S2 "
-                    "maxima, KD1/KD2, final state, regime code, counts; units in the column names) in DIR/SCENE-sweep.parquet "
-                    "and .csv. Work is done in chunks written to DIR/chunks/, each holding its key "
+                    "maxima, KD1/KD2, final state, regime code, counts; units in the column names) in "
+                    "DIR/SCENE-sweep.parquet and .csv. Work is done in chunks written to DIR/chunks/, each holding its key "
                     "(model, runtime, settings, rows); a rerun reuses only chunks that prove they hold "
                     "the asked rows and recomputes others with a warning. Exit status: 0 done, 1 "
                     "interrupted (complete chunks are kept: rerun to resume), 2 bad input.")

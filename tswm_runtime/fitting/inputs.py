@@ -13,11 +13,12 @@ history   a column ``t`` [s]: one row per sample, an optional ``case`` label (ro
 
 A column name may carry its unit, ``NAME [UNIT]`` ('S1 [N]', 'S1 [kN]', 'm2 [kg]'): a unit of
 the column's quantity (tswm_common.units), converted to SI. The tables tswm writes are read as
-written: ``tswm sweep -o``'s (peaks; it has the columns status and regimes) skips its other
-result columns and the columns of the parameters being fitted (refused if the sweep ran
-several values of one), and refuses rows that did not finish; ``tswm simulate -o``'s CSV (a history; it has the columns mode and regime) reads
-t, S1, S2 and v1, skips the other series it records, and takes the run's other parameter
-values from the SCENE-summary.json written beside it (the scene's values without one).
+written. ``tswm sweep -o``'s (peaks; it has the columns status and regimes): its other result
+columns and the columns of the parameters being fitted are skipped (refused if the sweep ran
+several values of one), rows that did not finish are refused. ``tswm simulate -o``'s CSV (a
+history; it has the columns mode and regime): t, S1, S2 and v1 are read, its other series
+skipped, and the run's other parameter values taken from the SCENE-summary.json written
+beside it (the scene's values without one).
 
 How the model is compared with either form: ``tswm_runtime.fitting.problem``.
 """
