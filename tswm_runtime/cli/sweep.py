@@ -17,7 +17,7 @@ def run(args: argparse.Namespace) -> int:
     from tswm_runtime.model.scenes import load_model
     from tswm_runtime.simulation.simulate import SimulationInputError
     from tswm_runtime.startup import warmup
-    from tswm_runtime.sweeps.sweep import SweepInputError, SweepInterrupted, scheduler_client, sweep, sweep_cases
+    from tswm_runtime.sweeps.sweep import SweepInputError, SweepInterrupted, sweep, sweep_cases
 
     module = load_model(spec)
     overrides = setting_overrides(args, SWEEP_SETTINGS)
@@ -29,10 +29,19 @@ def run(args: argparse.Namespace) -> int:
             if not warmup.interpreting_is_quicker(cold, module, P, overrides, method):
                 return warmup.rerun_compiled(args.argv)
             warmup.begin(cold, method)
+        client = cluster = None
+        if args.scheduler:
+            from distributed import Client, LocalCluster
+
+            if args.scheduler == "local":
+                cluster = LocalCluster(n_workers=1, threads_per_worker=1, processes=False,
+                                       dashboard_address=None)
+                client = Client(cluster)
+            else:
+                client = Client(args.scheduler)
         try:
-            with scheduler_client(args.scheduler) as client:
-                outcome = sweep(module, P, overrides, output=args.output, chunk_size=args.chunk_size,
-                                client=client, progress=not args.no_progress, prune=args.prune)
+            outcome = sweep(module, P, overrides, output=args.output, chunk_size=args.chunk_size,
+                            client=client, progress=not args.no_progress, prune=args.prune)
         except SweepInterrupted as stop:
             print(f"tswm sweep: {stop}", file=sys.stderr)
             return 1
@@ -40,6 +49,11 @@ def run(args: argparse.Namespace) -> int:
             if cold is None or isinstance(error, (SweepInputError, SimulationInputError)):
                 raise
             return warmup.rerun_compiled(args.argv, error)
+        finally:
+            if client is not None:
+                client.close()
+            if cluster is not None:
+                cluster.close()
     except SweepInputError as error:
         raise UsageError(str(error)) from None
     except SimulationInputError as error:

@@ -40,7 +40,6 @@ import io
 import json
 import math
 import re
-from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import ModuleType
@@ -333,29 +332,6 @@ def run_cases(module: ModuleType, P: np.ndarray, run: dict):
         "impacts": out_i[:, batch.I_IMPACTS], "impact_energy": out_f[:, batch.F_IMPACT_E],
     })
     return pd.DataFrame(columns)
-
-
-@contextmanager
-def scheduler_client(address: str | None):
-    """A dask.distributed Client of the scheduler at ``address`` ('local': a LocalCluster of one
-    worker in this process), closed on exit; None without an address (chunks run here)."""
-    if not address:
-        yield None
-        return
-    from distributed import Client, LocalCluster
-
-    cluster = None
-    if address == "local":
-        cluster = LocalCluster(n_workers=1, threads_per_worker=1, processes=False, dashboard_address=None)
-        client = Client(cluster)
-    else:
-        client = Client(address)
-    try:
-        yield client
-    finally:
-        client.close()
-        if cluster is not None:
-            cluster.close()
 
 
 def _chunk_task(scene: str, P: np.ndarray, run: dict):
