@@ -1,7 +1,8 @@
 """The derivation document, built from the same objects that feed code generation.
 
 ``build_document(model)`` returns a list of sections of text, equations and tables;
-``render(doc, "latex" | "markdown")`` writes it through a Jinja2 template. Text uses
+``render(doc, "latex" | "markdown")`` writes it through a Jinja2 template, ``write_documents``
+writes the files. Text uses
 ``$...$`` for inline math, which both targets understand; that text is tswm's own. Text from
 the scene (its description, its file's path) goes through the ``literal`` filter, which
 escapes everything TeX or Markdown would read as markup: maths in the document comes
@@ -12,6 +13,7 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass, field
 from importlib import resources
+from pathlib import Path
 
 import jinja2
 import sympy as sp
@@ -430,3 +432,25 @@ def render(doc: dict, target: str) -> str:
     """The document as a standalone LaTeX file or as Markdown with $$ math blocks."""
     name = {"latex": "derivation.tex.j2", "markdown": "derivation.md.j2"}[target]
     return _environment(target).get_template(name).render(**doc)
+
+
+def write_documents(model: Model, *, latex=None, markdown=None, pdf=None) -> list[Path]:
+    """Write the document of ``model`` as Markdown, LaTeX and a PDF (``pdf``: a path, or True for
+    the LaTeX file's name, else SCENE-derivation.pdf; needs pdflatex); the paths written."""
+    from derivation.latex import build_pdf
+    from tswm_common.files import write_atomic
+
+    if not (latex or markdown or pdf):
+        return []
+    doc = build_document(model)
+    written = []
+    if markdown:
+        written.append(write_atomic(markdown, render(doc, "markdown")))
+    if latex or pdf:
+        tex = render(doc, "latex")
+        if latex:
+            written.append(write_atomic(latex, tex))
+        if pdf:
+            target = Path(pdf if not isinstance(pdf, bool) else (latex or f"{model.scene.name}-derivation.tex"))
+            written.append(build_pdf(tex, target.with_suffix(".pdf")))
+    return written

@@ -10,7 +10,7 @@ from tswm_runtime.cli import main
 from tswm_runtime.model.contract import load_module
 from tswm_runtime.results.result import STATUS_NAMES
 from tswm_runtime.simulation.simulate import simulate
-from tswm_runtime.sweeps.sweep import REGIME_LETTERS, SweepInputError, grid_cases, parse_grid, sweep
+from tswm_runtime.sweeps.sweep import REGIME_LETTERS, SweepInputError, grid_cases, parse_grid, read_table, sweep
 
 LETTER = REGIME_LETTERS
 
@@ -72,10 +72,13 @@ def test_resume_skips_finished_chunks(tmp_path):
     pd.testing.assert_frame_equal(first.table, again.table)
     changed = sweep(module, P, {"v1": 2.5}, output=tmp_path, chunk_size=2)  # other settings: no reuse
     assert changed.computed == [0, 1, 2]
-    on_disk = pd.read_parquet(tmp_path / "paper-sweep.parquet")
-    pd.testing.assert_frame_equal(on_disk, changed.table)
-    csv = pd.read_csv(tmp_path / "paper-sweep.csv")
-    assert list(csv.columns) == list(on_disk.columns) and len(csv) == 6
+    pd.testing.assert_frame_equal(read_table(tmp_path / "paper-sweep.parquet"), changed.table)
+    pd.testing.assert_frame_equal(read_table(tmp_path / "paper-sweep.csv"), changed.table, check_exact=True)
+    written = ["m2 [kg]", "F2 [N]", "status", "problem", "t_stop [s]", "S1m [N]", "tS1m [s]", "S2m [N]", "tS2m [s]",
+               "KD1", "KD2", "x1 [m]", "v1 [m/s]", "regimes", "modes", "n_events", "steps", "rejected", "nfev",
+               "njev", "impacts", "impact_energy [J]"]
+    assert list(pd.read_parquet(tmp_path / "paper-sweep.parquet").columns) == written
+    assert list(pd.read_csv(tmp_path / "paper-sweep.csv").columns) == written
 
 
 def test_dask_local_cluster_rows_equal_in_process_rows():
@@ -94,7 +97,7 @@ def test_cli_sweep_writes_tables(tmp_path, capsys):
     assert main(["sweep", "paper", "--samples", "5", "--range", "F2=-15000:-1000", "--seed", "3",
                  "-o", str(tmp_path), "--no-progress"]) == 0
     table = pd.read_parquet(tmp_path / "paper-sweep.parquet")
-    assert len(table) == 5 and table["F2"].between(-15000, -1000).all() and (table["m2"] == 200).all()
+    assert len(table) == 5 and table["F2 [N]"].between(-15000, -1000).all() and (table["m2 [kg]"] == 200).all()
     out = capsys.readouterr().out
     assert "5 cases" in out
     # the run's description beside the tables, as the README says, and named in the output
@@ -109,7 +112,7 @@ def test_cli_sweep_writes_tables(tmp_path, capsys):
     (["--grid", "gamma=0.1:0.2:3"], "gamma is fixed"),
     (["--grid", "F2=1:2"], "F2=1:2"),
     (["--grid", "F2=1:2:0"], "count 0 must be in [1, 1e+07]"),
-    (["--grid", "F2=a:2:3"], "'a' is not a number"),
+    (["--grid", "F2=a:2:3"], "F2 = 'a': expected a force"),
     (["--samples", "4", "--range", "F2=5:1"], "lo = 5 must be < hi = 1"),
     (["--samples", "0", "--range", "F2=1:5"], "--samples 0"),
     (["--grid", "F2=1:2:2000", "--grid", "m2=1:2:1000"], "2000000 cases, about 440 MB"),
@@ -131,6 +134,8 @@ def test_cli_sweep_bad_input_exits_2_naming_it(argv, fragment, capsys):
 def test_parse_grid_single_value_and_duplicates():
     module = load_module("paper")
     assert parse_grid(["F2=-5"], module)["F2"].tolist() == [-5.0]
+    assert parse_grid(["F2=-15 kN:-5 kN:3"], module)["F2"].tolist() == [-15000.0, -10000.0, -5000.0]
+    assert parse_grid(["m2=0.2 t"], module)["m2"].tolist() == [200.0]
     with pytest.raises(SweepInputError, match="twice"):
         parse_grid(["F2=1:2:2", "F2=3"], module)
 

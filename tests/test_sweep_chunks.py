@@ -12,7 +12,7 @@ from tswm_runtime.sweeps import chunks
 from tswm_runtime.sweeps import sweep as sweep_module
 from tswm_runtime.cli import main
 from tswm_runtime.model.contract import load_module
-from tswm_runtime.sweeps.sweep import grid_cases, parse_grid, sweep
+from tswm_runtime.sweeps.sweep import grid_cases, parse_grid, read_table, sweep
 
 SETTINGS = {"v1": 2.0}
 
@@ -57,7 +57,7 @@ def test_truncated_chunk_is_recomputed(paper, cases, reference, tmp_path):
     assert again.rejected[0][0] == 1 and "unreadable" in again.rejected[0][1]
     assert any(victim.name in w and "recomputing" in w for w in again.warnings)
     pd.testing.assert_frame_equal(again.table, reference)
-    pd.testing.assert_frame_equal(pd.read_parquet(tmp_path / "paper-sweep.parquet"), reference)
+    pd.testing.assert_frame_equal(read_table(tmp_path / "paper-sweep.parquet"), reference)
     third = sweep(paper, cases, SETTINGS, output=tmp_path, chunk_size=2)   # the rewritten chunk is good
     assert third.computed == [] and third.rejected == []
 
@@ -148,7 +148,7 @@ def test_ctrl_c_keeps_complete_chunks_and_the_rerun_resumes(paper, cases, refere
     assert main(argv + ["--t-end", "1"]) == 0
     assert "reused 1" in capsys.readouterr().out
     expected = sweep(paper, cases, {"t_end": 1.0}, chunk_size=2).table
-    pd.testing.assert_frame_equal(pd.read_parquet(tmp_path / "paper-sweep.parquet"), expected)
+    pd.testing.assert_frame_equal(read_table(tmp_path / "paper-sweep.parquet"), expected)
 
 
 def test_cli_reports_rejected_chunks_on_stderr(tmp_path, capsys):
@@ -162,7 +162,7 @@ def test_cli_reports_rejected_chunks_on_stderr(tmp_path, capsys):
     captured = capsys.readouterr()
     assert "tswm sweep: warning: chunk 0" in captured.err and "recomputing" in captured.err
     assert "rejected on disk" in captured.out and "Traceback" not in captured.err
-    assert np.isfinite(pd.read_parquet(tmp_path / "paper-sweep.parquet")["F2"]).all()
+    assert np.isfinite(read_table(tmp_path / "paper-sweep.parquet")["F2"]).all()
 
 
 def test_cli_prune_removes_stale_files(tmp_path, capsys):

@@ -91,9 +91,7 @@ def test_a_cold_cli_run_is_interpreted_and_says_so(tmp_path):
 def test_a_cold_cli_sweep_is_interpreted_and_gives_the_compiled_table(tmp_path):
     """A small sweep on an empty cache runs interpreted (fewer cases than the probe: no timing
     needed); its table is the compiled sweep's for the same rows (the chunk keys prove the rows)."""
-    import pandas as pd
-
-    from tswm_runtime.sweeps.sweep import sample_cases, sweep
+    from tswm_runtime.sweeps.sweep import read_table, sample_cases, sweep
 
     out = tmp_path / "out"
     run = subprocess.run([sys.executable, "-m", "tswm_runtime.cli", "sweep", "paper", "--samples", "6", "--range",
@@ -102,7 +100,7 @@ def test_a_cold_cli_sweep_is_interpreted_and_gives_the_compiled_table(tmp_path):
                          timeout=300)
     assert run.returncode == 0, run.stderr
     assert "this run is interpreted" in run.stderr.splitlines()[0] and "finished 6" in run.stdout
-    got = pd.read_parquet(out / "paper-sweep.parquet")
+    got = read_table(out / "paper-sweep.parquet")
     module = load_module("paper")
     P = sample_cases(module, 6, {"F2": (-20000.0, 5000.0), "m2": (100.0, 400.0)}, 0)
     ref = sweep(module, P).table

@@ -1,7 +1,24 @@
-"""tswm runtime: integrators, event location and the hybrid mode machine (numba, no sympy)."""
-from importlib import metadata as _metadata
+"""tswm runtime: integrators, event location and the hybrid mode machine (numba, no sympy).
 
-try:
-    __version__ = _metadata.version("tswm")
-except _metadata.PackageNotFoundError:  # run from a source tree that was never installed
-    __version__ = "0.1.0+source"
+The Python API (``tswm_runtime.api``, docs/api.md) is exported here and loaded on first use::
+
+    import tswm_runtime as tswm
+    result = tswm.simulate("paper", {"F2": "-5 kN"})
+
+so ``import tswm_runtime`` loads neither numba's kernels nor SymPy.
+"""
+from tswm_runtime.common.provenance import TSWM_VERSION as __version__
+
+API = ("simulate", "sweep", "fit", "derive")
+
+
+def __getattr__(name: str):
+    if name in API:
+        from tswm_runtime import api
+
+        return getattr(api, name)
+    raise AttributeError(f"module 'tswm_runtime' has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted([*globals(), *API])

@@ -58,16 +58,22 @@ def setting_error(error: Exception, overrides: dict) -> UsageError:
     return UsageError(message)
 
 
-def prepare_kernels(scene: str, groups):
+def prepare_kernels(scene: str, groups, *, many_runs: bool = False):
     """Resolve the scene (``scenes.model_spec``) and, before anything compiles, choose how this
     command gets its kernels (``warmup.interpret_if_cold``: cached, compiled now with a message saying
-    what and about how long, or run interpreted). Returns (spec for ``load_model``, the ColdStart to
-    pass to ``warmup.begin`` once the run's method is known, or None)."""
+    what and about how long, or run interpreted). ``many_runs``: the command runs the model hundreds
+    of times (a fit), so it compiles first (with the message) unless TSWM_COLD_START is 'interpret'.
+    Returns (spec for ``load_model``, the ColdStart to pass to ``warmup.begin`` once the run's method
+    is known, or None)."""
+    from tswm_runtime.jit import coldstart
     from tswm_runtime.model.scenes import model_spec
     from tswm_runtime.startup import warmup
 
     spec = model_spec(scene)
     try:
+        if many_runs and warmup.mode() != "interpret":
+            coldstart.announce(groups, spec)
+            return spec, None
         return spec, warmup.interpret_if_cold(groups, spec)
     except warmup.ColdStartError as error:
         raise UsageError(str(error)) from None

@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 
 
 def add_parser(sub) -> None:
@@ -17,11 +16,9 @@ def add_parser(sub) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from derivation.audit import audit
-    from derivation.document import build_document, render
-    from derivation.latex import build_pdf
+    from derivation.document import write_documents
     from derivation.model import build_model
     from derivation.scene import load_scene
-    from tswm_common.files import write_atomic
 
     scene = load_scene(args.scene)
     model = build_model(scene)
@@ -30,15 +27,6 @@ def run(args: argparse.Namespace) -> int:
     print(f"  states: {', '.join(map(str, model.states))}; free parameters: "
           f"{', '.join(p.name for p in scene.free_params()) or 'none'}")
     print("  audit: " + "; ".join(f"eq. {e.equation} {'agrees' if e.agrees else 'differs'}" for e in audit()))
-    if not (args.latex or args.markdown or args.pdf):
-        return 0
-    doc = build_document(model)
-    if args.markdown:
-        print(f"  wrote {write_atomic(args.markdown, render(doc, 'markdown'))}")
-    latex = render(doc, "latex")
-    if args.latex:
-        print(f"  wrote {write_atomic(args.latex, latex)}")
-    if args.pdf:
-        pdf = Path(args.pdf if isinstance(args.pdf, str) else (args.latex or f"{scene.name}-derivation.tex"))
-        print(f"  wrote {build_pdf(latex, pdf.with_suffix('.pdf'))}")
+    for path in write_documents(model, latex=args.latex, markdown=args.markdown, pdf=args.pdf):
+        print(f"  wrote {path}")
     return 0

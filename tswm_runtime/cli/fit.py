@@ -6,25 +6,29 @@ import math
 import sys
 import time
 
-from tswm_runtime.cli.common import (UsageError, add_setting_options, output_directory, setting_error,
-                                     setting_overrides)
+from tswm_runtime.cli.common import (UsageError, add_setting_options, output_directory, prepare_kernels, run_method,
+                                     setting_error, setting_overrides)
 
 FIT_SETTINGS = ("t_end", "rtol", "atol", "method", "max_steps", "max_events", "points")
 
 
 def run(args: argparse.Namespace) -> int:
     start = time.perf_counter()
-    from tswm_runtime.model.scenes import load_model
-    from tswm_runtime.fitting.fit import FitInputError, fit
-    from tswm_runtime.fitting.report import write_outputs
-    from tswm_runtime.simulation.simulate import SimulationInputError
-
     output_directory(args.output)
     try:
         import pandas  # noqa: F401  (reads the measured file)
     except ModuleNotFoundError:
         raise UsageError("tswm fit reads CSV and Parquet with pandas and pyarrow: pip install -e '.[sweep]'") from None
-    module = load_model(args.scene)
+    spec, cold = prepare_kernels(args.scene, ("integrate", "batch"), many_runs=True)
+    from tswm_runtime.fitting.fit import FitInputError, fit
+    from tswm_runtime.fitting.report import write_outputs
+    from tswm_runtime.model.scenes import load_model
+    from tswm_runtime.simulation.simulate import SimulationInputError
+    from tswm_runtime.startup import warmup
+
+    module = load_model(spec)
+    if cold is not None:
+        warmup.begin(cold, run_method(args, module))
     overrides = setting_overrides(args, FIT_SETTINGS)
     try:
         result = fit(module, args.measured, args.free, overrides=overrides, starts=args.starts,
@@ -38,6 +42,10 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError(str(error)) from None
     except SimulationInputError as error:
         raise setting_error(error, overrides) from None
+    except warmup.PYTHON_ONLY_ERRORS as error:
+        if cold is None:
+            raise
+        return warmup.rerun_compiled(args.argv, error)
     print(f"scene {result.scene}: {result.measured['form']} of {result.measured['cases']} case(s) from "
           f"{args.measured}; {len(result.starts)} start(s), {result.fit_settings['model_runs']} model runs, "
           f"{time.perf_counter() - start:.3g} s")
@@ -64,16 +72,18 @@ def add_parser(sub) -> None:
         "fit", help="identify free parameters from measured peaks or time histories (least squares)",
         description="Fit free parameters of a scene to measured values: peaks (one row per case: known "
                     "parameters, S1m, S2m, KD1, KD2) or a time history (columns t, case, S1, S2, v1), from a "
-                    "CSV or Parquet file, with scipy.optimize.least_squares from several starts. Writes "
+                    "CSV or Parquet file (the tables tswm sweep -o and tswm simulate -o write, as written), "
+                    "with scipy.optimize.least_squares from several starts. Writes "
                     "DIR/fit-report.md, fit.json and misfit.png (see docs/fit.md). Exit status: 0 fitted, 1 "
                     "fitted but a case does not finish at the optimum (or no start converged), 2 bad input, "
                     "130 interrupted.")
     fit.add_argument("scene", help="a shipped scene name, a scene file (.toml) or a generated module's .py path")
     fit.add_argument("--measured", required=True, metavar="FILE",
-                     help="the measured table, .csv or .parquet (docs/fit.md)")
+                     help="the measured table, .csv or .parquet: one of docs/fit.md, or as tswm simulate -o or "
+                          "tswm sweep -o wrote it")
     fit.add_argument("--free", action="append", default=[], required=True, metavar="NAME[=LO:HI]",
-                     help="a free parameter to fit, within LO..HI (bare NAME: the scene's range, where it "
-                          "gives one); repeatable")
+                     help="a free parameter to fit, within LO..HI (numbers in SI or with a unit: "
+                          "m2='50 kg:0.6 t'; bare NAME: the scene's range, where it gives one); repeatable")
     fit.add_argument("--starts", type=int, default=4, metavar="K", help="starting points (default 4, at most 64)")
     fit.add_argument("--sampler", choices=("sobol", "lhs"), default="sobol",
                      help="how the starts are spread in the bounds (scipy.stats.qmc; default sobol)")

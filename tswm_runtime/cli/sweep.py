@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 import sys
-from pathlib import Path
 
 from tswm_runtime.cli.common import (UsageError, add_setting_options, output_directory, prepare_kernels, run_method,
                                      setting_error, setting_overrides)
@@ -18,26 +17,13 @@ def run(args: argparse.Namespace) -> int:
     from tswm_runtime.model.scenes import load_model
     from tswm_runtime.simulation.simulate import SimulationInputError
     from tswm_runtime.startup import warmup
-    from tswm_runtime.sweeps.sweep import (SweepInputError, SweepInterrupted, check_size, grid_cases, grid_size,
-                                    parse_grid, parse_ranges, sample_cases, sweep)
+    from tswm_runtime.sweeps.sweep import SweepInputError, SweepInterrupted, sweep, sweep_cases
 
     module = load_model(spec)
     overrides = setting_overrides(args, SWEEP_SETTINGS)
     try:
-        if args.grid and args.samples is not None:
-            raise SweepInputError("give either --grid or --samples with --range, not both")
-        if args.range and args.samples is None:
-            raise SweepInputError("--range needs --samples N")
-        if args.samples is not None:
-            ranges = parse_ranges(args.range, module)
-            check_size(max(args.samples, 1), args.chunk_size, args.large)   # before the samples are drawn
-            P = sample_cases(module, args.samples, ranges, args.seed)
-        elif args.grid:
-            grid = parse_grid(args.grid, module)
-            check_size(grid_size(grid), args.chunk_size, args.large)   # before the grid is built
-            P = grid_cases(module, grid)
-        else:
-            raise SweepInputError("give --grid NAME=START:STOP:COUNT ... or --samples N --range NAME=LO:HI ...")
+        P = sweep_cases(module, args.grid, samples=args.samples, ranges=args.range, seed=args.seed,
+                        chunk_size=args.chunk_size, large=args.large)
         if cold is not None:
             method = run_method(args, module)
             if not warmup.interpreting_is_quicker(cold, module, P, overrides, method):
@@ -55,9 +41,7 @@ def run(args: argparse.Namespace) -> int:
                 client = Client(args.scheduler)
         try:
             outcome = sweep(module, P, overrides, output=args.output, chunk_size=args.chunk_size,
-                            client=client, progress=not args.no_progress,
-                            scene_spec=module.__file__ if Path(args.scene).suffix else args.scene,
-                            prune=args.prune)
+                            client=client, progress=not args.no_progress, prune=args.prune)
         except SweepInterrupted as stop:
             print(f"tswm sweep: {stop}", file=sys.stderr)
             return 1
@@ -98,18 +82,18 @@ def add_parser(sub) -> None:
         "sweep", help="run a scene over a grid or random samples of its free parameters, in parallel",
         description="Run a scene over a grid (--grid) or seeded random samples (--samples, --range) of "
                     "its free parameters on all cores; one row per case (parameters, status, S1/S2 "
-                    "maxima, KD1/KD2, final state, regime code, counts) in DIR/SCENE-sweep.parquet "
-                    "and .csv. Work is done in chunks written to DIR/chunks/, each holding its key "
+                    "maxima, KD1/KD2, final state, regime code, counts; units in the column names) in "
+                    "DIR/SCENE-sweep.parquet and .csv. Work is done in chunks written to DIR/chunks/, each holding its key "
                     "(model, runtime, settings, rows); a rerun reuses only chunks that prove they hold "
                     "the asked rows and recomputes others with a warning. Exit status: 0 done, 1 "
                     "interrupted (complete chunks are kept: rerun to resume), 2 bad input.")
     sweep.add_argument("scene", help="a shipped scene name, a scene file (.toml) or a generated module's .py path")
     sweep.add_argument("--grid", action="append", default=[], metavar="NAME=START:STOP:COUNT",
-                       help="COUNT values from START to STOP (both included), or NAME=VALUE; repeatable: "
-                            "all combinations")
+                       help="COUNT values from START to STOP (both included), or NAME=VALUE; numbers in SI or "
+                            "with a unit (F2='-15 kN:-5 kN:11'); repeatable: all combinations")
     sweep.add_argument("--samples", type=int, metavar="N", help="N random cases (with --range)")
     sweep.add_argument("--range", action="append", default=[], metavar="NAME=LO:HI",
-                       help="with --samples: NAME uniform in [LO, HI); repeatable")
+                       help="with --samples: NAME uniform in [LO, HI) (numbers in SI or with a unit); repeatable")
     sweep.add_argument("--seed", type=int, default=0, help="random seed for --samples (default 0)")
     sweep.add_argument("-o", "--output", metavar="DIR", help="write DIR/chunks/, DIR/SCENE-sweep.parquet, "
                        ".csv and .json (without -o: print the summary only, no resume)")

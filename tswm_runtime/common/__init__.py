@@ -1,1 +1,1 @@
-"""Runtime leaves: provenance (machine and versions) of results. Imports nothing of tswm."""
+"""Runtime leaves: provenance (tswm's version, the machine and versions) of results. Imports nothing of tswm."""

@@ -1,10 +1,19 @@
-"""What a report records so that it can be redone: the machine and the package versions."""
+"""What a report records so that it can be redone: tswm's version, the machine and the package versions."""
 from __future__ import annotations
 
 import os
 import platform
 from importlib import metadata
 
+
+def _tswm_version() -> str:
+    try:
+        return metadata.version("tswm")
+    except metadata.PackageNotFoundError:  # run from a source tree that was never installed
+        return "0.1.0+source"
+
+
+TSWM_VERSION = _tswm_version()
 
 def package_versions(names) -> dict:
     """Python's version and each named distribution's ("not installed" if absent)."""

@@ -257,7 +257,7 @@ def fit(model: str | ModuleType, measured: str | Path | Measured, free: dict | l
     skips the grid. Raises FitInputError for inputs that cannot be used."""
     from scipy.optimize import least_squares
 
-    from tswm_runtime import __version__
+    from tswm_runtime.common.provenance import TSWM_VERSION as __version__
     from tswm_runtime.sweeps import chunks
     from tswm_runtime.simulation.simulate import SimulationInputError, settings
     from tswm_runtime.common import provenance

@@ -11,12 +11,22 @@ history   a column ``t`` [s]: one row per sample, an optional ``case`` label (ro
           case share it, and its known parameters must be equal), measured quantities
           among S1, S2 [N] and v1 [m/s].
 
+A column name may carry its unit, ``NAME [UNIT]`` ('S1 [N]', 'S1 [kN]', 'm2 [kg]'): a unit of
+the column's quantity (tswm_common.units), converted to SI. The tables tswm writes are read as
+written. ``tswm sweep -o``'s (peaks; it has the columns status and regimes): its other result
+columns and the columns of the parameters being fitted are skipped (refused if the sweep ran
+several values of one), rows that did not finish are refused. ``tswm simulate -o``'s CSV (a
+history; it has the columns mode and regime): t, S1, S2 and v1 are read, its other series
+skipped, and the run's other parameter values taken from the SCENE-summary.json written
+beside it (the scene's values without one).
+
 How the model is compared with either form: ``tswm_runtime.fitting.problem``.
 """
 from __future__ import annotations
 
 import hashlib
 import io
+import json
 import math
 import re
 from dataclasses import dataclass
@@ -25,9 +35,17 @@ from types import ModuleType
 
 import numpy as np
 
+from tswm_common import units
+
 PEAK_QUANTITIES = ("S1m", "S2m", "KD1", "KD2")
 HISTORY_QUANTITIES = ("S1", "S2", "v1")
 CASE, TIME = "case", "t"
+QUANTITY = {"S1m": "force", "S2m": "force", "KD1": "dimensionless", "KD2": "dimensionless", "t": "time",
+            "S1": "force", "S2": "force", "v1": "velocity"}  # tswm_common.units quantities
+SWEEP_TABLE = ("status", "regimes")   # columns that mark a table written by tswm sweep -o
+SIMULATE_TABLE = ("mode", "regime")   # ... and a CSV written by tswm simulate -o
+FINISHED = "finished"
+UNIT = re.compile(r"(.*?)\s*\[([^\[\]]*)\]")
 # Size bounds (docs/promises.md): the measured file is untrusted input.
 MAX_FILE_BYTES = 64 * 2**20
 MAX_UNPACKED_BYTES = 256 * 2**20  # Parquet: uncompressed size from its metadata
@@ -146,17 +164,127 @@ def _numbers(frame, name: str, where: str) -> np.ndarray:
     return values
 
 
+def _quantity(module: ModuleType, name: str) -> str | None:
+    """The units quantity of column ``name`` (a measured quantity or a free parameter), or None."""
+    if name in QUANTITY:
+        return QUANTITY[name]
+    si = dict(zip(module.PARAM_NAMES, module.PARAM_UNITS)).get(name)
+    return None if si is None else {units.si_unit(q): q for q in units.UNITS}.get(si, si)
+
+
+def _factor(module: ModuleType, header: str, name: str, unit: str | None, where: str) -> float:
+    """What converts column ``header`` (``name [unit]``) to SI: 1 without a unit."""
+    if unit is None:
+        return 1.0
+    quantity = _quantity(module, name)
+    if quantity is None:  # the case label, or a column refused by its name later
+        if name == CASE:
+            raise FitInputError(f"{where}: column {_show(header)}: {CASE!r} takes no unit")
+        return 1.0
+    known = units.UNITS.get(quantity, {quantity: 1.0})
+    if unit not in known:
+        kind = f"{units.article(quantity)} {quantity}" if quantity in units.UNITS else "this parameter"
+        raise FitInputError(f"{where}: column {_show(header)}: {unit!r} is not a unit of {kind} "
+                            f"({', '.join(repr(u) for u in known)})")
+    return known[unit]
+
+
+def _skipped(columns: list[str], module: ModuleType, free: list[str]) -> set[str]:
+    """Columns of a table tswm wrote that are its record, not measurements or known values."""
+    if all(c in columns for c in SWEEP_TABLE):
+        from tswm_runtime.sweeps.sweep import RESULT_COLUMNS
+
+        load_factors = ("KD1", "KD2") if module.HAS_LOAD_FACTORS else ()
+        return set(RESULT_COLUMNS) - {"S1m", "S2m", *load_factors} | set(free)
+    if all(c in columns for c in SIMULATE_TABLE):
+        from tswm_runtime.results.result import GAP_SERIES, SERIES, STEM_SERIES
+
+        series = {name for name, _ in SERIES + GAP_SERIES + STEM_SERIES}
+        return series - {TIME, *HISTORY_QUANTITIES} | set(SIMULATE_TABLE)
+    return set()
+
+
+def _finished_rows(frame, where: str) -> None:
+    """A sweep table's rows must all have run to the end: the others measured nothing."""
+    status = frame["status"].astype(str)
+    bad = np.flatnonzero(status.to_numpy() != FINISHED)
+    if bad.size:
+        raise FitInputError(f"{where}: column 'status', data row {bad[0] + 1}: {_show(status.iloc[bad[0]])}: that "
+                            f"run did not finish, so its row is no measurement; keep the rows with status "
+                            f"{FINISHED!r} ({bad.size} of {len(frame)} are not)")
+
+
+def _one_value(frame, header: str, name: str, where: str) -> None:
+    """A fitted parameter's column in a sweep table: the sweep must have run one value of it."""
+    values = frame[header].astype(str).unique()
+    if len(values) > 1:
+        raise FitInputError(f"{where}: column {_show(header)}: the sweep ran {len(values)} values of {name} "
+                            f"({_show(values[0])}, {_show(values[1])}, ...) and the fit estimates one; keep the rows "
+                            f"of one {name}, or fit another parameter")
+
+
+def _named_columns(frame, module: ModuleType, free: list[str], where: str) -> tuple[dict, dict]:
+    """{name: header} of the columns to read (units stripped: 'S1 [N]' -> 'S1') and {name: factor to
+    SI}; a tswm table's own record is skipped (``_skipped``)."""
+    headers = list(frame.columns)
+    skipped = _skipped(headers, module, free)
+    if "status" in skipped:
+        _finished_rows(frame, where)
+    column, factor = {}, {}
+    for header in headers:
+        match = UNIT.fullmatch(header)
+        name, unit = (match[1], match[2]) if match else (header, None)
+        if name in free and "status" in skipped:
+            _one_value(frame, header, name, where)
+        if name in skipped:
+            continue
+        if name in column:
+            raise FitInputError(f"{where}: columns {_show(column[name])} and {_show(header)} both give {name!r}")
+        column[name], factor[name] = header, _factor(module, header, name, unit, where)
+    return column, factor
+
+
+def _run_parameters(path: str | Path, module: ModuleType, skip, where: str) -> dict[str, float]:
+    """The free parameters of the run that wrote a simulate CSV, from the SCENE-summary.json the same
+    ``-o`` wrote beside it ({} without one), leaving out the names in ``skip``."""
+    summary = Path(path).with_name(f"{Path(path).stem}-summary.json")
+    if not summary.is_file():
+        return {}
+    try:
+        if summary.stat().st_size > MAX_FILE_BYTES:
+            raise ValueError(f"more than {MAX_FILE_BYTES // 2**20} MiB")
+        data = json.loads(summary.read_text(encoding="utf-8"))
+        scene, params = data["scene"], data["params"]
+        values = {str(name): float(value) for name, value in params.items()}
+    except (OSError, ValueError, TypeError, KeyError, AttributeError) as error:
+        raise FitInputError(f"{where}: {summary} (the run's summary beside it) is not readable: "
+                            f"{str(error)[:200]}; move it away to fit with the scene's parameter values") from None
+    if scene != module.SCENE:
+        raise FitInputError(f"{where}: {summary} says the CSV is a run of scene {_show(scene)}, not "
+                            f"{module.SCENE!r}")
+    for name, value in values.items():
+        if name not in module.PARAM_NAMES or not math.isfinite(value):
+            raise FitInputError(f"{where}: {summary}: parameter {_show(name)} = {value!r} is not a free parameter "
+                                f"value of scene {module.SCENE!r}")
+    return {name: value for name, value in values.items() if name not in skip}
+
+
 def read_measured(path: str | Path, module: ModuleType, free: list[str], run: dict | None = None) -> Measured:
     """Read and validate a measured table for ``module`` with ``free`` parameters to fit."""
     frame, digest = _read_table(path)
     where = f"--measured {str(path)[:200]}"
     if len(frame) == 0:
         raise FitInputError(f"{where}: no rows (one row per measured case or sample)")
-    columns = list(frame.columns)
+    column, factor = _named_columns(frame, module, free, where)
+    columns = list(column)
     history = TIME in columns
     allowed_q = HISTORY_QUANTITIES if history else PEAK_QUANTITIES
     other_q = PEAK_QUANTITIES if history else HISTORY_QUANTITIES
     known, quantities = [], []
+
+    def numbers(name: str) -> np.ndarray:
+        return _numbers(frame, column[name], where) * factor[name]
+
     for name in columns:
         if name in (CASE, TIME):
             continue
@@ -177,7 +305,7 @@ def read_measured(path: str | Path, module: ModuleType, free: list[str], run: di
                                 f"there: {', '.join(allowed_q)}")
         else:
             raise FitInputError(
-                f"{where}: unknown column {_show(name)}: not a free parameter of scene {module.SCENE!r} "
+                f"{where}: unknown column {_show(column[name])}: not a free parameter of scene {module.SCENE!r} "
                 f"({', '.join(module.PARAM_NAMES) or 'none'}), a measured quantity ({', '.join(allowed_q)}), "
                 f"{CASE!r} or {TIME!r}")
     if not quantities:
@@ -185,12 +313,15 @@ def read_measured(path: str | Path, module: ModuleType, free: list[str], run: di
     n_rows = len(frame)
     if not history and n_rows > MAX_CASES:
         raise FitInputError(f"{where}: {n_rows} cases, more than the {MAX_CASES} a fit runs per evaluation")
-    values = np.column_stack([_numbers(frame, q, where) for q in quantities])
-    known_values = (np.column_stack([_numbers(frame, k, where) for k in known]) if known
-                    else np.empty((n_rows, 0)))
+    values = np.column_stack([numbers(q) for q in quantities])
+    known_values = (np.column_stack([numbers(k) for k in known]) if known else np.empty((n_rows, 0)))
+    if all(c in frame.columns for c in SIMULATE_TABLE):
+        of_run = _run_parameters(path, module, {*free, *known}, where)
+        known += list(of_run)
+        known_values = np.column_stack([known_values, np.tile(list(of_run.values()), (n_rows, 1))])
     if CASE in columns:
         labels = []
-        for row, raw in enumerate(frame[CASE].tolist()):
+        for row, raw in enumerate(frame[column[CASE]].tolist()):
             text = raw if isinstance(raw, str) else ("" if raw is None or (isinstance(raw, float) and math.isnan(raw))
                                                     else (str(int(raw)) if float(raw).is_integer() else str(raw)))
             if not CASE_ID.fullmatch(text):
@@ -206,7 +337,7 @@ def read_measured(path: str | Path, module: ModuleType, free: list[str], run: di
             raise FitInputError(f"{where}: column 'case': label {dup!r} appears twice (one row per case)")
         return Measured("peaks", str(path), digest, known, quantities, cases, known_values, values,
                         np.arange(n_rows), None)
-    t = _numbers(frame, TIME, where)
+    t = numbers(TIME)
     bad = np.flatnonzero(t < 0)
     if bad.size:
         raise FitInputError(f"{where}: column 't', data row {bad[0] + 1}: t = {t[bad[0]]:g} s is before the start (0)")

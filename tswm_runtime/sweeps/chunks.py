@@ -20,7 +20,7 @@ from types import ModuleType
 
 import numpy as np
 
-from tswm_runtime import __version__
+from tswm_runtime.common.provenance import TSWM_VERSION as __version__
 from tswm_runtime.jit.cache_guard import kernel_digest
 from tswm_common.files import write_atomic
 

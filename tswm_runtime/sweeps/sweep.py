@@ -28,19 +28,25 @@ One row per case: the free parameters, then
               rhs and Jacobian calls
     impacts, impact_energy   impacts with a normal impulse (scenes with a clearance and
               rigid flanks) and the kinetic energy they took [J]
+
+The table in memory (``SweepOutcome.table``) has these names; the written SCENE-sweep.parquet
+and .csv carry the unit in the name where there is one (``written_names``: 'm2 [kg]',
+'S1m [N]', 'tS1m [s]', 'v1 [m/s]'; 'KD1', 'status' as they are), and ``read_table`` reads
+them back without it. ``tswm fit --measured`` reads them as written.
 """
 from __future__ import annotations
 
 import io
 import json
 import math
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import ModuleType
 
 import numpy as np
 
-from tswm_runtime import __version__
+from tswm_runtime.common.provenance import TSWM_VERSION as __version__
 
 from tswm_runtime.sweeps import chunks
 from tswm_runtime.jit import coldstart
@@ -50,6 +56,8 @@ from tswm_runtime.hybrid import batch  # noqa: E402
 
 from tswm_runtime.model import checks, modes  # noqa: E402
 from tswm_runtime.model.contract import load_module  # noqa: E402
+from tswm_runtime.model.scenes import load_model  # noqa: E402
+from tswm_runtime.model.values import ValueInputError, si_value  # noqa: E402
 from tswm_common.files import write_atomic  # noqa: E402
 from tswm_runtime.results.result import STATUS_NAMES  # noqa: E402
 from tswm_runtime.jit.structures import Tolerances  # noqa: E402
@@ -73,6 +81,32 @@ ROW_BYTES = 220   # bytes per case in chunks + parquet + CSV: 214 measured on a 
 INVALID = "invalid-parameter"
 RESULT_COLUMNS = ("status", "problem", "t_stop", "S1m", "tS1m", "S2m", "tS2m", "KD1", "KD2", "x1", "v1",
                   "regimes", "modes", "n_events", "steps", "rejected", "nfev", "njev", "impacts", "impact_energy")
+# Units of the result columns in the written tables ('S1m [N]'); the parameters carry PARAM_UNITS.
+RESULT_UNITS = {"t_stop": "s", "S1m": "N", "tS1m": "s", "S2m": "N", "tS2m": "s", "x1": "m", "v1": "m/s",
+                "impact_energy": "J"}
+TEXT_COLUMNS = ("status", "problem", "regimes", "modes")
+UNIT_SUFFIX = re.compile(r"\s*\[([^\[\]]*)\]$")
+
+
+def written_names(module: ModuleType) -> dict[str, str]:
+    """Column name in a sweep's table -> its name in the written parquet and CSV: 'NAME [UNIT]'
+    where it has a unit ('m2 [kg]', 'S1m [N]', 'tS1m [s]'), else NAME ('KD1', 'status')."""
+    units = {**dict(zip(module.PARAM_NAMES, module.PARAM_UNITS)), **RESULT_UNITS}
+    return {name: f"{name} [{units[name]}]" if units.get(name) else name
+            for name in (*module.PARAM_NAMES, *RESULT_COLUMNS)}
+
+
+def read_table(path: str | Path):
+    """A written sweep table (.parquet or .csv) as ``sweep`` returned it: columns without units."""
+    import pandas as pd
+
+    path = Path(path)
+    if path.suffix == ".csv":  # CSV writes empty text as it writes a missing number
+        table = pd.read_csv(path, dtype={name: "str" for name in TEXT_COLUMNS})
+        table[list(TEXT_COLUMNS)] = table[list(TEXT_COLUMNS)].fillna("")
+    else:
+        table = pd.read_parquet(path)
+    return table.rename(columns=lambda name: UNIT_SUFFIX.sub("", name))
 
 
 class SweepInputError(ValueError):
@@ -84,18 +118,47 @@ def _free(module: ModuleType, name: str, option: str) -> None:
         raise SweepInputError(f"{option} {name!r}: {unknown_parameter(module, name)}")
 
 
-def _number(text: str, what: str) -> float:
+def _number(module: ModuleType, name: str, text: str, what: str) -> float:
+    """``text`` as free parameter ``name``'s value in SI: a number, or a number with a unit of its
+    quantity ("-5 kN")."""
     try:
-        value = float(text)
-    except ValueError:
-        raise SweepInputError(f"{what}: {text!r} is not a number") from None
+        value = float(si_value(module, name, text))
+    except ValueInputError as error:
+        raise SweepInputError(f"{what}: {error}") from None
     if not math.isfinite(value):
         raise SweepInputError(f"{what}: {text!r} is not finite")
     return value
 
 
+def spec_items(specs, option: str) -> list[str]:
+    """Grid, range or bound specs as the CLI's ``NAME=SPEC`` items: a list of such strings as it
+    is, or a dict {name: spec} with a spec string ("-15 kN:-5 kN:11", "100:400"), one number,
+    or a (lo, hi) pair of numbers or unit strings."""
+    if specs is None:
+        return []
+    if isinstance(specs, str):
+        specs = [specs]
+    if not isinstance(specs, dict):
+        for item in specs:
+            if not isinstance(item, str):
+                raise SweepInputError(f"{option} {item!r}: expected a 'NAME=SPEC' string, e.g. 'F2=-15000:0:11'")
+        return list(specs)
+    items = []
+    for name, spec in specs.items():
+        if isinstance(spec, (tuple, list)) and len(spec) == 2:
+            spec = ":".join(part if isinstance(part, str) else repr(part) for part in spec)
+        elif isinstance(spec, (int, float)) and not isinstance(spec, bool):
+            spec = repr(spec)
+        elif not isinstance(spec, str):
+            raise SweepInputError(f"{option} {name}={spec!r}: expected a string ('-15 kN:-5 kN:11', '100:400'), "
+                                  "a number or a (lo, hi) pair")
+        items.append(f"{name}={spec}")
+    return items
+
+
 def parse_grid(items: list[str], module: ModuleType) -> dict[str, np.ndarray]:
-    """``name=start:stop:count`` (count points, both ends included) or ``name=value``."""
+    """``name=start:stop:count`` (count points, both ends included) or ``name=value``; values are
+    numbers in SI or numbers with a unit of the parameter's quantity ("-15 kN")."""
     grid = {}
     for item in items:
         name, sep, spec = (s.strip() for s in item.partition("="))
@@ -106,11 +169,11 @@ def parse_grid(items: list[str], module: ModuleType) -> dict[str, np.ndarray]:
             raise SweepInputError(f"--grid {item!r}: {name} is given twice")
         parts = spec.split(":")
         if len(parts) == 1:
-            grid[name] = np.array([_number(parts[0], f"--grid {item!r}")])
+            grid[name] = np.array([_number(module, name, parts[0], f"--grid {item!r}")])
             continue
         if len(parts) != 3:
             raise SweepInputError(f"--grid {item!r}: expected NAME=START:STOP:COUNT, e.g. F2=-15000:0:11")
-        start, stop = (_number(v, f"--grid {item!r}") for v in parts[:2])
+        start, stop = (_number(module, name, v, f"--grid {item!r}") for v in parts[:2])
         try:
             count = int(parts[2])
         except ValueError:
@@ -122,7 +185,7 @@ def parse_grid(items: list[str], module: ModuleType) -> dict[str, np.ndarray]:
 
 
 def parse_ranges(items: list[str], module: ModuleType) -> dict[str, tuple[float, float]]:
-    """``name=lo:hi`` with lo < hi."""
+    """``name=lo:hi`` with lo < hi (numbers in SI or with a unit, as for ``parse_grid``)."""
     ranges = {}
     for item in items:
         name, sep, spec = (s.strip() for s in item.partition("="))
@@ -130,7 +193,7 @@ def parse_ranges(items: list[str], module: ModuleType) -> dict[str, tuple[float,
         if not sep or not name or len(parts) != 2:
             raise SweepInputError(f"--range {item!r}: expected NAME=LO:HI, e.g. m2=100:400")
         _free(module, name, "--range")
-        lo, hi = (_number(v, f"--range {item!r}") for v in parts)
+        lo, hi = (_number(module, name, v, f"--range {item!r}") for v in parts)
         if not lo < hi:
             raise SweepInputError(f"--range {item!r}: lo = {lo:g} must be < hi = {hi:g}")
         ranges[name] = (lo, hi)
@@ -170,6 +233,26 @@ def grid_cases(module: ModuleType, grid: dict[str, np.ndarray]) -> np.ndarray:
     for name, values in zip(grid, mesh):
         P[:, module.PARAM_NAMES.index(name)] = values.ravel()
     return P
+
+
+def sweep_cases(module: ModuleType, grid=None, *, samples: int | None = None, ranges=None, seed: int = 0,
+                chunk_size: int = DEFAULT_CHUNK, large: bool = False) -> np.ndarray:
+    """The parameter rows of a sweep: all combinations of a ``grid``, or ``samples`` seeded random
+    rows in ``ranges`` (specs as ``spec_items`` takes them), size-checked before they are built."""
+    grid, ranges = spec_items(grid, "--grid"), spec_items(ranges, "--range")
+    if grid and samples is not None:
+        raise SweepInputError("give either --grid or --samples with --range, not both")
+    if ranges and samples is None:
+        raise SweepInputError("--range needs --samples N")
+    if samples is not None:
+        parsed = parse_ranges(ranges, module)
+        check_size(max(samples, 1), chunk_size, large)   # before the samples are drawn
+        return sample_cases(module, samples, parsed, seed)
+    if not grid:
+        raise SweepInputError("give --grid NAME=START:STOP:COUNT ... or --samples N --range NAME=LO:HI ...")
+    parsed = parse_grid(grid, module)
+    check_size(grid_size(parsed), chunk_size, large)   # before the grid is built
+    return grid_cases(module, parsed)
 
 
 def sample_cases(module: ModuleType, samples: int, ranges: dict, seed: int) -> np.ndarray:
@@ -290,7 +373,8 @@ def sweep(model: str | ModuleType, P: np.ndarray, overrides: dict | None = None,
 
     output: a directory for chunks/ and SCENE-sweep.parquet/.csv (None: in memory only;
     no resume). client: a dask.distributed Client to run the chunks on (its workers
-    load the module by ``scene_spec``, a shipped name or a module path). prune: delete
+    load the module by ``scene_spec``, a shipped name or a module path; by default the
+    model's). prune: delete
     stale files in chunks/ (else they are only reported). Ctrl-C raises SweepInterrupted
     after the chunks finished so far are on disk.
     """
@@ -299,8 +383,9 @@ def sweep(model: str | ModuleType, P: np.ndarray, overrides: dict | None = None,
     start = time.perf_counter()
     if not isinstance(model, ModuleType):
         coldstart.announce((), model)
-    module = model if isinstance(model, ModuleType) else load_module(model)
-    scene_spec = scene_spec or (model if isinstance(model, str) else module.SCENE)
+    module = load_model(model)
+    if scene_spec is None:  # what a dask worker loads: a shipped scene by name, another module by its file
+        scene_spec = module.SCENE if module.__name__.startswith("generated.") else module.__file__
     run = settings(module, overrides or {})
     P = np.ascontiguousarray(P, dtype=np.float64).reshape(-1, len(module.PARAM_NAMES))
     check_size(P.shape[0], chunk_size, large=True)
@@ -354,14 +439,15 @@ def sweep(model: str | ModuleType, P: np.ndarray, overrides: dict | None = None,
     outcome.table = (_concat(frames) if frames else run_cases(module, P[:0], run))
     if out is not None:
         stem = module.SCENE
-        outcome.parquet = write_atomic(out / f"{stem}-sweep.parquet", _parquet_bytes(outcome.table))
-        outcome.csv = write_atomic(out / f"{stem}-sweep.csv", outcome.table.to_csv(index=False))
+        written = outcome.table.rename(columns=written_names(module))
+        outcome.parquet = write_atomic(out / f"{stem}-sweep.parquet", _parquet_bytes(written))
+        outcome.csv = write_atomic(out / f"{stem}-sweep.csv", written.to_csv(index=False))
         write_atomic(out / f"{stem}-sweep.json", json.dumps({
             "scene": module.SCENE, "scene_digest": getattr(module, "SCENE_DIGEST", None),
             "model_digest": keys[0]["model_digest"] if keys else chunks.model_digest(module),
             "runtime_version": __version__, "runtime_digest": runtime, "settings": run,
             "cases": int(P.shape[0]), "chunk_size": chunk_size, "chunks": names,
-            "columns": list(outcome.table.columns)}, indent=2, default=str))
+            "columns": list(written.columns)}, indent=2, default=str))
     outcome.seconds = time.perf_counter() - start
     return outcome
 
