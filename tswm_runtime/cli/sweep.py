@@ -41,6 +41,13 @@ def _client(address: str):
                                  f"({type(error).__name__}: {error})") from None
 
 
+def _quiet_dask() -> None:
+    """Silence distributed's loggers: closing a client that lost its scheduler logs reconnect
+    tracebacks that say no more than our message."""
+    for name in [n for n in logging.root.manager.loggerDict if n.split(".")[0] == "distributed"]:
+        logging.getLogger(name).setLevel(logging.CRITICAL + 1)
+
+
 def _wait_seconds(text: str) -> float:
     value = float(text)
     if math.isnan(value) or value < 0:
@@ -83,7 +90,7 @@ def _run(args: argparse.Namespace) -> int:
             print(f"tswm sweep: {stop}", file=sys.stderr)
             return 1
         except SweepClusterLost as lost:
-            logging.getLogger("distributed").setLevel(logging.CRITICAL)   # its reconnect tracebacks say no more
+            _quiet_dask()
             print(f"tswm sweep: cluster problem: {lost}\n  resume with: tswm {shlex.join(args.argv)}",
                   file=sys.stderr)
             return 1

@@ -23,6 +23,7 @@ import logging
 import tempfile
 import threading
 import time
+from concurrent.futures import CancelledError
 from dataclasses import dataclass
 from pathlib import Path
 from types import ModuleType
@@ -33,7 +34,7 @@ LOG = logging.getLogger("tswm_runtime.sweep")
 POLL_S = 0.5
 STATUS_EVERY_S = 10.0
 FIRST_NOTICE_S = 2.0
-KERNEL_GROUPS = ("integrate", "batch")
+KERNEL_GROUPS = ("integrate", "batch")   # and the run's method's step
 MODEL_DIR = "tswm-models"   # under the worker's temporary directory: one folder per model digest
 _lock = threading.Lock()    # one chunk at a time per worker process
 _loaded: dict[str, ModuleType] = {}
@@ -109,9 +110,10 @@ def stamp(pack: ModelPackage) -> dict:
     return {"tswm": version, "runtime digest": runtime, "model digest": chunks.file_digest(_model_file(pack)[0])}
 
 
-def handshake(pack: ModelPackage, dask_worker=None) -> dict:
+def handshake(pack: ModelPackage, groups: tuple[str, ...], dask_worker=None) -> dict:
     """Run on a worker (``Client.run`` passes it as ``dask_worker``) before any chunk, compiling
-    nothing: its stamp, numba, threads and the kernels it would compile (coldstart's estimate)."""
+    nothing: its stamp, numba, threads and which of the kernel ``groups`` (coldstart.GROUPS) and
+    the model it would compile, with coldstart's estimate."""
     try:
         import numba
     except ImportError as error:
@@ -119,7 +121,7 @@ def handshake(pack: ModelPackage, dask_worker=None) -> dict:
     from tswm_runtime.jit import coldstart
 
     path, name = _model_file(pack)
-    cold = coldstart.cold_groups(KERNEL_GROUPS)
+    cold = coldstart.cold_groups(groups)
     model = pack.scene if coldstart.model_cold(path, name) else None
     return {**stamp(pack), "numba": numba.__version__, "nthreads": dask_worker.state.nthreads,
             "compiles": coldstart.describe(cold, model) if cold or model else "",
@@ -137,8 +139,8 @@ def differences(here: dict, there: dict) -> list[str]:
 
 
 def chunk_task(pack: ModelPackage, P, run: dict):
-    """One chunk on a worker: (the worker's stamp and address, the rows), with numba's threads
-    set to the worker's nthreads."""
+    """One chunk on a worker: (the worker's stamp, address and numba threads, the rows), with
+    numba's threads set to the worker's nthreads."""
     import numba
     from distributed import get_worker
 
@@ -149,23 +151,25 @@ def chunk_task(pack: ModelPackage, P, run: dict):
     with _lock:
         numba.set_num_threads(max(1, min(worker.state.nthreads, numba.config.NUMBA_NUM_THREADS)))
         table = run_cases(module, P, run)
-    return {**stamp(pack), "worker": worker.address}, table
+        threads = numba.get_num_threads()
+    return {**stamp(pack), "worker": worker.address, "numba threads": threads}, table
 
 
 class Watch:
     """The client's view of the cluster while chunks run: waits for workers with a visible
     status, handshakes each new worker once (refusing a mismatched one), says when one compiles."""
 
-    def __init__(self, client, pack: ModelPackage, wait_for_workers: float, notice):
+    def __init__(self, client, pack: ModelPackage, method: str, wait_for_workers: float, notice):
         self.client, self.pack, self.wait, self.notice = client, pack, wait_for_workers, notice
+        self.groups = (*KERNEL_GROUPS, method)
         self.here = stamp(pack)
         self.known: set[str] = set()
         self.empty_since: float | None = None
         self.last_status = 0.0
 
     def workers(self) -> dict:
-        try:
-            return self.client.scheduler_info(n_workers=-1)["workers"]
+        try:   # asked each time: Client.scheduler_info falls back to a cache without workers
+            return self.client.sync(self.client.scheduler.identity, n_workers=-1)["workers"]
         except Exception as error:  # noqa: BLE001 - any failure to ask the scheduler is its loss
             raise ClusterError(f"lost the dask scheduler at {self.client.scheduler.address} "
                                f"({type(error).__name__}: {error})") from None
@@ -174,7 +178,8 @@ class Watch:
         """Look at the cluster once: the number of workers (raises ClusterError when the scheduler
         is gone, a worker differs, or there were no workers for longer than ``wait``)."""
         if self.client.status != "running":
-            raise ClusterError(f"lost the dask scheduler at {self.client.scheduler.address} (client {self.client.status})")
+            raise ClusterError(f"lost the dask scheduler at {self.client.scheduler.address} (the connection "
+                               f"closed; the client is {self.client.status})")
         workers = self.workers()
         new = sorted(set(workers) - self.known)
         if new:
@@ -199,7 +204,7 @@ class Watch:
         return 0
 
     def _handshake(self, addresses: list[str], workers: dict) -> None:
-        answers = self.client.run(handshake, self.pack, workers=addresses, on_error="return")
+        answers = self.client.run(handshake, self.pack, self.groups, workers=addresses, on_error="return")
         bad = []
         for address in addresses:
             answer = answers.get(address, ClusterError("the worker left before answering"))
@@ -228,11 +233,9 @@ def run_chunks(client, module: ModuleType, P, run: dict, bounds, todo, finish, *
     """Compute the chunks ``todo`` (indices into ``bounds``, row ranges of P) on the dask
     ``client``; ``finish(i, table)`` stores each as it arrives; ``notice(text)`` tells the user
     about the cluster (default: the ``tswm_runtime.sweep`` logger)."""
-    from distributed import wait
-
     if not todo:
         return
-    watch = Watch(client, package(module), wait_for_workers, notice or LOG.warning)
+    watch = Watch(client, package(module), run["method"], wait_for_workers, notice or LOG.warning)
     deadline = time.monotonic() + FIRST_NOTICE_S
     while watch.check() == 0 and time.monotonic() < deadline:   # a few seconds for workers to appear
         time.sleep(POLL_S)
@@ -241,20 +244,7 @@ def run_chunks(client, module: ModuleType, P, run: dict, bounds, todo, finish, *
     pending = set(futures)
     try:
         while pending:
-            try:
-                done, _ = wait(list(pending), timeout=POLL_S, return_when="FIRST_COMPLETED")
-            except TimeoutError:
-                done = set()
-            for future in done:
-                pending.discard(future)
-                if future.status == "cancelled":
-                    watch.check()   # the scheduler is gone: raises
-                    raise ClusterError(f"the cluster cancelled chunk {futures[future]}")
-                if future.status == "error":
-                    error = future.exception()
-                    raise ClusterError(f"chunk {futures[future]} failed on the cluster: {type(error).__name__}: "
-                                       f"{error}")
-                worker_stamp, table = future.result()
+            for future, (worker_stamp, table) in _arrived(watch, pending, futures):
                 watch.verify(worker_stamp)
                 finish(futures[future], table)
                 if bar:
@@ -265,3 +255,29 @@ def run_chunks(client, module: ModuleType, P, run: dict, bounds, todo, finish, *
         if client.status == "running":
             client.cancel(list(pending))
         raise
+
+
+def _arrived(watch: Watch, pending: set, futures: dict) -> list:
+    """The futures that finished within POLL_S, with their results, removed from ``pending``;
+    a failed or cancelled chunk, or a lost connection, raises ClusterError."""
+    from distributed import wait
+
+    try:
+        try:
+            done, _ = wait(list(pending), timeout=POLL_S, return_when="FIRST_COMPLETED")
+        except TimeoutError:
+            return []
+        arrived = []
+        for future in done:
+            pending.discard(future)
+            if future.status == "cancelled":
+                watch.check()   # the scheduler is gone: raises
+                raise ClusterError(f"the cluster cancelled chunk {futures[future]}")
+            if future.status == "error":
+                error = future.exception()
+                raise ClusterError(f"chunk {futures[future]} failed on the cluster: {type(error).__name__}: {error}")
+            arrived.append((future, future.result()))
+        return arrived
+    except (OSError, CancelledError) as error:   # distributed's CommClosedError, FuturesCancelledError
+        watch.check()
+        raise ClusterError(f"lost contact with the cluster ({type(error).__name__}: {error})") from None
