@@ -32,6 +32,7 @@ SETTINGS = {"t_end": 0.5}
 SLOW = ("import time\nfrom tswm_runtime.sweeps import rows\n_real = rows.__dict__.setdefault('unslowed', rows.run_cases)\n\n\n"
         "def run_cases(module, P, run):\n    time.sleep(0.4)\n    return _real(module, P, run)\n\n\n"
         "rows.run_cases = run_cases\n")
+NO_TSWM = "import sys\nsys.modules['tswm_runtime'] = None   # import tswm_runtime raises ModuleNotFoundError\n"
 OTHER_VERSION = "from tswm_runtime.common import provenance\nprovenance.TSWM_VERSION = '0.0.0-other'\n"
 
 
@@ -220,3 +221,10 @@ def test_chunk_uses_the_workers_threads(dask_cluster):
     assert stamp["numba threads"] == 1 and len(table) == 3
     assert numba.get_num_threads() == numba.config.NUMBA_NUM_THREADS
     assert np.array_equal(table["F2"].to_numpy(), P[:, 1])
+
+
+def test_worker_without_tswm_is_named_and_refused(dask_cluster, tmp_path, capsys):
+    dask_cluster.worker("bare", NO_TSWM)
+    assert main(argv(tmp_path / "out", "--scheduler", dask_cluster.address, "--no-progress")) == 1
+    err = capsys.readouterr().err
+    assert "worker bare (tcp://" in err and "cannot run tswm's handshake" in err and "tswm_runtime" in err, err
