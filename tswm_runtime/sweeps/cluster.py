@@ -28,6 +28,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from types import ModuleType
 
+from tswm_runtime.jit import coldstart
 from tswm_runtime.sweeps import chunks
 
 LOG = logging.getLogger("tswm_runtime.sweep")
@@ -118,8 +119,6 @@ def handshake(pack: ModelPackage, groups: tuple[str, ...], dask_worker=None) -> 
         import numba
     except ImportError as error:
         return {"numba": f"not importable ({error})"}
-    from tswm_runtime.jit import coldstart
-
     path, name = _model_file(pack)
     cold = coldstart.cold_groups(groups)
     model = pack.scene if coldstart.model_cold(path, name) else None
@@ -215,7 +214,7 @@ class Watch:
                 bad.append(f"worker {label}: " + "; ".join(wrong))
             elif answer["compiles"]:
                 self.notice(f"worker {label} is compiling {answer['compiles']} first: about "
-                            f"{answer['seconds']:.0f} s, once (its numba cache keeps them)")
+                            f"{coldstart.about(answer['seconds'])} s, once (its numba cache keeps them)")
         self.known.update(addresses)
         if bad:
             raise ClusterError("refusing to mix results from workers that differ from this tswm:\n  "

@@ -8,7 +8,8 @@ chunk only when the file proves it holds exactly those rows; a truncated, foreig
 stale one is recomputed with a warning, and files no chunk expects are reported (and
 removed with ``prune``). An interrupted sweep leaves only complete chunks and resumes
 without recomputing them. With a dask.distributed ``Client`` the chunks run as tasks on
-its workers instead.
+its workers instead (``cluster.py``: every worker checked first, the model shipped with the
+work). The rows of a chunk come from ``rows.run_cases``.
 
 One row per case: the free parameters, then
 
