@@ -104,21 +104,24 @@ def _runtime() -> tuple[str, str]:
     return provenance.TSWM_VERSION, chunks.runtime_digest()
 
 
-def stamp(pack: ModelPackage) -> dict:
-    """What a worker's rows depend on besides the chunk: tswm's version, the runtime digest, the
-    model digest of what it loads (``here``: the client's own)."""
+def expected(pack: ModelPackage) -> dict:
+    """What a chunk's rows depend on besides its rows and settings, as this process has it:
+    tswm's version, the runtime digest, the model's body digest."""
     version, runtime = _runtime()
-    return {"tswm": version, "runtime digest": runtime, "model digest": chunks.file_digest(_model_file(pack)[0])}
+    return {"tswm": version, "runtime digest": runtime, "model digest": pack.model_digest}
+
+
+def stamp(pack: ModelPackage) -> dict:
+    """``expected`` as a worker has it: the model digest of the file it loads."""
+    return {**expected(pack), "model digest": chunks.file_digest(_model_file(pack)[0])}
 
 
 def handshake(pack: ModelPackage, groups: tuple[str, ...], dask_worker=None) -> dict:
     """Run on a worker (``Client.run`` passes it as ``dask_worker``) before any chunk, compiling
     nothing: its stamp, numba, threads and which of the kernel ``groups`` (coldstart.GROUPS) and
     the model it would compile, with coldstart's estimate."""
-    try:
-        import numba
-    except ImportError as error:
-        return {"numba": f"not importable ({error})"}
+    import numba   # without numba (or tswm_runtime) the handshake fails to load: ``differences`` says so
+
     path, name = _model_file(pack)
     cold = coldstart.cold_groups(groups)
     model = pack.scene if coldstart.model_cold(path, name) else None
@@ -131,9 +134,7 @@ def differences(here: dict, there: dict) -> list[str]:
     """What a worker's handshake answer says differently from this process's."""
     if isinstance(there, BaseException):
         return [f"cannot run tswm's handshake ({type(there).__name__}: {there}); does the worker's Python have "
-                "tswm_runtime and its dependencies installed?"]
-    if not isinstance(there.get("numba"), str) or there["numba"].startswith("not importable"):
-        return [f"numba {there.get('numba', 'missing')}"]
+                "tswm_runtime, numba and their dependencies installed?"]
     return [f"{key} {there.get(key)} (here {value})" for key, value in here.items() if there.get(key) != value]
 
 
@@ -161,7 +162,7 @@ class Watch:
     def __init__(self, client, pack: ModelPackage, method: str, wait_for_workers: float, notice):
         self.client, self.pack, self.wait, self.notice = client, pack, wait_for_workers, notice
         self.groups = (*KERNEL_GROUPS, method)
-        self.here = stamp(pack)
+        self.here = expected(pack)
         self.known: set[str] = set()
         self.empty_since: float | None = None
         self.last_status = 0.0
@@ -222,7 +223,7 @@ class Watch:
 
     def verify(self, worker_stamp: dict) -> None:
         """Refuse a chunk computed by a worker whose stamp differs from this process's."""
-        wrong = [f"{k} {worker_stamp.get(k)} (here {v})" for k, v in self.here.items() if worker_stamp.get(k) != v]
+        wrong = differences(self.here, worker_stamp)
         if wrong:
             raise ClusterError(f"refusing a chunk from worker {worker_stamp.get('worker')}: " + "; ".join(wrong))
 
