@@ -70,7 +70,7 @@ MIN_STEP_ULPS = 10.0  # A step must exceed 10 ulp(t) to move t reliably (scipy's
 
 
 
-@numba.njit(JAC_SIG, cache=True)
+@cache_guard.compile_cached(JAC_SIG)   # after the stale-cache check, which would purge it
 def no_jacobian(mode, t, y, p, J, dfdt):
     """Placeholder ``jac`` for DOPRI5 runs (DOPRI5 never calls it); fills NaN."""
     J[:, :] = np.nan
