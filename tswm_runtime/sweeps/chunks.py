@@ -27,15 +27,19 @@ from tswm_common.files import write_atomic
 KEY_FORMAT = 1
 METADATA_KEY = b"tswm.chunk"
 PATTERN = "chunk-*.parquet"
-RUNTIME_SOURCES = ("model/modes.py", "model/checks.py", "simulation/simulate.py", "sweeps/sweep.py", "sweeps/chunks.py")   # besides cache_guard's kernels
+RUNTIME_SOURCES = ("model/modes.py", "model/checks.py", "simulation/simulate.py", "sweeps/rows.py", "sweeps/sweep.py",
+                   "sweeps/chunks.py")   # besides cache_guard's kernels
 
 
 def model_digest(module: ModuleType) -> str:
-    """The module's body digest from its header; without one, a sha256 of its whole file."""
+    """The module's body digest from its header (``file_digest``)."""
     path = getattr(module, "__file__", None)
-    if not path:
-        return "no-file:" + getattr(module, "SCENE_DIGEST", module.__name__)
-    source = Path(path).read_bytes()
+    return file_digest(Path(path)) if path else "no-file:" + getattr(module, "SCENE_DIGEST", module.__name__)
+
+
+def file_digest(path: Path) -> str:
+    """A generated module file's body digest from its header; without one, a sha256 of the whole file."""
+    source = path.read_bytes()
     for line in source.decode("utf-8", "replace").splitlines()[:8]:
         if line.startswith("# body-sha256:"):
             return line.split(":", 1)[1].strip()
