@@ -164,7 +164,7 @@ RUN = {
     "x1": Rule("length", default=0.0),
     "v1": Rule("velocity", default=0.0),
     "gap": Rule("length", 0.0, lo_in=True, default=0.0),
-    "rtol": Rule("dimensionless", 1e-13, 1e-1, lo_in=True, hi_in=True, default=1e-6),
+    "rtol": Rule("dimensionless", 1e-13, 1e-2, lo_in=True, hi_in=True, default=1e-6),   # = simulate.RTOL_RANGE
     "atol": Rule("dimensionless", 1e-20, 1.0, lo_in=True, hi_in=True, default=1e-9),   # = simulate.ATOL_RANGE
     "max_steps": Rule("dimensionless", 1, 1e9, lo_in=True, hi_in=True, default=100000, integer=True),  # MAX_STEPS
 }

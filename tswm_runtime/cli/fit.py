@@ -38,9 +38,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"tswm fit {args.scene}: interrupted (Ctrl-C) after {time.perf_counter() - start:.3g} s; "
               "nothing written", file=sys.stderr)
         return 130
-    except FitInputError as error:
-        raise UsageError(str(error)) from None
-    except SimulationInputError as error:
+    except (FitInputError, SimulationInputError) as error:   # a run setting's is named by its option
         raise setting_error(error, overrides) from None
     except warmup.PYTHON_ONLY_ERRORS as error:
         if cold is None:

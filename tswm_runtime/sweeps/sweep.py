@@ -2,10 +2,10 @@
 
 The cases are split into chunks; each chunk is one call of the parallel numba batch
 (``batch.run_batch``, prange over cases on all cores) and is written atomically to
-``DIR/chunks/chunk-NNNNN-HASH.parquet`` with its key inside (``chunks.py``: the model's
-body digest, the runtime's version and digest, the settings, the rows). A rerun reuses a
-chunk only when the file proves it holds exactly those rows; a truncated, foreign or
-stale one is recomputed with a warning, and files no chunk expects are reported (and
+``DIR/chunks/chunk-NNNNN-HASH.parquet`` with its key inside (``chunks.py``: a sha256 of the
+model module's file, the runtime's version and digest, the settings, the rows) and a checksum
+of its columns. A rerun reuses a chunk only when the file proves it holds exactly those rows;
+a truncated, altered, foreign or stale one is recomputed with a warning, and files no chunk expects are reported (and
 removed with ``prune``). An interrupted sweep leaves only complete chunks and resumes
 without recomputing them. With a dask.distributed ``Client`` the chunks run as tasks on
 its workers instead (``cluster.py``: every worker checked first, the model shipped with the
