@@ -41,7 +41,7 @@ from tswm_runtime.jit.borrow import borrowed
 from tswm_runtime.jit.cache_guard import njit
 from tswm_runtime.jit.signatures import MATRIX, VECTOR, GuardsFunction, JacFunction, RhsFunction
 from tswm_runtime.jit.structures import (EVENT_LOG, JUMP_WIDTH, MODE_TABLES, OUTPUTS, TOLERANCES,
-                                                 EventSettings)
+                                         EventSettings, Functions, Record, Segment, Settings, State)
 
 # Guard kinds (modes.GUARD_KINDS maps the generated GUARDS names to these).
 (G_PHI, G_V1, G_D, G_JAM, G_CONE_F, G_CONE_B, G_FLANK_N, G_LAW, G_SLIDE_A, G_SLIDE_B, G_TRIP, G_GAP_A, G_GAP_B,
@@ -585,6 +585,7 @@ def integrate_hybrid(method, attempt, rhs, jac, guards, observe, impact, p, tabl
         _unbounded(observe, guards, mode, t0, y, p, -1, mon, obs, g)
         return INCONSISTENT, t0, 0, mode, NEED_NOTHING, mode
     first = mode
+    fns, record = Functions(attempt, rhs, jac, guards, observe, impact), Record(out, log, mon, counters)
     t, i, n_ev, same, h = t0, 0, 0, 0, 0.0
     singular = True  # hand over to the Painleve approach when D heads for 0
     while True:
@@ -592,9 +593,8 @@ def integrate_hybrid(method, attempt, rhs, jac, guards, observe, impact, p, tabl
         i0 = i
         k_singular = k_d if singular and k_d >= 0 and tables.guard_direction[mode, k_d] != 0 else -1
         ev = EventSettings(tables.guard_direction[mode], 0.0, 0.0, True, k_singular, True)
-        seg_status, t_new, k, i, h = segment.run(method, attempt, rhs, jac, guards, observe, mode, p, t, t_end, tol,
-                                                 max(max_steps - steps, 0), h, ev, out, i, y, q, mon, counters,
-                                                 scratch)
+        seg_status, t_new, k, i, h = segment.run(fns, Settings(method, t_end, tol, max(max_steps - steps, 0)),
+                                                 Segment(mode, p, ev), State(t, y, q, h), record, i, scratch)
         singular = True
         stalled = seg_status == segment.STEP_TOO_SMALL or seg_status == segment.NOT_FINITE
         if k_singular >= 0 and stalled and counters[segment.N_STEPS] > 0:
@@ -602,8 +602,8 @@ def integrate_hybrid(method, attempt, rhs, jac, guards, observe, impact, p, tabl
         if seg_status == segment.APPROACH:
             ev = EventSettings(tables.guard_direction[mode], 0.0, 0.0, True, k_d, False)
             left = max(max_steps - counters[segment.N_STEPS] - counters[segment.N_REJECTED], 0)
-            outcome, t_new, i = painleve.approach(rhs, guards, observe, mode, p, ev, t_new, y, q, t_end, h, tol,
-                                                  left, out, i, mon, counters)
+            outcome, t_new, i = painleve.approach(fns, Settings(method, t_end, tol, left), Segment(mode, p, ev),
+                                                  State(t_new, y, q, h), record, i)
             if outcome == painleve.ZERO:
                 seg_status, k = segment.EVENT, k_d
             elif outcome == painleve.END:
