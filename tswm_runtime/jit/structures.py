@@ -62,6 +62,11 @@ Functions = namedtuple("Functions", "attempt rhs jac guards observe impact")
 Settings = namedtuple("Settings", "method t_end tol max_steps")
 SETTINGS = types.NamedTuple((types.int64, types.float64, TOLERANCES, types.int64), Settings)
 
+#: Where a hybrid run starts: the time, the state, its integral (size 0: none), the mode (-1:
+#: chosen from the state) and the parameter vector (the run writes its latches: pass a copy).
+Start = namedtuple("Start", "t y quad mode p")
+START = types.NamedTuple((types.float64, VECTOR, VECTOR, types.int64, VECTOR), Start)
+
 #: What holds through one segment: its mode, the parameter vector (latches included) and the
 #: EventSettings that end it.
 Segment = namedtuple("Segment", "mode p ev")
