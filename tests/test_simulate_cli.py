@@ -302,7 +302,9 @@ def test_plot_labels_forces_without_exponents():
     from tswm_runtime.results.plot import figure
 
     r = simulate("paper", {"m2": 200.0, "F2": -15000.0}, points=11)
-    labels = [t.get_text() for ax in figure(r, load_module("paper")).axes for t in ax.texts]
+    from matplotlib.text import Text
+
+    labels = [t.get_text() for t in figure(r, load_module("paper")).findobj(Text)]
     assert r.S2_max == -15000.0
     assert any(label.startswith("S2 = -15 kN at t = ") for label in labels), labels
     assert not any("e+" in label for label in labels), labels

@@ -47,6 +47,7 @@ from types import ModuleType
 import numpy as np
 
 from tswm_runtime.common.provenance import TSWM_VERSION as __version__
+from tswm_runtime.common.words import plural
 
 from tswm_runtime.sweeps import chunks
 from tswm_runtime.jit import coldstart
@@ -429,7 +430,7 @@ def sweep(model: str | ModuleType, P: np.ndarray, overrides: dict | None = None,
         _run_chunks(module, P, run, bounds, todo, finish, client, scene_spec, bar)
     except KeyboardInterrupt:
         done = len(outcome.skipped) + len(outcome.computed)
-        where = (f"{done} of {len(bounds)} chunks are complete in {out / 'chunks'}; rerun the same command to "
+        where = (f"{done} of {plural(len(bounds), 'chunk')} complete in {out / 'chunks'}; rerun the same command to "
                  "resume from them" if out is not None else "nothing was saved (no -o DIR)")
         raise SweepInterrupted(f"interrupted: {where}") from None
     finally:
@@ -466,9 +467,9 @@ def _report_stale(outcome: SweepOutcome, directory: Path, expected: set[str], pr
         for path in outcome.stale:
             path.unlink(missing_ok=True)
         outcome.pruned = True
-        outcome.warnings.append(f"pruned {len(outcome.stale)} stale file(s) from {directory}")
+        outcome.warnings.append(f"pruned {plural(len(outcome.stale), 'stale file')} from {directory}")
     else:
-        outcome.warnings.append(f"{len(outcome.stale)} file(s) in {directory} belong to no chunk of this sweep "
+        outcome.warnings.append(f"{plural(len(outcome.stale), 'file')} in {directory} {'belongs' if len(outcome.stale) == 1 else 'belong'} to no chunk of this sweep "
                                 "(another model, runtime, setting or grid, or left by a crash); --prune removes them")
 
 
