@@ -33,17 +33,22 @@ def _titles_fit(fig) -> None:
 
 
 def _legends_clear_of_data(fig) -> None:
-    """No point of an axes' plotted curves lies under its legend."""
+    """No point of an axes' plotted curves (vertical lines included) lies under its legend, and
+    the figure's legends lie outside every axes."""
     renderer = fig.canvas.get_renderer()
+    for legend in fig.legends:
+        box = legend.get_window_extent(renderer)
+        assert not any(box.overlaps(ax.bbox) for ax in fig.axes), [t.get_text() for t in legend.get_texts()]
+        assert _inside(fig.bbox, box), [t.get_text() for t in legend.get_texts()]              # not cut
     for ax in fig.axes:
         legend = ax.get_legend()
         if legend is None:
             continue
         box = legend.get_window_extent(renderer)
         for line in ax.get_lines():
-            if not line.get_label().startswith("_") and line.get_marker() not in ("None", "", None, " "):
-                continue   # the legend's own entries (markers) are named in it
-            xy = ax.transData.transform(np.column_stack(line.get_data()))
+            if line.get_marker() not in ("None", "", None, " ") and line.get_linestyle() in ("None", ""):
+                continue   # a marker named in the legend itself
+            xy = line.get_transform().transform(np.column_stack(line.get_data()))
             covered = (xy[:, 0] > box.x0) & (xy[:, 0] < box.x1) & (xy[:, 1] > box.y0) & (xy[:, 1] < box.y1)
             assert not covered.any(), (ax.get_ylabel(), line.get_label(), int(covered.sum()))
 
@@ -122,20 +127,32 @@ def test_misfit_plot_shades_the_confidence_band_and_says_when_it_is_too_narrow_t
     fig = misfit_figure(_fit_result(ci))
     fig.canvas.draw()
     ax = fig.axes[0]
-    entries = [t.get_text() for t in ax.get_legend().get_texts()]
+    entries = [t.get_text() for t in fig.legends[0].get_texts()]
     band = [p for p in ax.patches if "confidence interval" in p.get_label()]
     assert len(band) == 1 and 0 < band[0].get_alpha() < 1
     x0, x1 = band[0].get_extents().x0, band[0].get_extents().x1
     assert x1 - x0 >= 0 and ax.transData.inverted().transform((x0, 0))[0] == pytest.approx(ci[0], abs=1e-6)
     label = next(e for e in entries if "confidence interval" in e)
     assert ("narrower than the optimum's line" in label) == narrow, label
+    assert label.startswith("95% confidence interval [0.008, 0.012]" if not narrow else
+                            "95% confidence interval [0.0099999, 0.0100001]"), label   # the ends differ
+    _titles_fit(fig)
+    _legends_clear_of_data(fig)
+
+
+def test_misfit_plot_shades_further_bands():
+    """The paper report adds the profile interval to the lost-motion fit's plot."""
+    fig = misfit_figure(_fit_result((0.0099999, 0.0100001)), bands=(("95% profile interval", 0.009, 0.018),))
+    fig.canvas.draw()
+    band = [p for p in fig.axes[0].patches if p.get_label().startswith("95% profile interval [0.009, 0.018]")]
+    assert len(band) == 1 and 0 < band[0].get_alpha() < 1
     _titles_fit(fig)
     _legends_clear_of_data(fig)
 
 
 def test_misfit_plot_without_a_finite_interval_says_so():
     fig = misfit_figure(_fit_result((-math.inf, math.inf)))
-    entries = [t.get_text() for t in fig.axes[0].get_legend().get_texts()]
+    entries = [t.get_text() for t in fig.legends[0].get_texts()]
     assert "no finite 95% confidence interval" in entries
 
 
@@ -149,5 +166,5 @@ def test_two_parameter_misfit_plot_shades_the_confidence_region():
     r = math.sqrt(2 * __import__("scipy").stats.f.ppf(0.95, 2, 11))
     assert np.ptp(xy[:, 0]) == pytest.approx(2 * r * 1e-3, rel=1e-3)       # semi-axes r * sigma
     assert np.ptp(xy[:, 1]) == pytest.approx(2 * r * 10.0, rel=1e-3)
-    assert any("confidence region" in t.get_text() for t in ax.get_legend().get_texts())
+    assert any("confidence region" in t.get_text() for t in fig.legends[0].get_texts())
     _titles_fit(fig)

@@ -18,10 +18,12 @@ if TYPE_CHECKING:
     from tswm_runtime.fitting.fit import FitResult
 
 
-def misfit_figure(res: FitResult):
+def misfit_figure(res: FitResult, bands: tuple = ()):
     """The misfit plot: cost over one parameter (curve) or two (contour of log10 cost), the
     optimum, the starts' ends and the confidence band (one parameter) or the linearised joint
-    confidence region (two), shaded; the legend says when the band is narrower than a line."""
+    confidence region (two), shaded; the legend, below the axes, says when a band is narrower
+    than the optimum's line. ``bands``: further intervals of the one parameter, (name, lo, hi),
+    as the paper report's profile interval."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
@@ -42,7 +44,9 @@ def misfit_figure(res: FitResult):
         ax.plot(ends[:, 0], [max(s.cost, 1e-300) for s in res.starts], "kx", label="ends of the starts")
         ax.set_xlabel(label[0])
         ax.set_ylabel("cost (log scale)")
-        _band(ax, res, names[0], xs)
+        _band(ax, f"{res.confidence:.0%} confidence interval", *res.ci[names[0]], xs, "C3")
+        for (name, lo, hi), colour in zip(bands, ("C2", "C4", "C1")):
+            _band(ax, name, lo, hi, xs, colour)
     else:
         xs, ys = (np.array(a) for a in g["axes"])
         cost = np.log10(np.maximum(np.array(g["cost"]), 1e-300))
@@ -55,25 +59,32 @@ def misfit_figure(res: FitResult):
         _region(ax, res, names)
     extra = f"; {', '.join(g['others_at_optimum'])} at the optimum" if g["others_at_optimum"] else ""
     heading = ax.set_title(f"tswm fit {res.scene}: misfit over the bounds{extra}", fontsize=10)
-    ax.legend(fontsize=8, loc="best", framealpha=0.9)
+    fig.legend(fontsize=8, loc="outside lower center")
     fig.draw_without_rendering()
     fit_text(heading, ax.bbox.width)
     fig.draw_without_rendering()
     return fig
 
 
-def _band(ax, res: FitResult, name: str, xs: np.ndarray) -> None:
-    """The confidence interval of one parameter as a shaded band, with its width in the legend."""
-    lo, hi = res.ci[name]
+def _band(ax, name: str, lo: float, hi: float, xs: np.ndarray, colour: str) -> None:
+    """An interval of the one parameter as a shaded band, named with its ends in the legend
+    (enough digits to tell them apart)."""
     if not (math.isfinite(lo) and math.isfinite(hi)):
-        ax.plot([], [], " ", label=f"no finite {res.confidence:.0%} confidence interval")
+        ax.plot([], [], " ", label=f"no finite {name}")
         return
-    text = f"{res.confidence:.0%} confidence interval [{lo:.4g}, {hi:.4g}]"
+    text = f"{name} {_ends(lo, hi)}"
     ax.get_figure().draw_without_rendering()
     pixels = abs(ax.transData.transform((hi, 1.0))[0] - ax.transData.transform((lo, 1.0))[0])
     if pixels < OPTIMUM_WIDTH * ax.get_figure().dpi / 72:
         text += ", narrower than the optimum's line"
-    ax.axvspan(max(lo, xs[0]), min(hi, xs[-1]), color="C3", alpha=0.25, linewidth=0, label=text)
+    ax.axvspan(max(lo, xs[0]), min(hi, xs[-1]), color=colour, alpha=0.25, linewidth=0, label=text)
+
+
+def _ends(lo: float, hi: float) -> str:
+    """'[lo, hi]' with enough significant digits (at least 4) to show the interval's width."""
+    width, scale = hi - lo, max(abs(lo), abs(hi))
+    digits = 4 if width <= 0 or scale == 0 else max(4, min(12, math.ceil(math.log10(scale / width)) + 2))
+    return f"[{lo:.{digits}g}, {hi:.{digits}g}]"
 
 
 def _region(ax, res: FitResult, names: list[str]) -> None:
@@ -99,10 +110,10 @@ def _region(ax, res: FitResult, names: list[str]) -> None:
     ax.add_patch(Polygon(points, closed=True, facecolor="C3", edgecolor="C3", alpha=0.35, label=text))
 
 
-def misfit_png(res: FitResult) -> bytes:
+def misfit_png(res: FitResult, bands: tuple = ()) -> bytes:
     """The misfit plot (``misfit_figure``) as PNG bytes."""
     buffer = io.BytesIO()
-    misfit_figure(res).savefig(buffer, format="png", dpi=120)
+    misfit_figure(res, bands).savefig(buffer, format="png", dpi=120)
     return buffer.getvalue()
 
 
