@@ -211,8 +211,8 @@ def check_size(cases: int, chunk_size: int, large: bool = False) -> None:
     if not 1 <= chunk_size <= MAX_CHUNK_SIZE:
         raise SweepInputError(f"--chunk-size {chunk_size}: must be in [1, {MAX_CHUNK_SIZE:.0e}]")
     files = -(-cases // chunk_size)
-    size = (f"{cases} cases, about {cases * ROW_BYTES / 1e6:.3g} MB of parquet and CSV output, {files} chunk "
-            f"file{'s' if files != 1 else ''} of {chunk_size}")
+    size = (f"{plural(cases, 'case')}, about {cases * ROW_BYTES / 1e6:.3g} MB of parquet and CSV output, "
+            f"{plural(files, 'chunk file')} of {chunk_size}")
     if cases > MAX_SWEEP_CASES:
         raise SweepInputError(f"sweep of {size}: more than the {MAX_SWEEP_CASES:.0e} cases tswm runs in one "
                               "sweep; split it (several -o directories) or coarsen the grid")
