@@ -168,3 +168,18 @@ def test_two_parameter_misfit_plot_shades_the_confidence_region():
     assert np.ptp(xy[:, 1]) == pytest.approx(2 * r * 10.0, rel=1e-3)
     assert any("confidence region" in t.get_text() for t in fig.legends[0].get_texts())
     _titles_fit(fig)
+
+
+def test_bench_plot_titles_fit_and_its_legend_keeps_off_the_panels():
+    from tswm_runtime.bench.cases import CASES
+    from tswm_runtime.bench.report import work_precision_figure
+
+    names = list(CASES) + ["a case whose name is much longer than one panel of the figure is wide"]
+    rows = [{"case": case, "solver": solver, "rtol": rtol, "t_med": t * (1 + k), "err": rtol * (1 + k)}
+            for case in names for k, solver in enumerate(("tswm simulate", "scipy RK45", "scipy LSODA", "CVODE"))
+            for rtol, t in ((1e-4, 1e-3), (1e-6, 3e-3), (1e-8, 1e-2))]
+    fig = work_precision_figure(rows)
+    fig.canvas.draw()
+    _titles_fit(fig)
+    _legends_clear_of_data(fig)
+    assert [t.get_text() for t in fig.legends[0].get_texts()] == ["tswm simulate", "scipy RK45", "scipy LSODA", "CVODE"]
