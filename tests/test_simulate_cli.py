@@ -281,6 +281,9 @@ t_end = "0.5 s"
     for line in out.splitlines():
         if line.startswith("  wrote "):
             assert Path(line[len("  wrote "):]).is_file(), line
+    assert main(["generate", str(scene), "-o", str(tmp_path / "gen")]) == 0     # generate names its file too
+    wrote = capsys.readouterr().out.split(":")[0]
+    assert wrote == f"wrote {tmp_path / 'gen' / 'block.py'}" and (tmp_path / "gen" / "block.py").is_file()
     stamp = cached[0].stat().st_mtime_ns
     assert main(["simulate", str(scene), "--no-plot"]) == 0
     assert cached[0].stat().st_mtime_ns == stamp                      # reused, not regenerated

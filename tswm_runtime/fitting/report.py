@@ -52,7 +52,8 @@ def misfit_figure(res: FitResult, bands: tuple = ()):
         cost = np.log10(np.maximum(np.array(g["cost"]), 1e-300))
         cs = ax.contourf(xs, ys, cost.T, levels=20, cmap="viridis")
         fig.colorbar(cs, ax=ax, label="log10 cost")
-        ax.plot(ends[:, 0], ends[:, 1], "wx", label="ends of the starts")
+        ax.plot(ends[:, 0], ends[:, 1], "X", color="white", markeredgecolor="black", linestyle="none",
+                label="ends of the starts")   # seen on the dark contour and in the white legend
         ax.plot([res.estimate[names[0]]], [res.estimate[names[1]]], "r*", ms=14, label="optimum")
         ax.set_xlabel(label[0])
         ax.set_ylabel(label[1])
