@@ -227,7 +227,8 @@ def test_html_renders_in_headless_chromium(report, tmp_path):
     dom = subprocess.run([CHROMIUM, *flags, "--dump-dom", url], capture_output=True, text=True, timeout=60).stdout
     title = re.search(r"<title>([^<]*)</title>", dom).group(1)
     images = len(re.findall(r"<img", html))
-    assert images == 5 and title.startswith(f"ok {images}/{images} images, {len(CASES)} rows, 4 tables of Table 3, "), title
+    expected = f"ok {images}/{images} images, {len(CASES)} rows, 4 tables of Table 3, "
+    assert images == 5 and title.startswith(expected), title
     widest, page = map(int, re.search(r"widest (\d+) of (\d+) px", title).groups())
     assert 0 < widest <= page <= 1240, title        # each of Table 3's tables fits an A4 page's width
     shot = tmp_path / "shot.png"

@@ -48,7 +48,8 @@ def run(args: argparse.Namespace) -> int:
             raise
         return warmup.rerun_compiled(args.argv, error)
     print(f"scene {result.scene}: {result.measured['form']} of {plural(result.measured['cases'], 'case')} from "
-          f"{args.measured}; {plural(len(result.starts), 'start')}, {plural(result.fit_settings['model_runs'], 'model run')}, "
+          f"{args.measured}; {plural(len(result.starts), 'start')}, "
+          f"{plural(result.fit_settings['model_runs'], 'model run')}, "
           f"{time.perf_counter() - start:.3g} s")
     for name, unit in zip(result.names, result.units):
         lo, hi = result.ci[name]

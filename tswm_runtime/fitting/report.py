@@ -127,7 +127,8 @@ def report_markdown(res: FitResult) -> str:
     f = res.to_dict()
     L = [f"# tswm fit: scene {res.scene}", ""]
     L.append(f"Measured: {_md(Path(res.measured['file']).name)} ({res.measured['form']}, "
-             f"{plural(res.measured['cases'], 'case')}, {plural(res.measured['rows'], 'row')}; quantities {', '.join(res.measured['quantities'])}, compared "
+             f"{plural(res.measured['cases'], 'case')}, {plural(res.measured['rows'], 'row')}; quantities "
+             f"{', '.join(res.measured['quantities'])}, compared "
              f"as {res.measured['compared']}; known per case: {', '.join(res.measured['known']) or 'none'}).")
     L.append("")
     L.append("| parameter | estimate | std. error | " f"{res.confidence:.0%} CI | bounds |")
@@ -141,7 +142,8 @@ def report_markdown(res: FitResult) -> str:
                  f"[{res.bounds[n][0]:g}, {res.bounds[n][1]:g}] ({res.bound_source[n]}) |")
     L.append("")
     L.append(f"Cost 0.5 sum r^2 = {res.cost:.6g} over {plural(len(res.jacobian), 'scaled residual')}, "
-             f"{plural(res.dof, 'degree of freedom')}, s^2 = {res.s2:.6g}; singular values of J (columns scaled to the bounds) "
+             f"{plural(res.dof, 'degree of freedom')}, s^2 = {res.s2:.6g}; singular values of J (columns scaled to the "
+             "bounds) "
              f"{', '.join(f'{v:.4g}' for v in res.singular_values)}, condition {res.condition:.4g}, rank {res.rank}.")
     L.append("")
     L.append("## Identifiability and warnings")

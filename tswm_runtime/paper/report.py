@@ -341,7 +341,8 @@ def verdict(rows: list[dict], checks: dict, readings: tuple = READINGS, lost: di
     n = scores[best.key]["cells"]
     fitted = next((r for r in readings if r.key == "lostmotion"), None)
     headline = (f"No reading reproduces the printed numbers: of the {plural(n, 'printed cell')} (S1m, KD1, S2m, KD2 "
-                f"of {plural(len(printed_rows), 'test')}), " + ", ".join(f"{r.label} {r.scene} matches {scores[r.key]['agree']}"
+                f"of {plural(len(printed_rows), 'test')}), "
+                + ", ".join(f"{r.label} {r.scene} matches {scores[r.key]['agree']}"
                                                            for r in READINGS)
                 + (f", and {fitted.label} {fitted.scene}, whose lost motion L is fitted to this table, "
                    f"{scores[fitted.key]['agree']}" if fitted else "")
@@ -378,7 +379,8 @@ def verdict(rows: list[dict], checks: dict, readings: tuple = READINGS, lost: di
         points.append(
             f"{b.label} `{b.scene}`: S1m is " + ("negative in every case" if max(s1) < 0 else
                                                 f"between {fmt(min(s1))} and {fmt(max(s1))} N")
-            + f"; {inverse} of {plural(len(rows), 'run')} {'turns' if inverse == 1 else 'turn'} inverse-tractive, where the paper prints S1m > 0 and "
+            + f"; {inverse} of {plural(len(rows), 'run')} {'turns' if inverse == 1 else 'turn'} inverse-tractive, "
+            "where the paper prints S1m > 0 and "
             f"a tractive drive. Its energy balance (m2 = {lit['m2']:g} kg, F2 = {lit['F2']:g} N): input work {lit['W_in']:.0f} J, kinetic "
             f"energy change {lit['dKE']:.0f} J, so friction would dissipate {lit['E_diss']:.0f} J"
             + (": friction would supply energy, the printed equations are not physical." if lit["E_diss"] < 0
@@ -634,7 +636,8 @@ def table3_tables(data: dict, readings: tuple = READINGS) -> list[dict]:
     header and rows of strings (agreeing cells marked ✓); with the fitted reading (d), its
     residual per cell (printed - computed) in the last column."""
     fitted = any(r.key == "lostmotion" for r in readings)
-    header = ["Test", "m2 [kg]", "F2 [N]", "paper", *(r.label for r in readings)] + (["paper − (d)"] if fitted else [])
+    header = ["Test", "m2 [kg]", "F2 [N]", "paper", *(r.label for r in readings)]
+    header += ["paper − (d)"] if fitted else []
     tables = []
     for q, _, unit in QUANTITIES:
         rows = []

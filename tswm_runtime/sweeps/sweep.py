@@ -469,7 +469,8 @@ def _report_stale(outcome: SweepOutcome, directory: Path, expected: set[str], pr
         outcome.pruned = True
         outcome.warnings.append(f"pruned {plural(len(outcome.stale), 'stale file')} from {directory}")
     else:
-        outcome.warnings.append(f"{plural(len(outcome.stale), 'file')} in {directory} {'belongs' if len(outcome.stale) == 1 else 'belong'} to no chunk of this sweep "
+        verb = "belongs" if len(outcome.stale) == 1 else "belong"
+        outcome.warnings.append(f"{plural(len(outcome.stale), 'file')} in {directory} {verb} to no chunk of this sweep "
                                 "(another model, runtime, setting or grid, or left by a crash); --prune removes them")
 
 
