@@ -140,7 +140,7 @@ def test_ctrl_c_keeps_complete_chunks_and_the_rerun_resumes(paper, cases, refere
             "--no-progress"]
     assert main(argv + ["--t-end", "1"]) == 1
     err = capsys.readouterr().err
-    assert "interrupted: 1 of 3 chunks are complete" in err and "rerun the same command" in err
+    assert "interrupted: 1 of 3 chunks complete" in err and "rerun the same command" in err
     assert "Traceback" not in err
     assert len(chunk_files(tmp_path)) == 1 and not list((tmp_path / "chunks").glob("*.tmp"))
     assert not (tmp_path / "paper-sweep.parquet").exists()
@@ -173,9 +173,9 @@ def test_cli_prune_removes_stale_files(tmp_path, capsys):
     capsys.readouterr()
     assert main([*base, "--grid", "F2=-15000:-1000:6"]) == 0     # another grid: the old chunks are stale
     err = capsys.readouterr().err
-    assert "3 file(s)" in err and "--prune" in err
+    assert "3 files in" in err and "--prune" in err
     assert main([*base, "--grid", "F2=-15000:-1000:6", "--prune"]) == 0
-    assert "pruned 3 stale file(s)" in capsys.readouterr().err
+    assert "pruned 3 stale files" in capsys.readouterr().err
     assert len(chunk_files(tmp_path)) == 3 and not leftover.exists()
 
 

@@ -6,6 +6,7 @@ import math
 import sys
 import time
 
+from tswm_runtime.common.words import plural
 from tswm_runtime.cli.common import (UsageError, add_setting_options, output_directory, prepare_kernels, run_method,
                                      setting_error, setting_overrides)
 
@@ -44,8 +45,9 @@ def run(args: argparse.Namespace) -> int:
         if cold is None:
             raise
         return warmup.rerun_compiled(args.argv, error)
-    print(f"scene {result.scene}: {result.measured['form']} of {result.measured['cases']} case(s) from "
-          f"{args.measured}; {len(result.starts)} start(s), {result.fit_settings['model_runs']} model runs, "
+    print(f"scene {result.scene}: {result.measured['form']} of {plural(result.measured['cases'], 'case')} from "
+          f"{args.measured}; {plural(len(result.starts), 'start')}, "
+          f"{plural(result.fit_settings['model_runs'], 'model run')}, "
           f"{time.perf_counter() - start:.3g} s")
     for name, unit in zip(result.names, result.units):
         lo, hi = result.ci[name]

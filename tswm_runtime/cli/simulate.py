@@ -7,6 +7,7 @@ import os
 import sys
 import time
 
+from tswm_runtime.common.words import plural
 from tswm_runtime.cli.common import (SETTING_OPTIONS, UsageError, add_setting_options, output_directory,
                                      parse_sets, prepare_kernels, run_method, setting_error, setting_overrides)
 
@@ -54,7 +55,7 @@ def _print_summary(result, module, origin: str, t_load: float, t_run: float) -> 
     params = ", ".join(f"{k} = {v:g} {units[k]}".rstrip() for k, v in result.params.items())
     print(f"  parameters: {params or 'none free'}")
     print(f"  run: t_end = {run['t_end']:g} s, x1(0) = {run['x1']:g} m, v1(0) = {run['v1']:g} m/s, "
-          f"{run['method']}, rtol {run['rtol']:g}, atol {run['atol']:g}, {run['points']} points")
+          f"{run['method']}, rtol {run['rtol']:g}, atol {run['atol']:g}, {plural(run['points'], 'point')}")
     print(f"  status: {result.status}: {result.message}")
     print(f"  phases ({len(result.phases)}):")
     rows = [("regime", "mode", "t_start [s]", "t_end [s]")]

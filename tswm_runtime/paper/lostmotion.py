@@ -168,23 +168,25 @@ def fit_table3(out_dir: Path, progress: bool = False) -> dict:
     out_dir/lostmotion (measured table, fit-report.md, fit.json, misfit.png). Returns the fit's
     numbers for the paper report (``fit``: FitResult.to_dict(), every number)."""
     from tswm_runtime.fitting.fit import fit
-    from tswm_runtime.fitting.report import write_outputs
+    from tswm_runtime.fitting.report import misfit_png, write_outputs
 
     directory = Path(out_dir) / DIRECTORY
     table = write_atomic(directory / "table3-measured.csv", measured_csv())
     res = fit(SCENE, table, {FREE: (L_MIN, L_MAX)}, starts=STARTS, seed=SEED, confidence=CONFIDENCE,
               grid_points=GRID, progress=progress)
-    files = write_outputs(res, directory)
+    files = write_outputs(res, directory, plot=False)
+    profile = profile_interval(res)
+    png = misfit_png(res, bands=((f"{CONFIDENCE:.0%} profile interval", profile["lo"], profile["hi"]),))
+    files.insert(1, write_atomic(directory / "misfit.png", png))
     L = float(res.estimate[FREE])
-    png = (directory / "misfit.png").read_bytes() if (directory / "misfit.png").exists() else None
     out = {
         "scene": SCENE, "free": FREE, "L": L, "L_mm": L * 1e3, "wheel_deg": math.degrees(L / R2),
         "bounds": [L_MIN, L_MAX], "fitted_columns": list(FITTED), "starts": STARTS, "seed": SEED,
         "ci_linear": list(res.ci[FREE]), "stderr": res.stderr[FREE], "cost": res.cost, "dof": res.dof,
         "success": res.success, "seconds": res.seconds,
-        "profile": profile_interval(res), "jump": jump(res),
+        "profile": profile, "jump": jump(res),
         "files": [str(Path(DIRECTORY) / p.name) for p in [table, *files]],
-        "misfit_png": None if png is None else base64.b64encode(png).decode("ascii"),
+        "misfit_png": base64.b64encode(png).decode("ascii"),
         "fit": res.to_dict(),
     }
     out["runup"] = free_runup()
