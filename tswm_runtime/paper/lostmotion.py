@@ -180,7 +180,7 @@ def fit_table3(out_dir: Path, progress: bool = False) -> dict:
     out = {
         "scene": SCENE, "free": FREE, "L": L, "L_mm": L * 1e3, "wheel_deg": math.degrees(L / R2),
         "bounds": [L_MIN, L_MAX], "fitted_columns": list(FITTED), "starts": STARTS, "seed": SEED,
-        "ci_linear": list(res.ci[FREE]), "stderr": res.stderr[FREE], "cost": res.cost, "dof": res.dof,
+        "ci_linear": list(res.ci_linear[FREE]), "stderr": res.stderr[FREE], "cost": res.cost, "dof": res.dof,
         "success": res.success, "seconds": res.seconds,
         "profile": profile_interval(res), "jump": jump(res),
         "files": [str(Path(DIRECTORY) / p.name) for p in [table, *files]],
