@@ -51,11 +51,15 @@ class Problem:
         self.last_modes = np.empty((0, 0), dtype=object)  # mode sequence per point and case, last evaluate()
 
     def tightened(self, factor: float) -> "Problem":
-        """The same problem run at rtol and atol divided by ``factor`` (own counters)."""
+        """The same problem run at rtol and atol divided by ``factor``, no tighter than simulate
+        accepts (own counters)."""
         from copy import copy
 
+        from tswm_runtime.simulation.simulate import ATOL_RANGE, RTOL_RANGE
+
         tight = copy(self)
-        tight.run = {**self.run, "rtol": self.run["rtol"] / factor, "atol": self.run["atol"] / factor}
+        tight.run = {**self.run, "rtol": max(self.run["rtol"] / factor, RTOL_RANGE[0]),
+                     "atol": max(self.run["atol"] / factor, ATOL_RANGE[0])}
         tight.evaluations = tight.runs = 0
         return tight
 

@@ -9,9 +9,10 @@ walking outward from the estimate). A point lies inside the interval when its co
   sigma, so the cost is chi^2 / 2) -> chi2_1(C) / 2; estimated (s^2 = 2 C_min / dof) ->
   C_min F_{1,dof}(C) / dof (Beale's region); without either (m = n) none;
 - numerical floor, from the model's own error at the fit's tolerances: every profile point is
-  run again at TIGHTER times tighter rtol and atol, e = r - r_tight, and a cost difference up
-  to SAFETY x max(|r| |e| + |e|^2 / 2) over the points may be the integrator's (points where
-  the two runs take different mode sequences are left out of the maximum and counted).
+  run again at TIGHTER times tighter rtol and atol (no tighter than simulate accepts),
+  e = r - r_tight, and a cost difference up to SAFETY x max(|r| |e| + |e|^2 / 2) over the
+  points may be the integrator's (points where the two runs take different mode sequences or
+  end with different statuses are left out of the maximum and counted).
 
 Each end of the interval is refined by bisection between the last grid point inside and the
 first outside. Verdicts: 'determined' (the interval ends inside the bounds on both sides),
@@ -94,13 +95,13 @@ def _cost(R: np.ndarray) -> np.ndarray:
     return 0.5 * np.sum(np.atleast_2d(R) ** 2, axis=1)
 
 
-def numerical_floor(problem: Problem, X: np.ndarray, R: np.ndarray, modes: np.ndarray) -> dict:
-    """The noise floor of the cost at points X (residuals R, mode sequences ``modes``) from a rerun
-    at TIGHTER times tighter tolerances."""
+def numerical_floor(problem: Problem, X: np.ndarray, R: np.ndarray, modes: np.ndarray, status: np.ndarray) -> dict:
+    """The noise floor of the cost at points X (residuals R, mode sequences ``modes``, statuses)
+    from a rerun at TIGHTER times tighter tolerances."""
     tight = problem.tightened(TIGHTER)
-    Rt, _, _ = tight.residuals(X)
+    Rt, _, status_t = tight.residuals(X)
     problem.runs += tight.runs
-    same = np.all(tight.last_modes == modes, axis=1)
+    same = np.all(tight.last_modes == modes, axis=1) & np.all(status_t == status, axis=1)
     e = np.linalg.norm(R - Rt, axis=1)
     bound = np.linalg.norm(R, axis=1) * e + 0.5 * e ** 2
     kept = bound[same]
@@ -118,7 +119,7 @@ def profile(problem: Problem, x_best: np.ndarray, j: int, *, points: int, confid
     R, _, status = problem.residuals(X)
     modes = problem.last_modes.copy()
     cost = _cost(R)
-    noise = numerical_floor(problem, X, R, modes)
+    noise = numerical_floor(problem, X, R, modes, status)
     cost_min = float(min(cost.min(), cost_best))
     delta, source = statistical_delta(cost_min, dof, confidence, stated)
     limit = cost_min + delta + noise["floor"]
@@ -144,7 +145,8 @@ def profile(problem: Problem, x_best: np.ndarray, j: int, *, points: int, confid
     at_edge = [e for e in (lower, upper) if e and e["edge"] and abs(e["at"] - x_best[j]) <= spacing]
     return {"values": values.tolist(), "cost": cost.tolist(), "points": X.tolist(), "modes": modes.tolist(),
             "failed": np.sum(status != "finished", axis=1).tolist(), "cost_min": cost_min,
-            "at_min": X[k].tolist(), "statistical": delta, "noise": source, "numerical": noise,
+            "at_min": X[k].tolist(), "below_fit": bool(cost[k] < cost_best - max(noise["floor"], 1e-12 * cost_best)),
+            "statistical": delta, "noise": source, "numerical": noise,
             "threshold": limit, "confidence": confidence, "lo": lo, "hi": hi, "lower": lower, "upper": upper,
             "verdict": verdict, "range": [float(values[inside].min()), float(values[inside].max())],
             "contiguous": bool(inside[a:b + 1].sum() == inside.sum()),
@@ -189,6 +191,10 @@ def notes(profiles: dict, linear: dict, names: list[str]) -> list[str]:
         level = f"{p['confidence']:.0%}"
         floor = (f"threshold {p['threshold']:.4g} = minimum {p['cost_min']:.4g} + noise {p['statistical']:.3g} "
                  f"({p['noise']}) + numerical floor {p['numerical']['floor']:.3g}")
+        if p["below_fit"]:
+            out.append(f"{name}: the profile finds a lower cost ({p['cost_min']:.6g} at "
+                       f"{', '.join(f'{v:.6g}' for v in p['at_min'])}) than the fit's best start: the starts missed "
+                       "it; the interval is taken around it")
         if p["verdict"] == "not determined":
             a, b = linear[name]
             out.append(f"{name} is not determined by these data: its profile stays within the noise floor over its "
@@ -215,5 +221,6 @@ def notes(profiles: dict, linear: dict, names: list[str]) -> list[str]:
                           "means nothing there" if end is edge else ""))
         if p["numerical"]["different_modes"]:
             out.append(f"{name}: at {p['numerical']['different_modes']} profile point(s) the {TIGHTER:g}x tighter run "
-                       "takes another mode sequence (a switch within the tolerance); they are left out of the floor")
+                       "takes another mode sequence or ends otherwise (a switch within the tolerance); they are left "
+                       "out of the floor")
     return out

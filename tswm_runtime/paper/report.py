@@ -413,7 +413,8 @@ def lostmotion_point(printed_rows: list[dict], score: dict, best_score: dict, be
     else:
         text += ("Even so no plausible L explains the table: the printed values minus the computed ones are "
                  + "; ".join(short) + " of the printed values, and "
-                 + (f"no L in the bounds does better (the lowest cost of the misfit grid and the profile over {lo * 1e3:g}-{hi * 1e3:g} mm, "
+                 + (f"no L in the bounds does better (the lowest cost of the misfit grid and the profile over "
+                    f"{lo * 1e3:g}-{hi * 1e3:g} mm, "
                     f"{prof['grid_best_cost']:.4g}, is not below the fit's {prof['fit_cost']:.4g})."
                     if prof["grid_best_cost"] >= prof["fit_cost"] * (1 - 1e-6) else
                     f"the misfit grid or the profile finds a lower cost ({prof['grid_best_cost']:.4g} at L = "
