@@ -259,23 +259,28 @@ def test_lostmotion_fit_uses_table3_and_stays_in_its_bounds(report):
         assert entry["known"] == {"m2": c.m2, "F2_1": c.F2}
         assert {q: v["measured"] for q, v in entry["quantities"].items()} == {"S1m": c.S1m, "S2m": c.S2m}
     assert (out / "lostmotion" / "fit.json").exists() and (out / "lostmotion" / "misfit.png").exists()
-    # both intervals are reported; the profile interval holds the estimate and is recomputed here
-    # from the fit's misfit grid with the F quantile
+    assert (out / "lostmotion" / "profile.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    # both intervals are reported; the profile interval holds the estimate, and its threshold is recomputed
+    # here from the profile's minimum with the F quantile plus the numerical floor
     from scipy import stats
 
-    prof = lost["profile"]
-    grid_L = np.array(lost["fit"]["misfit"]["axes"][0])
-    grid_cost = np.array(lost["fit"]["misfit"]["cost"])
-    best = min(lost["cost"], grid_cost.min())
-    threshold = best * (1 + stats.f.ppf(0.95, 1, lost["dof"]) / lost["dof"])
-    inside = grid_L[grid_cost <= threshold]
-    assert prof["threshold"] == pytest.approx(threshold, rel=1e-12)
-    assert (prof["lo"], prof["hi"]) == (inside.min(), inside.max()) and prof["lo"] <= lost["L"] <= prof["hi"]
+    prof, fp = lost["profile"], lost["fit"]["profiles"]["load_at1"]
+    floor = fp["numerical"]["floor"]
+    threshold = prof["cost_min"] * (1 + stats.f.ppf(0.95, 1, lost["dof"]) / lost["dof"]) + floor
+    assert prof["threshold"] == pytest.approx(threshold, rel=1e-12) and 0 < floor < 1e-3 * prof["cost_min"]
+    L, cost = np.array(fp["values"]), np.array(fp["cost"])
+    assert np.all((L >= prof["lo"]) & (L <= prof["hi"]) | (cost > threshold))
+    assert prof["lo"] <= lost["L"] <= prof["hi"] and prof["verdict"] == "determined"
+    # the headline value is an edge: just below it test 6 stalls (its mode sequence gains 'stick'), cost jumps
+    assert prof["minimum_on_edge"] and prof["below"] < lost["L"] and prof["cost_below"] > 5 * prof["cost_min"]
+    assert [c["case"] for c in prof["edge_changes"]] == ["test6"] and "stick" in prof["edge_changes"][0]["outside"]
+    assert lost["notes"][0].startswith(f"Verdict: the fitted L = {lost['L'] * 1e3:.3f} mm is an edge, not a minimum")
     md = (out / "paper-report.md").read_text()
     a, b = lost["ci_linear"]
     assert f"linearised interval {a * 1e3:.4f}-{b * 1e3:.4f} mm" in md
     assert f"profile interval {prof['lo'] * 1e3:.2f}-{prof['hi'] * 1e3:.2f} mm" in md
     assert f"**Fitted: L = {lost['L'] * 1e3:.3f} mm**" in md
+    assert "is an edge, not a minimum" in md and "(lostmotion/profile.png)" in md
 
 
 def test_lostmotion_cells_are_simulate_at_the_fitted_L(report):

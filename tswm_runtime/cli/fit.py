@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 import argparse
-import math
 import sys
 import time
 
@@ -34,7 +33,8 @@ def run(args: argparse.Namespace) -> int:
     try:
         result = fit(module, args.measured, args.free, overrides=overrides, starts=args.starts,
                      sampler=args.sampler, seed=args.seed, magnitude=args.magnitude, confidence=args.confidence,
-                     grid_points=args.grid_points, progress=not args.no_progress, misfit=not args.no_plot)
+                     grid_points=args.grid_points, progress=not args.no_progress, misfit=not args.no_plot,
+                     noise=args.noise, profile_points=args.profile_points)
     except KeyboardInterrupt:
         print(f"tswm fit {args.scene}: interrupted (Ctrl-C) after {time.perf_counter() - start:.3g} s; "
               "nothing written", file=sys.stderr)
@@ -50,9 +50,10 @@ def run(args: argparse.Namespace) -> int:
           f"{plural(result.fit_settings['model_runs'], 'model run')}, "
           f"{time.perf_counter() - start:.3g} s")
     for name, unit in zip(result.names, result.units):
-        lo, hi = result.ci[name]
-        ci = ("no CI" if math.isnan(lo) else "CI unbounded" if not (math.isfinite(lo) and math.isfinite(hi))
-              else f"{result.confidence:.0%} CI [{lo:.6g}, {hi:.6g}]")
+        p = result.profiles[name]
+        ci = (f"not determined by these data: any value in [{p['range'][0]:.6g}, {p['range'][1]:.6g}]"
+              if p["verdict"] == "not determined" else
+              f"{result.confidence:.0%} profile CI [{p['lo']:.6g}, {p['hi']:.6g}], {p['verdict']}")
         print(f"  {name} = {result.estimate[name]:.8g} {unit}  ({ci}; bounds {result.bounds[name][0]:g} to "
               f"{result.bounds[name][1]:g})")
     print(f"  cost {result.cost:.6g}, {result.dof} degrees of freedom, condition {result.condition:.4g}")
@@ -73,8 +74,9 @@ def add_parser(sub) -> None:
         description="Fit free parameters of a scene to measured values: peaks (one row per case: known "
                     "parameters, S1m, S2m, KD1, KD2) or a time history (columns t, case, S1, S2, v1), from a "
                     "CSV or Parquet file (the tables tswm sweep -o and tswm simulate -o write, as written), "
-                    "with scipy.optimize.least_squares from several starts. Writes "
-                    "DIR/fit-report.md, fit.json and misfit.png (see docs/fit.md). Exit status: 0 fitted, 1 "
+                    "with scipy.optimize.least_squares from several starts, and profile-likelihood intervals. "
+                    "Writes DIR/fit-report.md, fit.json, misfit.png and profile.png (see docs/fit.md). Exit "
+                    "status: 0 fitted, 1 "
                     "fitted but a case does not finish at the optimum (or no start converged), 2 bad input, "
                     "130 interrupted.")
     fit.add_argument("scene", help="a shipped scene name, a scene file (.toml) or a generated module's .py path")
@@ -92,11 +94,16 @@ def add_parser(sub) -> None:
                      "as the sweep reports them)")
     fit.add_argument("--confidence", type=float, default=0.95, help="confidence level of the intervals "
                      "(default 0.95)")
+    fit.add_argument("--noise", action="append", metavar="QUANTITY=SIGMA",
+                     help="measurement noise (one standard deviation) of a measured quantity, SI or with a unit: "
+                          "S1m='50 N'; give every quantity or none (default: estimated from the residuals)")
+    fit.add_argument("--profile-points", type=int, metavar="N",
+                     help="grid points of each parameter's profile (default 21, 5 to 201)")
     fit.add_argument("--grid-points", type=int, metavar="N",
                      help="misfit plot: points per axis (default 41 for one parameter, 15 for two)")
     add_setting_options(fit, FIT_SETTINGS)
     fit.add_argument("-o", "--output", default="tswm-report/fit", metavar="DIR",
-                     help="write DIR/fit-report.md, fit.json, misfit.png (default tswm-report/fit)")
-    fit.add_argument("--no-plot", action="store_true", help="no misfit grid and no misfit.png")
+                     help="write DIR/fit-report.md, fit.json, misfit.png, profile.png (default tswm-report/fit)")
+    fit.add_argument("--no-plot", action="store_true", help="no misfit grid, no misfit.png and no profile.png")
     fit.add_argument("--no-progress", action="store_true", help="no progress bars")
     fit.set_defaults(run=run)

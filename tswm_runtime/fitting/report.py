@@ -11,6 +11,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from tswm_runtime.common.words import plural
+from tswm_runtime.fitting.profile import TIGHTER
 
 OPTIMUM_WIDTH = 1.5   # points, the optimum's vertical line
 
@@ -44,7 +45,7 @@ def misfit_figure(res: FitResult, bands: tuple = ()):
         ax.plot(ends[:, 0], [max(s.cost, 1e-300) for s in res.starts], "kx", label="ends of the starts")
         ax.set_xlabel(label[0])
         ax.set_ylabel("cost (log scale)")
-        _band(ax, f"{res.confidence:.0%} confidence interval", *res.ci[names[0]], xs, "C3")
+        _band(ax, f"{res.confidence:.0%} profile interval", *res.ci[names[0]], xs, "C3")
         for (name, lo, hi), colour in zip(bands, ("C2", "C4", "C1")):
             _band(ax, name, lo, hi, xs, colour)
     else:
@@ -118,6 +119,41 @@ def misfit_png(res: FitResult, bands: tuple = ()) -> bytes:
     return buffer.getvalue()
 
 
+def profile_png(res: FitResult) -> bytes:
+    """One panel per parameter: its profile (cost above the minimum, others re-optimised), the
+    threshold (noise + numerical floor) and the numerical floor as lines, the interval shaded,
+    the estimate and any edge (a mode-sequence change) marked."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    n = len(res.names)
+    fig = Figure(figsize=(7, 2.6 + 2.4 * n))
+    FigureCanvasAgg(fig)
+    for j, (name, unit) in enumerate(zip(res.names, res.units)):
+        p = res.profiles[name]
+        ax = fig.add_subplot(n, 1, j + 1)
+        xs, rise = np.array(p["values"]), np.array(p["cost"]) - p["cost_min"]
+        floor, limit = p["numerical"]["floor"], p["threshold"] - p["cost_min"]
+        bottom = max(min(floor, limit) / 10, 1e-300) if limit > 0 else 1e-300
+        ax.semilogy(xs, np.maximum(rise, bottom), "o-", ms=3, color="C0", label="profile: cost - minimum")
+        ax.axhline(max(limit, bottom), color="C3", ls="--", label=f"threshold {limit:.3g} ({p['confidence']:.0%})")
+        ax.axhline(max(floor, bottom), color="C7", ls=":", label=f"numerical floor {floor:.3g}")
+        lo, hi = (p["range"] if p["verdict"] == "not determined" else (p["lo"], p["hi"]))
+        ax.axvspan(lo, hi, color="C3", alpha=0.15, label=f"{p['verdict']}: [{lo:.5g}, {hi:.5g}]")
+        ax.axvline(res.estimate[name], color="k", lw=1, label=f"estimate {res.estimate[name]:.6g}")
+        for end in (p["lower"], p["upper"]):
+            if end and end["edge"]:
+                ax.axvline(end["at"], color="C1", lw=2, label=f"edge (mode sequence changes) {end['at']:.5g}")
+        ax.set_xlabel(f"{name} [{unit}]".replace(" []", ""))
+        ax.set_ylabel("cost rise (log)")
+        ax.legend(fontsize=7)
+    fig.suptitle(f"tswm fit {res.scene}: profiles (other parameters re-optimised)", fontsize=10)
+    fig.tight_layout()
+    buffer = io.BytesIO()
+    fig.savefig(buffer, format="png", dpi=110)
+    return buffer.getvalue()
+
+
 def _md(text: str) -> str:
     """Escape what Markdown would read as markup (file names are user text)."""
     return re.sub(r"([\\`*_{}\[\]<>()#+!|])", r"\\\1", text)
@@ -131,15 +167,26 @@ def report_markdown(res: FitResult) -> str:
              f"{', '.join(res.measured['quantities'])}, compared "
              f"as {res.measured['compared']}; known per case: {', '.join(res.measured['known']) or 'none'}).")
     L.append("")
-    L.append("| parameter | estimate | std. error | " f"{res.confidence:.0%} CI | bounds |")
-    L.append("| --- | --- | --- | --- | --- |")
+    L.append(f"| parameter | estimate | verdict | {res.confidence:.0%} profile interval | linearised interval "
+             "(std. error) | bounds |")
+    L.append("| --- | --- | --- | --- | --- | --- |")
     for n, u in zip(res.names, res.units):
-        lo, hi = res.ci[n]
-        ci = "unbounded" if not (math.isfinite(lo) and math.isfinite(hi)) else f"[{lo:.6g}, {hi:.6g}]"
-        if math.isnan(lo):
-            ci = "none"
-        L.append(f"| {n} [{u}] | {res.estimate[n]:.8g} | {res.stderr[n]:.3g} | {ci} | "
+        p = res.profiles[n]
+        ci = (f"none: any value in [{p['range'][0]:.6g}, {p['range'][1]:.6g}]" if p["verdict"] == "not determined"
+              else f"[{p['lo']:.6g}, {p['hi']:.6g}]")
+        if p["minimum_on_edge"]:
+            ci += " (minimum on an edge)"
+        lo, hi = res.ci_linear[n]
+        lin = "none" if math.isnan(lo) else "unbounded" if not (math.isfinite(lo) and math.isfinite(hi)) \
+            else f"[{lo:.6g}, {hi:.6g}]"
+        L.append(f"| {n} [{u}] | {res.estimate[n]:.8g} | {p['verdict']} | {ci} | {lin} ({res.stderr[n]:.3g}) | "
                  f"[{res.bounds[n][0]:g}, {res.bounds[n][1]:g}] ({res.bound_source[n]}) |")
+    L.append("")
+    noise = (", ".join(f"{q} {v:g}" for q, v in res.noise.items()) + " (stated, SI)" if res.noise
+             else "estimated from the residuals")
+    L.append(f"Profile intervals: the values whose cost, with the other parameters re-optimised, stays within the "
+             f"threshold of the minimum: the data's noise ({noise}) plus the numerical floor (the integrator's "
+             f"error at the fit's tolerances, from a rerun at {TIGHTER:g}x tighter ones). See profile.png.")
     L.append("")
     L.append(f"Cost 0.5 sum r^2 = {res.cost:.6g} over {plural(len(res.jacobian), 'scaled residual')}, "
              f"{plural(res.dof, 'degree of freedom')}, s^2 = {res.s2:.6g}; singular values of J (columns scaled to the "
@@ -148,8 +195,8 @@ def report_markdown(res: FitResult) -> str:
     L.append("")
     L.append("## Identifiability and warnings")
     L.append("")
-    L += [f"- {n}" for n in res.notes] or ["- none: every parameter is determined by the data (full-rank J, finite "
-                                           "confidence intervals inside the bounds, starts agree)"]
+    L += [f"- {n}" for n in res.notes] or ["- none: every parameter is determined by the data (its profile rises "
+                                           "above the noise floor on both sides inside the bounds, starts agree)"]
     L.append("")
     if len(res.names) > 1:
         L.append("## Correlation")
@@ -188,6 +235,8 @@ def report_markdown(res: FitResult) -> str:
                 L.append(f"| {c['case']} | {known} | {c['status']} | {c['samples']} | {q} | {d['rms_measured']:.6g} | "
                          f"{d['rms_residual']:.4g} | {d['max_residual']:.4g} | {d['relative']:.3g} |")
     L.append("")
+    L.append("![profiles](profile.png)" if res.profiles else "")
+    L.append("")
     L.append("![misfit](misfit.png)" if res.misfit else "")
     L.append("")
     L.append("## Settings and provenance")
@@ -214,12 +263,15 @@ def report_markdown(res: FitResult) -> str:
 
 
 def write_outputs(res: FitResult, directory: str | Path, plot: bool = True) -> list[Path]:
-    """DIR/fit-report.md, fit.json and (with a misfit grid) misfit.png, each written atomically."""
+    """DIR/fit-report.md, fit.json, and with plot: misfit.png (with a misfit grid) and profile.png,
+    each written atomically."""
     from tswm_common.files import write_atomic
 
     directory = Path(directory)
     paths = [write_atomic(directory / "fit.json", json.dumps(res.to_dict(), indent=2, allow_nan=False))]
     if plot and res.misfit:
         paths.append(write_atomic(directory / "misfit.png", misfit_png(res)))
+    if plot and res.profiles:
+        paths.append(write_atomic(directory / "profile.png", profile_png(res)))
     paths.append(write_atomic(directory / "fit-report.md", report_markdown(res)))
     return paths

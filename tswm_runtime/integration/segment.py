@@ -34,7 +34,6 @@ is a sequence of named steps: ``_start``, then per step attempt ``_rejected`` or
 from collections import namedtuple
 
 import numpy as np
-import numba
 from numba import types
 
 from tswm_runtime.jit import cache_guard

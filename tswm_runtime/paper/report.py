@@ -281,7 +281,7 @@ def lostmotion_statement(rows: list[dict], checks: dict, lost: dict) -> str:
     prof = lost["profile"]
     if lost.get("stall_below"):
         text += (f"A shorter lost motion picks the load up at a lower speed, where the friction angle is larger: at "
-                 f"L = {prof['below'] * 1e3:.2f} mm (the misfit grid's next point below) "
+                 f"L = {prof['below'] * 1e3:.4f} mm (just below the edge the profile's bisection found) "
                  + ", ".join(lost["stall_below"]) + (" stall and self-lock" if len(lost["stall_below"]) > 1 else
                                                      " stalls and self-locks") + ", and the cost jumps from "
                  f"{prof['cost_min']:.4g} to {prof['cost_below']:.4g}. ")
@@ -404,8 +404,10 @@ def lostmotion_point(printed_rows: list[dict], score: dict, best_score: dict, be
     text = (f"{fitted.label} `{fitted.scene}`, lost motion fitted to Table 3: L = {lost['L_mm']:.2f} mm of x2 (the "
             f"wheel turns {lost['wheel_deg']:.1f} deg freely before it picks up the load), "
             f"{prof['confidence']:.0%} profile interval {prof['lo'] * 1e3:.2f}-{prof['hi'] * 1e3:.2f} mm, within the "
-            f"bounds {lo * 1e3:g}-{hi * 1e3:g} mm that span the physically plausible lost motions (see below). "
-            f"At that L it matches {score['agree']} of {score['cells']} printed cells within {TOLERANCE:.0%}, mean "
+            f"bounds {lo * 1e3:g}-{hi * 1e3:g} mm that span the physically plausible lost motions (see below)"
+            + ("; the fitted L is an edge, not a minimum: just below it a test stalls and the cost jumps. "
+               if prof["minimum_on_edge"] else ". ")
+            + f"At that L it matches {score['agree']} of {score['cells']} printed cells within {TOLERANCE:.0%}, mean "
             f"deviation {score['mean_deviation']:.0%} (against {best_score['mean_deviation']:.0%} for {best.label}). "
             "A fitted parameter is a fit, not a reproduction: L was chosen to make S1m and S2m come as close to this "
             "table as they can, so the agreement it buys is no evidence that the paper modelled lost motion. ")
@@ -414,10 +416,11 @@ def lostmotion_point(printed_rows: list[dict], score: dict, best_score: dict, be
     else:
         text += ("Even so no plausible L explains the table: the printed values minus the computed ones are "
                  + "; ".join(short) + " of the printed values, and "
-                 + (f"no L in the bounds does better (the misfit grid's lowest cost over {lo * 1e3:g}-{hi * 1e3:g} mm, "
+                 + (f"no L in the bounds does better (the lowest cost of the misfit grid and the profile over "
+                    f"{lo * 1e3:g}-{hi * 1e3:g} mm, "
                     f"{prof['grid_best_cost']:.4g}, is not below the fit's {prof['fit_cost']:.4g})."
                     if prof["grid_best_cost"] >= prof["fit_cost"] * (1 - 1e-6) else
-                    f"the misfit grid finds a lower cost ({prof['grid_best_cost']:.4g} at L = "
+                    f"the misfit grid or the profile finds a lower cost ({prof['grid_best_cost']:.4g} at L = "
                     f"{prof['grid_best_L'] * 1e3:.2f} mm) than the fit's {prof['fit_cost']:.4g}: the starts missed it."))
     return text
 
@@ -595,7 +598,7 @@ def build_report(out_dir: str | Path = "tswm-report", cases: list[tuple[float, f
         if first is not None:
             settings[r.scene] = {k: first.settings[k] for k in ("method", "rtol", "atol", "t_end", "points",
                                                                   "max_steps", "max_events")}
-    misfit_png = lost.pop("misfit_png", None)
+    profile_png = lost.pop("profile_png", None)
     lost["fit_vs_simulate"] = _fit_vs_simulate(rows, lost)
     data = {
         "source": SOURCE, "tolerance": TOLERANCE, "figure_case": {"m2": fig_case[0], "F2": fig_case[1]},
@@ -610,7 +613,7 @@ def build_report(out_dir: str | Path = "tswm-report", cases: list[tuple[float, f
     data["statements"] = _statements(rows, checks, cases_printed, readings, lost)
     now = time.perf_counter()   # before rendering (milliseconds); the CLI prints this same figure
     data["timing"] = {"wall_s": now - started, "startup_s": start - started, "work_s": now - start}
-    context = _context(data, figures, readings, misfit_png)
+    context = _context(data, figures, readings, profile_png)
     env = _environment()
     paths = {"json": write_atomic(out_dir / FILES["json"], json.dumps(jsonable(data), indent=2, allow_nan=False) + "\n"),
              "md": write_atomic(out_dir / FILES["md"], env.get_template("paper_report.md.j2").render(context)),
@@ -677,7 +680,7 @@ def lostmotion_tables(data: dict) -> dict:
             "starts": (["start", "from L [mm]", "to L [mm]", "cost", "status", "evaluations", "failed cases"], starts)}
 
 
-def _context(data: dict, figures: list[dict], readings: tuple = READINGS, misfit_png: str | None = None) -> dict:
+def _context(data: dict, figures: list[dict], readings: tuple = READINGS, profile_png: str | None = None) -> dict:
     regime_header = ["Case (test)", "m2 [kg]", "F2 [N]"] + [f"{r.label} {r.scene}" for r in readings]
     regime_rows = [[str(row["test"]) if row["test"] else "–", f"{row['m2']:g}", f"{row['F2']:g}"]
                    + [f"{row[r.key]['drive']}: {row[r.key]['regimes']}"
@@ -697,7 +700,7 @@ def _context(data: dict, figures: list[dict], readings: tuple = READINGS, misfit
                       str(s["max_steps"])] for scene, s in data["settings"].items()]
     lost = data["lostmotion"]
     return {"data": data, "figures": figures, "readings": readings, "lost": lost,
-            "lost_tables": lostmotion_tables(data), "misfit_png": misfit_png,
+            "lost_tables": lostmotion_tables(data), "profile_png": profile_png,
             "table3": table3_tables(data, readings), "regimes": (regime_header, regime_rows),
             "statics": (statics_header, statics_rows), "energy": (energy_header, energy_rows),
             "settings": (["scene", "integrator", "rtol", "atol", "t_end", "output points", "max steps"],
