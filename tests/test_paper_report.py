@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from tswm_runtime.paper import report as pr
+from tswm_runtime.paper import plan
 from tswm_runtime.paper.data import FIGURE2, TABLE3_PRINTED, printed
 from tswm_runtime.simulation.simulate import simulate
 
@@ -26,7 +27,7 @@ DIRECT = {"consistent": ("paper", lambda m2, F2: {"m2": m2, "F2": F2}),
 @pytest.fixture(scope="module")
 def report(tmp_path_factory):
     out = tmp_path_factory.mktemp("report")
-    return pr.build_report(out, CASES, derivation=False, progress=False), out
+    return pr.build_report(out, CASES), out
 
 
 def _table3(out) -> list[dict]:
@@ -136,10 +137,14 @@ def test_figures_are_print_resolution(report):
 
 def test_cli_paper_does_not_load_sympy_without_the_derivation(tmp_path):
     code = ("import sys; from tswm_runtime.cli import main; "
-            f"rc = main(['paper', '-o', {str(tmp_path)!r}, '--case', '200,-15000', '--no-derivation', "
-            "'--no-progress']); assert rc == 0; assert 'sympy' not in sys.modules, 'sympy loaded'")
+            f"rc = main(['paper', '-o', {str(tmp_path)!r}, '--case', '200,-15000', '--no-derivation']); "
+            "assert rc == 0; assert 'sympy' not in sys.modules, 'sympy loaded'")
     run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert run.returncode == 0, run.stderr
+    # the progress bar names every stage, in order, after the first line
+    assert run.stderr.startswith("tswm paper: the paper's cases in four readings")
+    seen = [run.stderr.find(f", {stage}]") for stage in plan.estimates({}, derivation=False)]
+    assert -1 not in seen and seen == sorted(seen), run.stderr
     assert (tmp_path / "paper-report.html").exists() and not (tmp_path / "paper-derivation.md").exists()
     # the CLI and the report state the same wall time, from the command's start, start-up included
     said = re.search(r"wall time (\d+\.\d\d) s from the start of `tswm paper` to the report "

@@ -5,7 +5,7 @@ Every number in the report comes from ``simulate`` on the shipped generated modu
 own functions; the paper's printed numbers come from ``paper_data``. Readings (a) to (c)
 take nothing from Table 3; reading (d) has one number, the lost motion L, fitted to it by
 ``tswm fit`` (``paper_lostmotion``), and its cells are ``simulate`` runs at that L.
-This module does not import SymPy; only ``derivation_document`` does (on request).
+This module does not import SymPy; the derivation document is written by ``background``.
 """
 from __future__ import annotations
 
@@ -30,6 +30,8 @@ from tswm_common.files import write_atomic
 from tswm_runtime.paper.data import F2_LISTED, FIGURE2, M2_LISTED, SOURCE, TABLE3_PRINTED, printed
 from tswm_runtime.reference.paper_gear import cones
 from tswm_runtime.paper import lostmotion
+from tswm_runtime.paper.plan import DOCUMENT, FIGURES, FIT, RUNS, SCENES, WRITE
+from tswm_runtime.common.progress import Stages
 from tswm_runtime.common.provenance import machine, package_versions
 from tswm_runtime.common.words import difference, differences, plural
 from tswm_runtime.results.result import Result
@@ -40,6 +42,7 @@ NOISE = 1e-6      # a dissipation rate counts as negative below -NOISE * max |in
 QUANTITIES = (("S1m", "S1_max", "N"), ("KD1", "KD1", ""), ("S2m", "S2_max", "N"), ("KD2", "KD2", ""))
 VERSIONED = ("tswm", "numpy", "scipy", "numba", "sympy", "jinja2", "matplotlib", "pandas")
 FILES = {"md": "paper-report.md", "html": "paper-report.html", "json": "paper-report.json"}
+
 
 
 @dataclass(frozen=True)
@@ -55,11 +58,11 @@ class Reading:
 
 
 READINGS = (
-    Reading("consistent", "(a)", "paper", "consistent derivation, load from t = 0 (the scene as printed)",
+    Reading("consistent", "(a)", SCENES["consistent"], "consistent derivation, load from t = 0 (the scene as printed)",
             lambda m2, F2: {"m2": m2, "F2": F2}),
-    Reading("literal", "(b)", "paper-literal", "the paper's equations (6), (7), (9) as printed, load from t = 0",
+    Reading("literal", "(b)", SCENES["literal"], "the paper's equations (6), (7), (9) as printed, load from t = 0",
             lambda m2, F2: {"m2": m2, "F2": F2}),
-    Reading("runup", "(c)", "paper-runup", "consistent derivation, free run-up, then F2 from t_step = 0.3 s",
+    Reading("runup", "(c)", SCENES["runup"], "consistent derivation, free run-up, then F2 from t_step = 0.3 s",
             lambda m2, F2: {"m2": m2, "F2_after": F2}),
 )
 
@@ -157,27 +160,6 @@ def energy_balance(result: Result, module) -> dict:
 
 
 # ---------------------------------------------------------------- the report
-
-def derivation_document(out_dir: Path) -> dict:
-    """Write the derivation of scene ``paper`` exactly as ``tswm derive paper`` does (the same
-    functions); PDF when pdflatex is present, else the Markdown is the linked document."""
-    from derivation.document import build_document, render
-    from derivation.latex import TexUnavailable, build_pdf
-    from derivation.model import build_model
-    from derivation.scene import load_scene
-
-    doc = build_document(build_model(load_scene("paper")))
-    md = write_atomic(out_dir / "paper-derivation.md", render(doc, "markdown"))
-    latex = render(doc, "latex")
-    tex = write_atomic(out_dir / "paper-derivation.tex", latex)
-    try:
-        pdf = build_pdf(latex, out_dir / "paper-derivation.pdf")
-        return {"link": pdf.name, "note": "PDF built with pdflatex; Markdown and LaTeX beside it",
-                "files": [md.name, tex.name, pdf.name]}
-    except TexUnavailable:
-        return {"link": md.name, "note": "no pdflatex here: the Markdown version (LaTeX source beside it)",
-                "files": [md.name, tex.name]}
-
 
 def _statements(rows: list[dict], checks: dict, cases_printed: int, readings: tuple = READINGS,
                 lost: dict | None = None) -> list[dict]:
@@ -489,41 +471,38 @@ def _fit_vs_simulate(rows: list[dict], lost: dict) -> dict:
 
 
 def build_report(out_dir: str | Path = "tswm-report", cases: list[tuple[float, float]] | None = None, *,
-                 derivation: bool = True, progress: bool = True, started: float | None = None) -> dict:
+                 document: Callable[[], dict | None] | None = None, stages: Stages | None = None,
+                 started: float | None = None) -> dict:
     """Run every reading for every case, write the report files into ``out_dir``; return
-    {'paths': {...}, 'data': the JSON sidecar's content}. ``started`` is the
+    {'paths': {...}, 'data': the JSON sidecar's content}. ``document``: returns the derivation
+    document's description once it is written (``background``), None for none. ``stages``:
+    the progress bar, with plan's stages FIT to WRITE among its own (None: no bar). ``started`` is the
     ``time.perf_counter()`` at which the command began (the CLI passes it), so that the
     wall time includes the start-up: imports and loading numba's compiled code."""
-    from tqdm import tqdm
-
     start = time.perf_counter()
     started = start if started is None else started
+    stages = stages or Stages({}, desc="tswm paper", enabled=False)
     out_dir = Path(out_dir)
     cases = list(cases) if cases is not None else all_cases()
     fig_case = (FIGURE2["m2"], FIGURE2["F2"])
     readings = READINGS + (lostmotion_reading(math.nan),)
     modules = {r.key: load_module(r.scene) for r in readings}
-    steps = len(cases) * len(readings) + len(readings) + len(cases) + (1 if derivation else 0) + 2
-    bar = tqdm(total=steps, desc="tswm paper", unit="step", disable=not progress, file=sys.stderr)
 
-    bar.set_postfix_str(f"fit L of {lostmotion.SCENE} to Table 3")
+    stages.begin(FIT)
     lost = lostmotion.fit_table3(out_dir)
     lost["Vmax"] = float(modules["lostmotion"].FIXED["Vmax"])
     tolerances = {k: lost["fit"]["settings"][k] for k in ("rtol", "atol")}
     readings = READINGS + (lostmotion_reading(lost["L"], tolerances),)
-    bar.update()
-
+    stages.begin(RUNS)
     rows, results = [], {}
     for test_index, (m2, F2) in enumerate(cases):
         paper = printed(m2, F2)
         row = {"m2": m2, "F2": F2, "test": paper.test if paper else None,
                "printed": None if paper is None else {q: getattr(paper, q) for q, _, _ in QUANTITIES}}
         for reading in readings:
-            bar.set_postfix_str(f"{reading.scene} m2={m2:g} F2={F2:g}")
             result = run(reading, m2, F2)
             results[(reading.key, m2, F2)] = result
             row[reading.key] = _cell(reading, result, paper)
-            bar.update()
         rows.append(row)
     # the same cells at the scene's own tolerances: does any case change its course?
     own, fitted = lostmotion_reading(lost["L"]), readings[-1]
@@ -552,7 +531,6 @@ def build_report(out_dir: str | Path = "tswm-report", cases: list[tuple[float, f
         lost["stall_below"] = [f"test {c.test} (m2 = {c.m2:g} kg, F2 = {c.F2:g} N)" for c in TABLE3_PRINTED
                                if drive_word(run(below, c.m2, c.F2)).startswith(("stalls", "does not start"))]
 
-    bar.set_postfix_str("statics and energy")
     consistent = modules["consistent"]
     checks = {"statics": [statics(consistent, F2) for F2 in sorted({F2 for _, F2 in cases}, reverse=True)],
               "energy": {}}
@@ -568,14 +546,12 @@ def build_report(out_dir: str | Path = "tswm-report", cases: list[tuple[float, f
             energy_rows.append({"reading": f"{reading.label} {reading.scene}", **e})
             if (m2, F2) == fig_case:
                 checks["energy"][reading.key] = e
-        bar.update()
     checks["energy_table"] = energy_rows
 
+    stages.begin(FIGURES)
     figures = []
     for reading in readings:
-        bar.set_postfix_str(f"figure {reading.scene}")
         if (reading.key, *fig_case) not in results:
-            bar.update()
             continue
         result = results[(reading.key, *fig_case)]
         png = _figure(result, modules[reading.key], reading, *fig_case)
@@ -584,13 +560,10 @@ def build_report(out_dir: str | Path = "tswm-report", cases: list[tuple[float, f
         figures.append({"file": name, "label": reading.label, "scene": reading.scene, "title": reading.title,
                         "regimes": regime_text(result), "drive": drive_word(result),
                         "data": base64.b64encode(png).decode("ascii")})
-        bar.update()
 
-    doc = None
-    if derivation:
-        bar.set_postfix_str("derivation document")
-        doc = derivation_document(out_dir)
-        bar.update()
+    stages.begin(DOCUMENT, waiting=True)
+    doc = document() if document is not None else None
+    stages.begin(WRITE)
 
     settings = {}
     for r in readings:
@@ -622,8 +595,7 @@ def build_report(out_dir: str | Path = "tswm-report", cases: list[tuple[float, f
     paths.update({Path(f).name: out_dir / f for f in lost.get("files", [])})
     if doc:
         paths.update({name: out_dir / name for name in doc["files"]})
-    bar.update()
-    bar.close()
+    stages.end()
     return {"paths": paths, "data": data}
 
 
