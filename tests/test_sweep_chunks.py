@@ -140,7 +140,7 @@ def test_ctrl_c_keeps_complete_chunks_and_the_rerun_resumes(paper, cases, refere
             "--no-progress"]
     assert main(argv + ["--t-end", "1"]) == 1
     err = capsys.readouterr().err
-    assert "interrupted: 1 of 3 chunks complete" in err and "rerun the same command" in err
+    assert "interrupted: 1 of 3 chunks are complete" in err and "rerun the same command" in err
     assert "Traceback" not in err
     assert len(chunk_files(tmp_path)) == 1 and not list((tmp_path / "chunks").glob("*.tmp"))
     assert not (tmp_path / "paper-sweep.parquet").exists()
