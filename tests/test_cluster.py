@@ -154,7 +154,7 @@ def test_killed_scheduler_exits_1_with_resume_and_rerun_gives_same_table(dask_cl
     safe = len(list((out / "chunks").glob("chunk-*.parquet")))
     assert "cluster problem: lost the dask scheduler" in stderr, stderr
     assert f"{safe} of 10 chunks are complete in {out / 'chunks'}" in stderr
-    assert f"resume with: tswm sweep paper --grid F2=-15000:-1000:8" in stderr and "Traceback" not in stderr
+    assert "resume with: tswm sweep paper --grid F2=-15000:-1000:8" in stderr and "Traceback" not in stderr
     assert not (out / "paper-sweep.parquet").exists()
     again = cli([a for a in args if a not in ("--scheduler", dask_cluster.address)])   # resumed in this machine
     stdout, stderr = again.communicate(timeout=300)

@@ -8,6 +8,7 @@ import math
 import shlex
 import sys
 
+from tswm_runtime.common.words import plural
 from tswm_runtime.cli.common import (UsageError, add_setting_options, output_directory, prepare_kernels, run_method,
                                      setting_error, setting_overrides)
 
@@ -111,7 +112,7 @@ def _run(args: argparse.Namespace) -> int:
         print(f"tswm sweep: warning: {warning}", file=sys.stderr)
     table = outcome.table
     n = len(table)
-    print(f"scene {module.SCENE}: {n} cases in {outcome.seconds:.3g} s "
+    print(f"scene {module.SCENE}: {plural(n, 'case')} in {outcome.seconds:.3g} s "
           f"({n / outcome.seconds if outcome.seconds else 0:.4g} cases/s incl. load and writing); "
           f"chunks computed {len(outcome.computed)} (of them {len(outcome.rejected)} rejected on disk), "
           f"reused {len(outcome.skipped)}")

@@ -54,7 +54,7 @@ class ModelPackage:
     stem: str
     source: bytes
     sha256: str        # of source, checked on arrival
-    model_digest: str  # the body digest in its header (chunks.model_digest), part of every chunk key
+    model_digest: str  # sha256 of the module file (chunks.model_digest), part of every chunk key
 
 
 def package(module: ModuleType) -> ModelPackage:

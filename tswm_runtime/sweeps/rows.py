@@ -10,8 +10,8 @@ import numpy as np
 from tswm_runtime.jit import coldstart
 
 coldstart.announce(("integrate", "batch"))  # before the next imports compile the kernels, if not cached
-from tswm_runtime.hybrid import batch  # noqa: E402
-from tswm_runtime.jit.structures import Tolerances  # noqa: E402
+from tswm_runtime.hybrid import batch, entry  # noqa: E402
+from tswm_runtime.jit.structures import Settings, Start, Tolerances  # noqa: E402
 from tswm_runtime.model import checks, modes  # noqa: E402
 from tswm_runtime.results.result import STATUS_NAMES  # noqa: E402
 from tswm_runtime.simulation.simulate import METHODS, initial_state, method_step, with_latches  # noqa: E402
@@ -66,10 +66,12 @@ def run_cases(module: ModuleType, P: np.ndarray, run: dict):
     seq = np.full((cases, SEQ_LEN), -1, np.int64)
     if valid.any():
         f, i, sq = out_f[valid], out_i[valid], seq[valid]
-        batch.run_batch(batch.INTEGRATE, METHODS[run["method"]], method_step(run["method"]), module.rhs, module.jac, module.guards, module.observe,
-                        module.impact, np.ascontiguousarray(full[valid]), modes.tables(module), y0, quad,
-                        run["t_end"], Tolerances(run["rtol"], np.full(y0.size, run["atol"]), 0.0, run["hmax"]),
-                        run["max_steps"], run["max_events"], len(module.OBSERVABLES), f, i, sq)
+        method_step(run["method"])  # announced if it compiles
+        tol = Tolerances(run["rtol"], np.full(y0.size, run["atol"]), 0.0, run["hmax"])
+        batch.run_batch(entry.functions(METHODS[run["method"]], module), modes.tables(module),
+                        np.ascontiguousarray(full[valid]), Start(0.0, y0, quad, -1, np.empty(0)),
+                        Settings(METHODS[run["method"]], float(run["t_end"]), tol, int(run["max_steps"])),
+                        run["max_events"], len(module.OBSERVABLES), batch.Results(f, i, sq))
         out_f[valid], out_i[valid], seq[valid] = f, i, sq
     regimes, mode_codes = sequence_texts(module, seq, out_i[:, batch.I_NMODES])
     KD1, KD2 = load_factor_columns(module, out_f[:, batch.F_S1M], out_f[:, batch.F_S2M], full, valid)

@@ -2,10 +2,10 @@
 
 The cases are split into chunks; each chunk is one call of the parallel numba batch
 (``batch.run_batch``, prange over cases on all cores) and is written atomically to
-``DIR/chunks/chunk-NNNNN-HASH.parquet`` with its key inside (``chunks.py``: the model's
-body digest, the runtime's version and digest, the settings, the rows). A rerun reuses a
-chunk only when the file proves it holds exactly those rows; a truncated, foreign or
-stale one is recomputed with a warning, and files no chunk expects are reported (and
+``DIR/chunks/chunk-NNNNN-HASH.parquet`` with its key inside (``chunks.py``: a sha256 of the
+model module's file, the runtime's version and digest, the settings, the rows) and a checksum
+of its columns. A rerun reuses a chunk only when the file proves it holds exactly those rows;
+a truncated, altered, foreign or stale one is recomputed with a warning, and files no chunk expects are reported (and
 removed with ``prune``). An interrupted sweep leaves only complete chunks and resumes
 without recomputing them. With a dask.distributed ``Client`` the chunks run as tasks on
 its workers instead (``cluster.py``: every worker checked first, the model shipped with the
@@ -49,6 +49,7 @@ from types import ModuleType
 import numpy as np
 
 from tswm_runtime.common.provenance import TSWM_VERSION as __version__
+from tswm_runtime.common.words import plural
 from tswm_runtime.jit import coldstart
 from tswm_runtime.model.scenes import load_model
 from tswm_runtime.model.values import ValueInputError, si_value
@@ -199,8 +200,8 @@ def check_size(cases: int, chunk_size: int, large: bool = False) -> None:
     if not 1 <= chunk_size <= MAX_CHUNK_SIZE:
         raise SweepInputError(f"--chunk-size {chunk_size}: must be in [1, {MAX_CHUNK_SIZE:.0e}]")
     files = -(-cases // chunk_size)
-    size = (f"{cases} cases, about {cases * ROW_BYTES / 1e6:.3g} MB of parquet and CSV output, {files} chunk "
-            f"file{'s' if files != 1 else ''} of {chunk_size}")
+    size = (f"{plural(cases, 'case')}, about {cases * ROW_BYTES / 1e6:.3g} MB of parquet and CSV output, "
+            f"{plural(files, 'chunk file')} of {chunk_size}")
     if cases > MAX_SWEEP_CASES:
         raise SweepInputError(f"sweep of {size}: more than the {MAX_SWEEP_CASES:.0e} cases tswm runs in one "
                               "sweep; split it (several -o directories) or coarsen the grid")
@@ -396,16 +397,17 @@ def _report_stale(outcome: SweepOutcome, directory: Path, expected: set[str], pr
         for path in outcome.stale:
             path.unlink(missing_ok=True)
         outcome.pruned = True
-        outcome.warnings.append(f"pruned {len(outcome.stale)} stale file(s) from {directory}")
+        outcome.warnings.append(f"pruned {plural(len(outcome.stale), 'stale file')} from {directory}")
     else:
-        outcome.warnings.append(f"{len(outcome.stale)} file(s) in {directory} belong to no chunk of this sweep "
+        verb = "belongs" if len(outcome.stale) == 1 else "belong"
+        outcome.warnings.append(f"{plural(len(outcome.stale), 'file')} in {directory} {verb} to no chunk of this sweep "
                                 "(another model, runtime, setting or grid, or left by a crash); --prune removes them")
 
 
 def _safe(outcome: SweepOutcome, total: int, out: Path | None) -> str:
     """How many chunks are safe on disk, and how to resume."""
     done = len(outcome.skipped) + len(outcome.computed)
-    return (f"{done} of {total} chunks are complete in {out / 'chunks'}; rerun the same command to resume from "
+    return (f"{done} of {plural(total, 'chunk')} {'is' if total == 1 else 'are'} complete in {out / 'chunks'}; rerun the same command to resume from "
             "them" if out is not None else "nothing was saved (no -o DIR)")
 
 
