@@ -5,7 +5,8 @@ from __future__ import annotations
 import argparse
 import sys
 
-from tswm_runtime.cli.common import (UsageError, add_setting_options, output_directory, prepare_kernels, run_method,
+from tswm_common.text import printable
+from tswm_runtime.cli.common import (MAX_MESSAGE, UsageError, add_setting_options, output_directory, prepare_kernels, run_method,
                                      setting_error, setting_overrides)
 
 SWEEP_SETTINGS = ("t_end", "rtol", "atol", "method", "max_steps", "max_events")
@@ -59,7 +60,7 @@ def run(args: argparse.Namespace) -> int:
     except SimulationInputError as error:
         raise setting_error(error, overrides) from None
     for warning in outcome.warnings:
-        print(f"tswm sweep: warning: {warning}", file=sys.stderr)
+        print(f"tswm sweep: warning: {printable(warning, MAX_MESSAGE)}", file=sys.stderr)
     table = outcome.table
     n = len(table)
     print(f"scene {module.SCENE}: {n} cases in {outcome.seconds:.3g} s "

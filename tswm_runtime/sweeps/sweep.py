@@ -14,7 +14,8 @@ One row per case: the free parameters, then
 
     status    'finished' or why the run stopped (result.STATUS_NAMES); 'invalid-parameter'
               for a row that breaks the scene file's rules for its parameters (not run)
-    problem   '' or, for an invalid row, which rule it breaks
+    problem   '' or, for an invalid row, which rule it breaks; for a not-finite one, which
+              column is inf or NaN and the likely cause
     t_stop    where the run ended [s]
     S1m, tS1m, S2m, tS2m   the value of S1 (S2) where |S1| (|S2|) is largest, and its time
     KD1, KD2  eq. (10) from S1m, S2m when the scene gives Ft1, Ft2 (else NaN)
@@ -59,7 +60,8 @@ from tswm_runtime.model.contract import load_module  # noqa: E402
 from tswm_runtime.model.scenes import load_model  # noqa: E402
 from tswm_runtime.model.values import ValueInputError, si_value  # noqa: E402
 from tswm_common.files import write_atomic  # noqa: E402
-from tswm_runtime.results.result import STATUS_NAMES  # noqa: E402
+from tswm_runtime.hybrid import machine as hybrid  # noqa: E402
+from tswm_runtime.results.result import NOT_FINITE_CAUSE, STATUS_NAMES  # noqa: E402
 from tswm_runtime.jit.structures import Tolerances  # noqa: E402
 from tswm_runtime.simulation.simulate import (METHODS, initial_state, method_step, settings, unknown_parameter,  # noqa: E402
                                         with_latches)
@@ -298,6 +300,24 @@ def load_factor_columns(module: ModuleType, S1m, S2m, full: np.ndarray, valid) -
     return KD1, KD2
 
 
+NOT_FINITE_COLUMNS = {"t_stop": batch.F_T_STOP, "S1m": batch.F_S1M, "S2m": batch.F_S2M, "x1": batch.F_X1,
+                      "v1": batch.F_V1}
+
+
+def _mark_not_finite(out_f: np.ndarray, out_i: np.ndarray, valid: np.ndarray, problems: list[str]) -> None:
+    """Cases whose results hold inf or NaN get status not-finite and the column in ``problems``
+    (in place). Not an inconsistent case (S1m, S2m = +-inf: unbounded, its status says so), nor NaN
+    x1, v1 of a run that stopped inside a step (documented); a finished one holds finite numbers."""
+    status = out_i[:, batch.I_STATUS]
+    finished = status == hybrid.FINISHED
+    for name, column in NOT_FINITE_COLUMNS.items():
+        values = out_f[:, column]
+        bad = np.isinf(values) | (np.isnan(values) & (finished if name in ("x1", "v1") else True))
+        for case in np.flatnonzero(bad & valid & (status != hybrid.INCONSISTENT) & (status != hybrid.NOT_FINITE)):
+            status[case] = hybrid.NOT_FINITE
+            problems[case] = f"{name} = {values[case]:g}: not finite; likely cause: {NOT_FINITE_CAUSE}"
+
+
 def run_cases(module: ModuleType, P: np.ndarray, run: dict):
     """Integrate every row of P (free parameters) in one parallel batch; a DataFrame.
     Rows that break the scene's parameter rules are not run: status 'invalid-parameter'."""
@@ -318,6 +338,7 @@ def run_cases(module: ModuleType, P: np.ndarray, run: dict):
                         run["t_end"], Tolerances(run["rtol"], np.full(y0.size, run["atol"]), 0.0, run["hmax"]),
                         run["max_steps"], run["max_events"], len(module.OBSERVABLES), f, i, sq)
         out_f[valid], out_i[valid], seq[valid] = f, i, sq
+    _mark_not_finite(out_f, out_i, valid, problems)
     regimes, mode_codes = sequence_texts(module, seq, out_i[:, batch.I_NMODES])
     KD1, KD2 = load_factor_columns(module, out_f[:, batch.F_S1M], out_f[:, batch.F_S2M], full, valid)
     columns = {name: P[:, j] for j, name in enumerate(module.PARAM_NAMES)}
