@@ -32,10 +32,9 @@ from derivation.mechanics import S1, S2, t
 from derivation.model import Model, compose_laws as _compose, param_symbol
 from derivation.scene import NAME, SceneError
 from tswm_common import units
-from tswm_common.files import EditedModuleError, write_atomic
+from tswm_common.files import EditedModuleError, body_digests, write_atomic
 
 GENERATOR_VERSION = "0.1.0"
-HEADER_LINES = 5
 STICK_GUARDS = ("cone_forward", "cone_backward", "flank_normal")
 SLIDING_GUARDS = ("phi", "v1", "D", "jam")
 SLIDE_GUARDS = ("slide_exit_a", "slide_exit_b")
@@ -704,11 +703,8 @@ def generate_module(model: Model, free: tuple[str, ...] | None = None) -> str:
 
 def body_is_intact(source: str) -> bool:
     """True when the module body still matches the hash in its header."""
-    lines = source.splitlines(keepends=True)
-    stated = next((line.split(":", 1)[1].strip() for line in lines[:HEADER_LINES]
-                   if line.startswith("# body-sha256:")), None)
-    body = "".join(lines[HEADER_LINES:])
-    return stated == hashlib.sha256(body.encode()).hexdigest()
+    stated, actual = body_digests(source)
+    return stated == actual
 
 
 def write_module(model: Model, directory: str | Path, force: bool = False) -> Path:

@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import NoReturn
 
 from tswm_common import units
+from tswm_common.text import printable
 
 DEG = math.pi / 180
 FLANKS = ("a", "b")
@@ -196,7 +197,7 @@ def load_scene(name_or_path: str | os.PathLike) -> Scene:
     try:
         data = Path(source).read_bytes()
     except OSError as err:
-        raise SceneError(f"{source}: cannot read scene file ({err.strerror}); "
+        raise SceneError(f"{printable(source)}: cannot read scene file ({err.strerror}); "
                          f"shipped scenes: {', '.join(shipped_scenes())}") from err
     return _parse(data, source)
 
@@ -208,18 +209,18 @@ def parse_scene(text: str, source: str = "<string>") -> Scene:
 
 def _parse(data: bytes, source: str) -> Scene:
     if len(data) > MAX_SCENE_BYTES:
-        raise SceneError(f"{source}: {len(data)} bytes: a scene file must be at most {MAX_SCENE_BYTES} bytes")
+        raise SceneError(f"{printable(source)}: {len(data)} bytes: a scene file must be at most {MAX_SCENE_BYTES} bytes")
     try:
         doc = tomllib.loads(data.decode("utf-8"))
     except (UnicodeDecodeError, tomllib.TOMLDecodeError) as err:
-        raise SceneError(f"{source}: not a valid UTF-8 TOML file: {err}") from err
+        raise SceneError(f"{printable(source)}: not a valid UTF-8 TOML file: {printable(err)}") from err
     except RecursionError:
-        raise SceneError(f"{source}: not a usable TOML file: its arrays or tables are nested too deeply "
+        raise SceneError(f"{printable(source)}: not a usable TOML file: its arrays or tables are nested too deeply "
                          "(a scene nests tables two levels deep)") from None
     try:
         return _Reader(source).scene(doc, hashlib.sha256(data).hexdigest())
     except RecursionError:   # writing a deeply nested value back for a message
-        raise SceneError(f"{source}: a value is nested too deeply to be a scene value") from None
+        raise SceneError(f"{printable(source)}: a value is nested too deeply to be a scene value") from None
 
 
 def _join(path: str, key: str) -> str:
@@ -232,13 +233,13 @@ def _toml(raw: object) -> str:
     if isinstance(raw, bool):
         return str(raw).lower()
     if isinstance(raw, str):
-        return f'"{raw}"' if len(raw) <= 80 else f'"{raw[:60]}..." ({len(raw)} characters)'
+        return f'"{printable(raw)}"' if len(raw) <= 80 else f'"{printable(raw[:60])}..." ({len(raw)} characters)'
     if isinstance(raw, float):
         return f"{raw:g}"
     if isinstance(raw, list):
         return f"[{', '.join(map(_toml, raw))}]"
     if isinstance(raw, dict):
-        return "{" + ", ".join(f"{k} = {_toml(v)}" for k, v in raw.items()) + "}"
+        return "{" + ", ".join(f"{printable(k)} = {_toml(v)}" for k, v in raw.items()) + "}"
     return str(raw)
 
 
@@ -283,10 +284,22 @@ class _Reader:
         if isinstance(rule.hi, str):
             other = siblings[rule.hi]
             self.checks.append(("less", param.name, param.key, other.name, f"below {other.key}"))
+        self.bound(param, rule.quantity)
+
+    def bound(self, param: Param, quantity: str) -> None:
+        """Record units.LIMITS of the quantity as a range rule (a quantity with a smallest magnitude,
+        mass, is positive: [smallest, largest]; else [-largest, largest])."""
+        if quantity in units.LIMITS:
+            smallest, largest = units.LIMITS[quantity]
+            lo = smallest if smallest is not None else -largest
+            unit = units.si_unit(quantity)
+            self.checks.append(("range", param.name, param.key, lo, largest, True, True,
+                                f"in [{lo:g}, {largest:g}] {unit} (where double arithmetic holds)"))
 
     def fail(self, key: str, problem: str, value: str | None = None) -> NoReturn:
-        where = key if value is None else f"{key} = {value}"
-        raise SceneError(f"{self.source}: {where}: {problem}")
+        """Raise naming the file and the dotted key (both as given: escaped by ``printable``)."""
+        where = printable(key) if value is None else f"{printable(key)} = {value}"
+        raise SceneError(f"{printable(self.source)}: {where}: {problem}")
 
     def keys(self, table: dict, path: str, allowed: tuple[str, ...]) -> None:
         """Refuse keys not in allowed, listing the allowed ones and the closest match."""
@@ -364,6 +377,9 @@ class _Reader:
                 hint = f"; plain numbers are SI (rad); write '{raw:g} deg'"
             self.fail(dotted, f"must be {_range(rule, hi, hi_key)}{hint}",
                       units.describe(raw, rule.quantity))
+        bounds = units.out_of_bounds(value, rule.quantity)
+        if bounds:
+            self.fail(dotted, bounds, units.describe(raw, rule.quantity))
         form = units.written(raw, rule.quantity)
         if form is not None:
             self.written[dotted] = form
@@ -440,6 +456,8 @@ class _Reader:
                           units.show(value, at_rule.quantity))
             if at_rule.lo is not None:
                 self.rule(param, at_rule, None)
+            else:
+                self.bound(param, at_rule.quantity)
             if breakpoints:
                 self.checks.append(("less", breakpoints[-1].name, breakpoints[-1].key, param.name,
                                     f"below {param.key} (breakpoints increase)"))
@@ -450,6 +468,7 @@ class _Reader:
             key = f"values[{i}]"
             value, free = self.number({key: raw}, key, path, Rule("force"))
             values.append(Param(f"{force}_{first + i}", value, "N", free, f"{path}.{key}"))
+            self.bound(values[-1], "force")
         return Law("schedule", {}, {"variable": variable, "shape": shape}, tuple(breakpoints), tuple(values))
 
     def only_modelled(self, table: dict, path: str, flank_of: dict[str, str],

@@ -346,14 +346,26 @@ BAD = [
      ["wedge.flanks", 'needs ["a", "b"]']),
     # run
     ({"run.t_end": "0"}, ["run.t_end = 0 s", "> 0 s"]),
-    ({"run.rtol": "1"}, ["run.rtol = 1", "in [1e-13, 0.1]"]),
-    ({"run.rtol": "1e-14"}, ["run.rtol = 1e-14", "in [1e-13, 0.1]"]),
+    ({"run.rtol": "1"}, ["run.rtol = 1", "in [1e-13, 0.01]"]),
+    ({"run.rtol": "1e-14"}, ["run.rtol = 1e-14", "in [1e-13, 0.01]"]),
     ({"run.atol": "0"}, ["run.atol = 0", "in [1e-20, 1]"]),
     ({"run.atol": "1e300"}, ["run.atol = 1e+300", "in [1e-20, 1]"]),
     ({"run.method": '"rk4"'}, ['run.method = "rk4"', '"dopri5", "rosenbrock23"']),
     ({"run.max_steps": "0"}, ["run.max_steps = 0", "in [1, 1e+09]"]),
     ({"run.max_steps": "99999999999999999999999"}, ["run.max_steps = 1e+23", "in [1, 1e+09]"]),
     ({"run.t_end": '{ value = "1 s", free = true }'}, ["run.t_end", "model parameters only"]),
+    # magnitudes where double arithmetic holds (units.LIMITS)
+    ({"wedge.m2": "1e308"}, ["wedge.m2 = 1e+308 kg", "|value| must be <= 1e+09 kg"]),
+    ({"wedge.m2": '{ value = 1e308, free = true }'}, ["wedge.m2 = 1e+308 kg", "<= 1e+09 kg"]),
+    ({"wedge.m1": '"1e-10 kg"'}, ["wedge.m1 = 1e-10 kg", "|value| must be >= 1e-09 kg"]),
+    ({"load.F2": '"1e300 N"'}, ["load.F2 = 1e+300 N", "|value| must be <= 1e+12 N"]),
+    ({"load.F2": '"-2e9 kN"'}, ["load.F2 = -2e+09 kN (= -2e+12 N)", "<= 1e+12 N"]),
+    ({"load": None, "load.law": '"spring"', "load.k": "1e16", "load.x2_contact": "0",
+      "load.preload": "0"}, ["load.k = 1e+16 N/m", "<= 1e+15 N/m"]),
+    ({"load": None, "load.law": '"schedule"', "load.variable": '"t"', "load.shape": '"steps"',
+      "load.at": '["0.5 s"]', "load.values": '["0 N", "1e13 N"]'}, ["load.values[1] = 1e+13 N", "<= 1e+12 N"]),
+    ({"run.t_end": '"1e10 s"'}, ["run.t_end = 1e+10 s", "<= 1e+09 s"]),
+    ({"run.v1": '"2e12 m/s"'}, ["run.v1 = 2e+12 m/s", "<= 1e+12 m/s"]),
     # name, value tables
     ({"name": '"Paper"'}, ['name = "Paper"', "[a-z0-9][a-z0-9-]{0,63}"]),
     ({"name": '"-x"'}, ['name = "-x"', "[a-z0-9][a-z0-9-]{0,63}"]),
@@ -373,6 +385,13 @@ def test_bad_input(changes, parts):
     assert message.startswith("t.toml: ")
     for part in parts:
         assert part in message
+
+
+def test_bounds_of_free_values_are_rules_for_the_run():
+    """A free mass carries units.LIMITS as a rule of its own, so --set and sweeps meet them too."""
+    masses = [c for c in scene(**{"wedge.m2": '{ value = "200 kg", free = true }'}).checks if c[1] == "m2"]
+    assert ("range", "m2", "wedge.m2", 1e-9, 1e9, True, True,
+            "in [1e-09, 1e+09] kg (where double arithmetic holds)") in masses
 
 
 def test_invalid_toml():

@@ -3,6 +3,8 @@
 import math
 import re
 
+from tswm_common.text import printable
+
 # quantity -> {unit: factor to SI}; the first unit is the SI unit tswm stores.
 UNITS: dict[str, dict[str, float]] = {
     "mass": {"kg": 1.0, "g": 1e-3, "t": 1e3},
@@ -16,6 +18,20 @@ UNITS: dict[str, dict[str, float]] = {
     "dimensionless": {"": 1.0},
 }
 DISPLAY = {"angle": "deg"}  # unit used in messages where it is not the SI unit
+# quantity -> (smallest, largest) magnitude of a value in SI (smallest: of a nonzero one; None: any).
+# Products of these (F / m, k x, m v^2, c v) stay below 1e40 and their ratios above 1e-40, far from
+# where doubles overflow (1.8e308) or underflow, so a scene inside them computes finite numbers;
+# m2 = 1e308 kg made S1 = inf, forces of 1e300 N NaN states. Velocities reach 1e12 m/s: a linear
+# drive with V0 = 1e12 m/s is the usual way to write a constant force with a speed term.
+LIMITS: dict[str, tuple[float | None, float]] = {
+    "mass": (1e-9, 1e9),
+    "force": (None, 1e12),
+    "length": (None, 1e6),
+    "velocity": (None, 1e12),
+    "time": (None, 1e9),
+    "stiffness": (None, 1e15),
+    "damping": (None, 1e12),
+}
 
 _QUANTITY = re.compile(r"\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*(.*?)\s*")
 
@@ -69,6 +85,17 @@ def written(raw: object, quantity: str) -> tuple[float, str] | None:
 def factor(unit: str) -> float:
     """The factor to SI of a unit in the table."""
     return next(table[unit] for table in UNITS.values() if unit in table)
+def out_of_bounds(value: float, quantity: str) -> str | None:
+    """Why an SI value lies outside LIMITS for its quantity ("|value| must be <= 1e+12 N"), or None."""
+    if quantity not in LIMITS:
+        return None
+    smallest, largest = LIMITS[quantity]
+    unit = si_unit(quantity)
+    if abs(value) > largest:
+        return f"|value| must be <= {largest:g} {unit} (where double arithmetic holds)"
+    if smallest is not None and 0.0 < abs(value) < smallest:
+        return f"|value| must be >= {smallest:g} {unit} (where double arithmetic holds)"
+    return None
 
 
 def describe(raw: int | float | str, quantity: str) -> str:
@@ -95,9 +122,9 @@ def _split(raw: str, quantity: str) -> tuple[float, str]:
         if not unit:
             problem = "missing unit"
         elif owner:
-            problem = f"'{unit}' is {article(owner)} {owner} unit"
+            problem = f"'{printable(unit)}' is {article(owner)} {owner} unit"
         else:
-            problem = f"unknown unit '{unit}'"
+            problem = f"unknown unit '{printable(unit)}'"
         raise UnitError(f"{problem}; expected {_expected(quantity)}")
     return float(match[1]), unit
 

@@ -6,8 +6,9 @@ import argparse
 import os
 import sys
 
+from tswm_common.text import printable
 from tswm_runtime.cli import bench, derive, fit, generate, paper, simulate, sweep
-from tswm_runtime.cli.common import UsageError
+from tswm_runtime.cli.common import MAX_MESSAGE, UsageError
 
 SUBCOMMANDS = (derive, generate, simulate, sweep, fit, paper, bench)
 
@@ -50,7 +51,7 @@ def main(argv: list[str] | None = None) -> int:
             if isinstance(error, OSError):
                 return _os_error(args, error)
             raise
-        print(f"tswm {args.command}: error: {error}", file=sys.stderr)
+        print(f"tswm {args.command}: error: {printable(error, MAX_MESSAGE)}", file=sys.stderr)
         return 2
 
 
@@ -73,7 +74,7 @@ def _stdout_closed() -> int:
 def _os_error(args: argparse.Namespace, error: OSError) -> int:
     """-o naming a file, a name too long, no permission: the path the user gave (exit 2)."""
     name = str(error.filename or "")
-    where = f"{name if len(name) <= 200 else name[:160] + '...'}: " if name else ""
+    where = f"{printable(name, 160)}: " if name else ""
     print(f"tswm {args.command}: error: {where}{error.strerror or error} (check -o and the paths given)",
           file=sys.stderr)
     return 2

@@ -5,6 +5,14 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from tswm_common.text import printable
+
+
+# An error or warning is one line: every value it echoes went through printable() already; the whole
+# message goes through it once more where it is printed, so that no path that forgot reaches the
+# terminal raw (at most MAX_MESSAGE characters).
+MAX_MESSAGE = 4000
+
 
 class UsageError(ValueError):
     """A command-line input that cannot be used; the message names it (exit status 2)."""
@@ -16,7 +24,7 @@ def output_directory(path: str | None, option: str = "-o") -> Path | None:
         return None
     directory = Path(path)
     if directory.exists() and not directory.is_dir():
-        raise UsageError(f"{option} {path}: exists and is not a directory; name a directory (it is created "
+        raise UsageError(f"{option} {printable(path)}: exists and is not a directory; name a directory (it is created "
                          "if missing)")
     return directory
 

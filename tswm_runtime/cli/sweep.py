@@ -8,8 +8,9 @@ import math
 import shlex
 import sys
 
+from tswm_common.text import printable
 from tswm_runtime.common.words import plural
-from tswm_runtime.cli.common import (UsageError, add_setting_options, output_directory, prepare_kernels, run_method,
+from tswm_runtime.cli.common import (MAX_MESSAGE, UsageError, add_setting_options, output_directory, prepare_kernels, run_method,
                                      setting_error, setting_overrides)
 
 SWEEP_SETTINGS = ("t_end", "rtol", "atol", "method", "max_steps", "max_events")
@@ -109,7 +110,7 @@ def _run(args: argparse.Namespace) -> int:
     except SimulationInputError as error:
         raise setting_error(error, overrides) from None
     for warning in outcome.warnings:
-        print(f"tswm sweep: warning: {warning}", file=sys.stderr)
+        print(f"tswm sweep: warning: {printable(warning, MAX_MESSAGE)}", file=sys.stderr)
     table = outcome.table
     n = len(table)
     print(f"scene {module.SCENE}: {plural(n, 'case')} in {outcome.seconds:.3g} s "

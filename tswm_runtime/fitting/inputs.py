@@ -36,6 +36,7 @@ from types import ModuleType
 import numpy as np
 
 from tswm_common import units
+from tswm_common.text import printable
 
 PEAK_QUANTITIES = ("S1m", "S2m", "KD1", "KD2")
 HISTORY_QUANTITIES = ("S1", "S2", "v1")
@@ -89,7 +90,7 @@ def _read_table(path: str | Path):
     import pandas as pd
 
     p = Path(path)
-    where = f"--measured {str(path)[:200]}"
+    where = f"--measured {printable(path)}"
     if not p.is_file():
         raise FitInputError(f"{where}: no such file")
     size = p.stat().st_size
@@ -272,7 +273,7 @@ def _run_parameters(path: str | Path, module: ModuleType, skip, where: str) -> d
 def read_measured(path: str | Path, module: ModuleType, free: list[str], run: dict | None = None) -> Measured:
     """Read and validate a measured table for ``module`` with ``free`` parameters to fit."""
     frame, digest = _read_table(path)
-    where = f"--measured {str(path)[:200]}"
+    where = f"--measured {printable(path)}"
     if len(frame) == 0:
         raise FitInputError(f"{where}: no rows (one row per measured case or sample)")
     column, factor = _named_columns(frame, module, free, where)

@@ -38,6 +38,12 @@ SERIES = (("t", "s"), ("x1", "m"), ("v1", "m/s"), ("a1", "m/s^2"), ("x2", "m"), 
           ("S1", "N"), ("S2", "N"), ("F1", "N"), ("F2", "N"))
 GAP_SERIES = (("gap", "m"), ("gap_rate", "m/s"))   # with a clearance only
 STEM_SERIES = (("x3", "m"), ("v3", "m/s"))          # with lost motion only: the stem's travel and speed
+UNITS = dict((*SERIES, *GAP_SERIES, *STEM_SERIES))
+# Why a run meets inf or NaN: the loader bounds every value (docs/scene-format.md) so that the
+# equations hold in double arithmetic; what is left is a law that overflows.
+NOT_FINITE_CAUSE = ("a law that overflows (a force growing without bound, an exp of a large argument, a "
+                    "division by a vanishing quantity: an edited module?) or parameter values far outside "
+                    "the scene file's bounds (|F| <= 1e12 N, 1e-9 <= m <= 1e9 kg; docs/scene-format.md)")
 NEEDED_MODE = {hybrid.NEED_STICK: "stick", hybrid.NEED_FORWARD: "forward",
                hybrid.NEED_BACKWARD: "backward"}
 
@@ -308,9 +314,42 @@ def _inconsistent(module: ModuleType, t_stop: float, y_stop: np.ndarray, last: i
             f"lower m2 or the friction, or raise m1")
 
 
+def first_non_finite(t: np.ndarray, columns: dict[str, np.ndarray]) -> tuple[str, float, float] | None:
+    """(name, time, value) of the earliest inf or NaN among ``columns`` (each sampled at ``t``), or None."""
+    found = None
+    for name, values in columns.items():
+        bad = np.flatnonzero(~np.isfinite(values))
+        if bad.size and (found is None or t[bad[0]] < found[1]):
+            found = (name, float(t[bad[0]]), float(values[bad[0]]))
+    return found
+
+
+def _quantity(name: str, value: float) -> str:
+    return f"{name} = {value:.6g} {UNITS.get(name, '')}".rstrip()
+
+
+def _not_finite(t_stop: float, found: tuple[str, float, float] | None,
+                last_values: tuple[float, dict] | None) -> str:
+    """Which quantity became inf or NaN, when, and the likely cause. ``found``: the first non-finite
+    value of the run; None: the integrator stopped because every step tried from t_stop met one;
+    then ``last_values``: (time, values by name) at the last output point, for the scale reached."""
+    if found is not None:
+        name, t, value = found
+        return f"{_quantity(name, value)} at t = {t:.9g} s: not finite; likely cause: {NOT_FINITE_CAUSE}"
+    where = ""
+    if last_values is not None:
+        t, values = last_values
+        where = f"; at t = {t:.9g} s " + ", ".join(_quantity(name, v) for name, v in values.items())
+    return (f"a state's rate or a guard is not finite just after t = {t_stop:.9g} s (every step tried from "
+            f"there met inf or NaN){where}; likely cause: {NOT_FINITE_CAUSE}")
+
+
 def status_message(module: ModuleType, status: int, t_stop: float, y_stop: np.ndarray, last: int,
-                   need: int, events: list[Event], p: np.ndarray) -> str:
-    """A sentence saying how the run ended, naming what to change when it failed."""
+                   need: int, events: list[Event], p: np.ndarray, *,
+                   found: tuple[str, float, float] | None = None, last_values: tuple[float, dict] | None = None) -> str:
+    """A sentence saying how the run ended, naming what to change when it failed. For a run that
+    ended not-finite, ``found``: its first non-finite value (``first_non_finite``), else
+    ``last_values``: (time, values by name) at its last output point."""
     if status == hybrid.FINISHED:
         changes = sum(1 for e in events if e.to_mode != e.from_mode)
         others = len(events) - changes
@@ -345,5 +384,5 @@ def status_message(module: ModuleType, status: int, t_stop: float, y_stop: np.nd
     if status == hybrid.STEP_TOO_SMALL:
         return f"the step size fell below the resolution of t at {at} (a singularity?)"
     if status == hybrid.NOT_FINITE:
-        return f"a non-finite state, derivative or guard at {at}"
+        return _not_finite(t_stop, found, last_values)
     return "invalid input to the integrator"

@@ -13,6 +13,7 @@ from types import ModuleType
 
 import numpy as np
 
+from tswm_common import units
 from tswm_runtime.jit import coldstart
 
 coldstart.announce(("integrate",))  # before the next imports compile the kernels, if not cached
@@ -25,7 +26,8 @@ from tswm_runtime.integration import segment  # noqa: E402
 from tswm_runtime.model import checks, modes  # noqa: E402
 from tswm_runtime.model.scenes import load_model  # noqa: E402
 from tswm_runtime.model.values import ValueInputError, si_value  # noqa: E402
-from tswm_runtime.results.result import Event, Jump, Result, status_message  # noqa: E402
+from tswm_runtime.hybrid.machine import INCONSISTENT, NOT_FINITE  # noqa: E402
+from tswm_runtime.results.result import Event, Jump, Result, first_non_finite, status_message  # noqa: E402
 
 coldstart.done()
 
@@ -39,6 +41,7 @@ RTOL_RANGE = (1e-13, 1e-2)
 # reaches 7.85 m/s: S1 max 90 % off; atol 1e-3: 1.6e-5 off).
 ATOL_RANGE = (1e-20, 1.0)
 ATOL_SCALE = RTOL_RANGE[1]
+RUN_QUANTITIES = {"t_end": "time", "x1": "length", "v1": "velocity", "gap": "length"}   # held to units.LIMITS
 DEFAULT_POINTS = 1001
 DEFAULT_MAX_EVENTS = 1000
 # Sizes that allocate memory up front (docs/promises.md): output points and the event log.
@@ -155,6 +158,10 @@ def _validated(module: ModuleType, overrides: dict) -> dict:
     _check(run["method"] in METHODS, "method", run["method"], lambda: f"one of {', '.join(METHODS)}")
     for key in ("t_end", "x1", "v1", "gap", "rtol", "atol", "hmax"):
         run[key] = float(run[key]) if key == "hmax" else _finite(key, run[key])
+    for key, quantity in RUN_QUANTITIES.items():
+        problem = units.out_of_bounds(run[key], quantity)
+        if problem:
+            raise SimulationInputError(f"{key} = {run[key]!r}: {problem.replace('value', key, 1)}")
     lo, hi = RTOL_RANGE
     _check(lo <= run["rtol"] <= hi, "rtol", run["rtol"], lambda: f"in [{lo:g}, {hi:g}]")
     lo_a, hi_a = ATOL_RANGE
@@ -298,6 +305,20 @@ def _direct_in_a_thread(kernel, args: tuple, counters: np.ndarray):
     return _in_a_thread(_entry_point(kernel), args, counters)
 
 
+def _values(module: ModuleType, y: np.ndarray, rows: np.ndarray) -> dict:
+    """The run's series by name: states, x1 (their integral, when it is no state), outputs."""
+    values = dict(zip((*module.STATES, "x1")[:y.shape[1]], y.T))
+    values.update(zip(module.OUTPUTS, rows))
+    return values
+
+
+def _first_non_finite(module: ModuleType, t: np.ndarray, values: dict, mon: np.ndarray):
+    """(name, time, value) of the run's first inf or NaN in its series, else in the maxima of S1
+    and S2 (found between output points); None if all are finite."""
+    maxima = [(f"{name} max", float(mon[k, 2]), float(mon[k, 1])) for k, name in enumerate(module.OBSERVABLES)]
+    return first_non_finite(t, values) or next((m for m in maxima if not math.isfinite(m[2])), None)
+
+
 def simulate(model: str | ModuleType, params: dict | None = None, *, interruptible: bool = False,
              **overrides) -> Result:
     """Run a scene. ``model``: a shipped scene name, a scene file (.toml), a path to a generated
@@ -322,7 +343,15 @@ def simulate(model: str | ModuleType, params: dict | None = None, *, interruptib
         keep = out.mode >= 0
         t_kept, y_kept, p_rows, modes_kept = (np.ascontiguousarray(a[keep])
                                               for a in (t_out, out.y, out.p, out.mode))
-    check_atol_scale(module, run["atol"], y_kept)
+    rows = np.empty((len(module.OUTPUTS), t_kept.size))
+    _entry_point(fill_rows)(address(module.outputs, GUARDS_SIG), t_kept, y_kept, modes_kept, p_rows, n, rows)
+    values = _values(module, y_kept, rows)
+    found = None if status == INCONSISTENT else _first_non_finite(module, t_kept, values, mon)
+    if found is not None:
+        status = NOT_FINITE
+    else:
+        check_atol_scale(module, run["atol"], y_kept)
+    last_point = (float(t_kept[-1]), {k: float(v[-1]) for k, v in values.items()}) if t_kept.size else None
     y_stop = log.state[n_ev - 1, :n].copy() if n_ev else y0
     at = x1_column(module)
     events = [Event(float(log.t[e]), module.GUARDS[log.index[e, 0]], module.MODES[log.index[e, 1]],
@@ -331,9 +360,7 @@ def simulate(model: str | ModuleType, params: dict | None = None, *, interruptib
                     None if math.isnan(log.jump[e, 0]) else Jump(*map(float, log.jump[e])),
                     dict(zip(module.STATES, map(float, log.state[e, :n]))))
               for e in range(n_ev)]
-    rows = np.empty((len(module.OUTPUTS), t_kept.size))
-    _entry_point(fill_rows)(address(module.outputs, GUARDS_SIG), t_kept, y_kept, modes_kept, p_rows, n, rows)
     return Result.build(module, p, p_rows, run, t_kept, y_kept, modes_kept, rows, events, log.state[:n_ev, :n],
                         mon, counters, hybrid_status=status, t_stop=t_stop,
                         first_mode=first, message=status_message(module, status, t_stop, y_stop, last,
-                                                                 need, events, p))
+                                                                 need, events, p, found=found, last_values=last_point))

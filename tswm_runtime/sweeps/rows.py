@@ -13,7 +13,8 @@ coldstart.announce(("integrate", "batch"))  # before the next imports compile th
 from tswm_runtime.hybrid import batch, entry  # noqa: E402
 from tswm_runtime.jit.structures import Settings, Start, Tolerances  # noqa: E402
 from tswm_runtime.model import checks, modes  # noqa: E402
-from tswm_runtime.results.result import STATUS_NAMES  # noqa: E402
+from tswm_runtime.hybrid import machine as hybrid  # noqa: E402
+from tswm_runtime.results.result import NOT_FINITE_CAUSE, STATUS_NAMES  # noqa: E402
 from tswm_runtime.simulation.simulate import METHODS, initial_state, method_step, with_latches  # noqa: E402
 
 coldstart.done()
@@ -51,6 +52,24 @@ def load_factor_columns(module: ModuleType, S1m, S2m, full: np.ndarray, valid) -
     return KD1, KD2
 
 
+NOT_FINITE_COLUMNS = {"t_stop": batch.F_T_STOP, "S1m": batch.F_S1M, "S2m": batch.F_S2M, "x1": batch.F_X1,
+                      "v1": batch.F_V1}
+
+
+def _mark_not_finite(out_f: np.ndarray, out_i: np.ndarray, valid: np.ndarray, problems: list[str]) -> None:
+    """Cases whose results hold inf or NaN get status not-finite and the column in ``problems``
+    (in place). Not an inconsistent case (S1m, S2m = +-inf: unbounded, its status says so), nor NaN
+    x1, v1 of a run that stopped inside a step (documented); a finished one holds finite numbers."""
+    status = out_i[:, batch.I_STATUS]
+    finished = status == hybrid.FINISHED
+    for name, column in NOT_FINITE_COLUMNS.items():
+        values = out_f[:, column]
+        bad = np.isinf(values) | (np.isnan(values) & (finished if name in ("x1", "v1") else True))
+        for case in np.flatnonzero(bad & valid & (status != hybrid.INCONSISTENT) & (status != hybrid.NOT_FINITE)):
+            status[case] = hybrid.NOT_FINITE
+            problems[case] = f"{name} = {values[case]:g}: not finite; likely cause: {NOT_FINITE_CAUSE}"
+
+
 def run_cases(module: ModuleType, P: np.ndarray, run: dict):
     """Integrate every row of P (free parameters) in one parallel batch; a DataFrame.
     Rows that break the scene's parameter rules are not run: status 'invalid-parameter'."""
@@ -73,6 +92,7 @@ def run_cases(module: ModuleType, P: np.ndarray, run: dict):
                         Settings(METHODS[run["method"]], float(run["t_end"]), tol, int(run["max_steps"])),
                         run["max_events"], len(module.OBSERVABLES), batch.Results(f, i, sq))
         out_f[valid], out_i[valid], seq[valid] = f, i, sq
+    _mark_not_finite(out_f, out_i, valid, problems)
     regimes, mode_codes = sequence_texts(module, seq, out_i[:, batch.I_NMODES])
     KD1, KD2 = load_factor_columns(module, out_f[:, batch.F_S1M], out_f[:, batch.F_S2M], full, valid)
     columns = {name: P[:, j] for j, name in enumerate(module.PARAM_NAMES)}

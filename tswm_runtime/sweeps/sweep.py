@@ -15,7 +15,8 @@ One row per case: the free parameters, then
 
     status    'finished' or why the run stopped (result.STATUS_NAMES); 'invalid-parameter'
               for a row that breaks the scene file's rules for its parameters (not run)
-    problem   '' or, for an invalid row, which rule it breaks
+    problem   '' or, for an invalid row, which rule it breaks; for a not-finite one, which
+              column is inf or NaN and the likely cause
     t_stop    where the run ended [s]
     S1m, tS1m, S2m, tS2m   the value of S1 (S2) where |S1| (|S2|) is largest, and its time
     KD1, KD2  eq. (10) from S1m, S2m when the scene gives Ft1, Ft2 (else NaN)
