@@ -70,7 +70,7 @@ def _work(n, n_quad, n_guards, n_obs):
                    np.empty(m))
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")  # a step of its caller, at no call
 def _rate(fns, seg, z, g, dz, w):
     """dz = d(t, y, q)/dsigma at z (the guards there into g); returns D."""
     n = w.y.size

@@ -88,7 +88,7 @@ def _all_finite(x):
     return True
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")  # a step of its caller, at no call
 def _eval_guards(fns, seg, t, y, g):
     """Guards into g (skipped when the model has none); True if all are finite."""
     if g.size > 0:
@@ -166,7 +166,7 @@ def attempt_function(method):
     return compiled(_ATTEMPTS[method], ATTEMPT_SIG)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")  # a step of its caller, at no call
 def _state_at(fns, seg, tol, step, t, y, s, counters):
     """y = state at t in the step by a full step from t_a (exact at the ends); s.g_tmp = guards."""
     if t == step.t_b:
@@ -265,14 +265,13 @@ MaxWindow = namedtuple("MaxWindow", "f y Q s")  # per observable: 2 steps' (t_a,
 
 
 @njit(cache=True, error_model="numpy")
-def _monitor(fns, seg, t, y, mon, step, t_hi, s):
+def _monitor(fns, seg, t, y, mon, step, t_hi, obs, win):
     """Track max |observable k| at (t, y) in mon[k] = (|value|, value, t).
 
     A new maximum at the end of ``step`` (None at a segment start) remembers that step's
     dense output in slot 0 of the refinement window, and the following step in slot 1:
     the true maximum lies in one of the two (``_refine``).
     """
-    obs, win = s.obs, s.win
     fns.observe(seg.mode, t, y, seg.p, obs)
     for k in range(mon.shape[0]):
         if abs(obs[k]) > mon[k, 0]:
@@ -294,7 +293,7 @@ _SQRT_EPS = np.sqrt(np.finfo(np.float64).eps)
 _GOLDEN = 0.5 * (3.0 - np.sqrt(5.0))
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")  # a step of its caller, at no call
 def _window_value(fns, seg, k, t, s):
     """|Observable k| at t, from the window slot whose step contains t."""
     win = s.win
@@ -405,7 +404,7 @@ def _start(fns, settings, seg, state, record, s):
     t, y, counters = state.t, state.y, record.counters
     s.win.s[:] = 0
     if record.mon.shape[0] > 0:
-        _monitor(fns, seg, t, y, record.mon, None, t, s)
+        _monitor(fns, seg, t, y, record.mon, None, t, s.obs, s.win)
     if settings.t_end == t:
         return REACHED_END, state.h
     fns.rhs(seg.mode, t, y, seg.p, s.f_a)
@@ -423,7 +422,7 @@ def _start(fns, settings, seg, state, record, s):
     return _STEPPING, h
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")  # a step of its caller, at no call
 def _jacobian(fns, seg, t, y, work, counters):
     """The Jacobian and df/dt at (t, y) into work; True if they are finite."""
     fns.jac(seg.mode, t, y, seg.p, work.J, work.dfdt)
@@ -431,7 +430,7 @@ def _jacobian(fns, seg, t, y, work, counters):
     return _all_finite(work.J) and _all_finite(work.dfdt)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")  # a step of its caller, at no call
 def _rejected(ctl, h, e, factor, counters):
     """After a step of size h rejected with error e: (control, the next step size)."""
     counters[N_REJECTED] += 1
@@ -440,14 +439,14 @@ def _rejected(ctl, h, e, factor, counters):
     return Control(True, h, e, ctl.h_acc, ctl.e_acc), h * factor
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")  # a step of its caller, at no call
 def _too_steep(ctl, h, counters):
     """After a step of size h rejected for changing D too much: (control, half the step)."""
     counters[N_REJECTED] += 1
     return Control(True, ctl.h_rej, 0.0, ctl.h_acc, ctl.e_acc), 0.5 * h
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")  # a step of its caller, at no call
 def _accepted(ctl, h, h_want, e, factor, order, counters):
     """After a step of size h (h_want before it was clipped to t_end) accepted with error e:
     (control, the next step size)."""
@@ -461,7 +460,7 @@ def _accepted(ctl, h, h_want, e, factor, order, counters):
     return Control(ctl.rejected, ctl.h_rej, ctl.e_rej, h, max(e, control.PREDICTIVE_MIN_ERR)), h_next
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")  # a step of its caller, at no call
 def _first_event(fns, seg, tol, step, t_end, s, counters):
     """(guard, time) of the first event in the accepted ``step`` (its state into s.y_ev), or
     (-1, step.t_b); the guards' rates at t_b into s.rate_b."""
@@ -485,7 +484,7 @@ def _first_event(fns, seg, tol, step, t_end, s, counters):
     return k, t_new
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")  # a step of its caller, at no call
 def _advance(fns, seg, record, i, step, t_new, y_hi, quad, s):
     """The rows, the integral and the maxima up to t_new (state y_hi) in ``step``; returns the
     next output row."""
@@ -494,11 +493,11 @@ def _advance(fns, seg, record, i, step, t_new, y_hi, quad, s):
         events.dense_integral(step.y_a, step.h, step.Q, (t_new - step.t_a) / step.h, s.q_tmp)
         quad += s.q_tmp
     if record.mon.shape[0] > 0:
-        _monitor(fns, seg, t_new, y_hi, record.mon, step, t_new, s)
+        _monitor(fns, seg, t_new, y_hi, record.mon, step, t_new, s.obs, s.win)
     return i
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")  # a step of its caller, at no call
 def _stable_rest(fns, seg, tol, t, y, quad, s, counters):
     """True if (t, y) is a stable equilibrium of the autonomous scalar segment (``steady``); the
     Jacobian there is left in s.work."""
@@ -522,7 +521,7 @@ def _hold(fns, seg, t_end, t, state, record, i, s):
     return t_hold, k, i
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")  # a step of its caller, at no call
 def _next_step(s):
     """The end of the accepted step becomes the start of the next."""
     s.f_a[:] = s.f_b
