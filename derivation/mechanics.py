@@ -8,10 +8,15 @@ downstream of the geometry and Coulomb's law is typed in.
 """
 from __future__ import annotations
 
+import hashlib
+import pickle
 from dataclasses import dataclass
-from functools import lru_cache
+from functools import lru_cache, wraps
+from pathlib import Path
 
 import sympy as sp
+
+from tswm_common.files import write_atomic
 
 FLANK_SIGN = {"a": 1, "b": -1}
 
@@ -33,6 +38,33 @@ E1 = sp.Matrix([1, 0])                        # direction of x1
 E2 = sp.Matrix([0, 1])                        # direction of x2
 TANGENT = sp.Matrix([-sp.cos(gamma), sp.sin(gamma)])   # contact line, seen from body 1
 NORMAL = sp.Matrix([sp.sin(gamma), sp.cos(gamma)])     # flank a normal, body 1 -> body 2
+
+STORE = Path(__file__).with_name("mechanics.pickle")   # every derivation below, as shipped (write_store)
+
+
+def store_key() -> str:
+    """What the derivations depend on: this file's source and SymPy's version."""
+    return hashlib.sha256(Path(__file__).read_bytes() + sp.__version__.encode()).hexdigest()
+
+
+@lru_cache(maxsize=None)
+def _store() -> dict:
+    """The shipped derivations {(function, args): result} while they match store_key(), else none."""
+    try:
+        key, entries = pickle.loads(STORE.read_bytes())
+    except (OSError, pickle.UnpicklingError, EOFError, AttributeError, ValueError):
+        return {}
+    return entries if key == store_key() else {}
+
+
+def _stored(derive):
+    """Cache ``derive`` per arguments; scene-independent, so a shipped store answers it first."""
+    @lru_cache(maxsize=None)
+    @wraps(derive)
+    def answer(*args):
+        found = _store().get((derive.__name__, args))
+        return derive(*args) if found is None else found
+    return answer
 
 
 @dataclass(frozen=True)
@@ -92,7 +124,7 @@ def _resultant(f: int, s: int) -> sp.Matrix:
     return Q * (f * sp.cos(rho) * NORMAL - s * sp.sin(rho) * TANGENT)
 
 
-@lru_cache(maxsize=None)
+@_stored
 def kinematics() -> Kinematics:
     """Non-penetration of the flank, differentiated twice."""
     X1, X2 = sp.Function("x1")(t), sp.Function("x2")(t)
@@ -106,7 +138,7 @@ def kinematics() -> Kinematics:
     return Kinematics(gap.subs({X1: x1, X2: x2}), *level, x2_sol, ratio, slide)
 
 
-@lru_cache(maxsize=None)
+@_stored
 def sliding(flank: str, direction: int) -> SlidingMode:
     """Solve the force balance of ``flank`` sliding with sign(v1) = ``direction``."""
     f, s = FLANK_SIGN[flank], direction
@@ -139,7 +171,7 @@ def sliding(flank: str, direction: int) -> SlidingMode:
     )
 
 
-@lru_cache(maxsize=None)
+@_stored
 def stick() -> Stick:
     """Both bodies at rest: solve the statics for the normal and tangential force."""
     fN = sp.Symbol("fN", real=True)
@@ -187,7 +219,7 @@ class ImpactFrame:
     newton_stick_loss: sp.Expr   # energy lost by Newton's law ending in stick: can be < 0
 
 
-@lru_cache(maxsize=None)
+@_stored
 def free_flight() -> FreeFlight:
     """Newton for each body without contact force, and the normal gap's motion."""
     kin = kinematics()
@@ -205,7 +237,7 @@ def free_flight() -> FreeFlight:
     return FreeFlight(sol[a1], sol[a2], normal_speed, slip, v2_of, x2_of, accel, gap_accel_phi)
 
 
-@lru_cache(maxsize=None)
+@_stored
 def impact_frame(flank: str) -> ImpactFrame:
     """Impulse balance of a collision on ``flank``: velocity jumps, inverse mass, energy."""
     f = FLANK_SIGN[flank]
@@ -245,9 +277,11 @@ class MeshContact:
     gap_accel: sp.Expr
     cone_forward: sp.Expr        # stick: mu N + T >= 0 while no slip forward
     cone_backward: sp.Expr       # stick: mu N - T >= 0 while no slip backward
+    simplified: tuple[sp.Expr, ...] = ()   # (a1, S1 = F1 - m1 a1, S2 = F2 - m2 a2, gap_accel) simplified
+                                           # once here (and stored), for the model to rename into a scene
 
 
-@lru_cache(maxsize=None)
+@_stored
 def mesh_contact(flank: str, direction: int) -> MeshContact:
     """Newton for both bodies under a spring-damper normal force and Coulomb friction."""
     f = FLANK_SIGN[flank]
@@ -264,8 +298,9 @@ def mesh_contact(flank: str, direction: int) -> MeshContact:
         T_ = sp.solve(sp.Eq(slip_accel.subs(acc), 0), T)[0]
         acc = {k: sp.simplify(v.subs(T, T_)) for k, v in acc.items()}
     gap_accel = sp.simplify(ff.normal_speed.subs({v1: a1, v2: a2}).subs(acc))
+    simplified = tuple(sp.simplify(e) for e in (acc[a1], F1 - m1 * acc[a1], F2 - m2 * acc[a2], gap_accel))
     return MeshContact(flank, direction, normal, sp.simplify(T_), acc[a1], acc[a2], gap_accel,
-                       sp.simplify(mu * normal + T_), sp.simplify(mu * normal - T_))
+                       sp.simplify(mu * normal + T_), sp.simplify(mu * normal - T_), simplified)
 
 
 # Lost motion: a stem (body 3) on body 2's guide, which body 2 picks up after a free travel.
@@ -289,7 +324,7 @@ class Pickup:
     stem_force: sp.Expr          # N3 while the stem moves with body 2, in S2 and F3
 
 
-@lru_cache(maxsize=None)
+@_stored
 def pickup() -> Pickup:
     """Impulse balance of the pickup on each sliding direction, the stick test, and the stem's
     contact force while it is carried (Newton for the stem, S2 with m2 + m3 and F2 = F3)."""
@@ -307,3 +342,22 @@ def pickup() -> Pickup:
     inertia = sp.simplify(2 * (m1 * v1**2 / 2 + m2 * (kin.ratio * v1)**2 / 2) / v1**2)
     return Pickup(jumps, impulses, sp.simplify(st.cone_forward.subs(unit)), sp.simplify(st.cone_backward.subs(unit)),
                   inertia, sp.simplify(carried[N3]))
+
+
+def derivations() -> list[tuple]:
+    """Every (function, args) a scene can ask for."""
+    calls: list[tuple] = [(kinematics, ()), (stick, ()), (free_flight, ()), (pickup, ())]
+    for flank in FLANK_SIGN:
+        calls += [(impact_frame, (flank,)), *((sliding, (flank, s)) for s in (1, -1)),
+                  *((mesh_contact, (flank, d)) for d in (1, -1, 0))]
+    return calls
+
+
+def write_store() -> Path:
+    """Derive everything and ship it in STORE (tools/regenerate.py), unless STORE is current."""
+    if _store():
+        return STORE
+    entries = {(fn.__name__, args): fn(*args) for fn, args in derivations()}
+    write_atomic(STORE, pickle.dumps((store_key(), entries), protocol=4))
+    _store.cache_clear()
+    return STORE

@@ -339,14 +339,12 @@ def _mesh_modes(scene: Scene, rho_of: dict[str, sp.Symbol]) -> list[Mode]:
         for flank in scene.flanks:
             c = mechanics.mesh_contact(flank, direction)
             sub_f = {**sub, mechanics.rho: rho_of[flank]}
-            a1_, a2_ = c.accel1.subs(sub_f), c.accel2.subs(sub_f)
+            accel, s1, s2, gap_accel = (e.subs(sub_f) for e in c.simplified)   # simplified once, in mechanics
             prefix = DIRECTIONS[word][0] if direction else "stick"
             guards = (c.normal, slip) if direction else (c.normal, c.cone_forward, c.cone_backward)
             modes.append(Mode(name=f"mesh_{prefix}_{flank}", regime=REGIMES[direction, flank] if direction else "stick",
-                              flank=flank, direction=direction, accel=sp.simplify(a1_),
-                              S1=sp.simplify(F1 - sub[mechanics.m1] * a1_),
-                              S2=sp.simplify(F2 - sub[mechanics.m2] * a2_), normal=c.normal.subs(sub_f),
-                              gap_accel=sp.simplify(c.gap_accel.subs(sub_f)),
+                              flank=flank, direction=direction, accel=accel, S1=s1, S2=s2,
+                              normal=c.normal.subs(sub_f), gap_accel=gap_accel,
                               mesh=tuple(g.subs(sub_f) for g in guards)))
     return modes
 

@@ -217,3 +217,31 @@ def test_pickup_stick_cone_is_self_locking_and_stem_force_by_hand():
     a2 = (M.F3 - M.S2) / (M.m2 + M.m3)
     assert zero(pk.stem_force - (M.m3 * a2 - M.F3))
     assert zero(pk.inertia - (M.m1 + M.m2 * sp.tan(M.gamma) ** 2))
+
+
+def test_shipped_derivations_are_current_and_what_the_derivation_gives(monkeypatch):
+    """derivation/mechanics.pickle (written by tools/regenerate.py) is keyed by this mechanics.py
+    and SymPy's version, holds every derivation a scene can ask for, and its entries equal the
+    derivation done afresh (the store switched off)."""
+    import pickle
+
+    key, entries = pickle.loads(M.STORE.read_bytes())
+    assert key == M.store_key(), "mechanics.py changed: run tools/regenerate.py"
+    assert set(entries) == {(fn.__name__, args) for fn, args in M.derivations()}
+    monkeypatch.setattr(M, "_store", lambda: {})
+    for fn, args in ((M.kinematics, ()), (M.stick, ()), (M.sliding, ("b", -1))):
+        assert entries[fn.__name__, args] == fn.__wrapped__(*args), fn.__name__
+
+
+def test_a_stale_store_is_not_read(tmp_path, monkeypatch):
+    """A store written from another mechanics.py (or SymPy) is ignored: the derivation runs."""
+    import pickle
+
+    stale = tmp_path / "mechanics.pickle"
+    stale.write_bytes(pickle.dumps(("0" * 64, {("stick", ()): "stale"})))
+    monkeypatch.setattr(M, "STORE", stale)
+    M._store.cache_clear()
+    try:
+        assert M._store() == {}
+    finally:
+        M._store.cache_clear()
