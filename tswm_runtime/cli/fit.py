@@ -5,6 +5,7 @@ import argparse
 import sys
 import time
 
+from tswm_runtime.common.words import plural
 from tswm_runtime.cli.common import (UsageError, add_setting_options, output_directory, prepare_kernels, run_method,
                                      setting_error, setting_overrides)
 
@@ -38,16 +39,15 @@ def run(args: argparse.Namespace) -> int:
         print(f"tswm fit {args.scene}: interrupted (Ctrl-C) after {time.perf_counter() - start:.3g} s; "
               "nothing written", file=sys.stderr)
         return 130
-    except FitInputError as error:
-        raise UsageError(str(error)) from None
-    except SimulationInputError as error:
+    except (FitInputError, SimulationInputError) as error:   # a run setting's is named by its option
         raise setting_error(error, overrides) from None
     except warmup.PYTHON_ONLY_ERRORS as error:
         if cold is None:
             raise
         return warmup.rerun_compiled(args.argv, error)
-    print(f"scene {result.scene}: {result.measured['form']} of {result.measured['cases']} case(s) from "
-          f"{args.measured}; {len(result.starts)} start(s), {result.fit_settings['model_runs']} model runs, "
+    print(f"scene {result.scene}: {result.measured['form']} of {plural(result.measured['cases'], 'case')} from "
+          f"{args.measured}; {plural(len(result.starts), 'start')}, "
+          f"{plural(result.fit_settings['model_runs'], 'model run')}, "
           f"{time.perf_counter() - start:.3g} s")
     for name, unit in zip(result.names, result.units):
         p = result.profiles[name]

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import sys
 import time
 from pathlib import Path
 
@@ -25,29 +26,85 @@ def add_parser(sub) -> None:
     paper.set_defaults(run=run)
 
 
+def _cases(items: list[str] | None) -> list[tuple[float, float]] | None:
+    """The --case values as (m2, F2) pairs, or None for all the paper lists."""
+    if not items:
+        return None
+    try:
+        cases = [tuple(float(v) for v in item.split(",")) for item in items]
+    except ValueError:
+        cases = []
+    if not cases or any(len(c) != 2 for c in cases):
+        raise UsageError(f"--case {items!r}: expected M2,F2 in SI, e.g. --case 200,-15000")
+    for m2, F2 in cases:
+        if not (math.isfinite(m2) and math.isfinite(F2) and m2 > 0):
+            raise UsageError(f"--case {m2:g},{F2:g}: M2 must be a finite mass > 0 kg and F2 a finite force [N]")
+    return cases
+
+
+def _say(text: str) -> None:
+    print(text, file=sys.stderr, flush=True)
+
+
+def _cold_parts() -> tuple[dict[str, float], str | None]:
+    """The compile seconds of what numba's cache lacks (plan's KERNELS, MODELS with the dopri5
+    step, BATCH), and the words for it (None if nothing is cold). Marks it announced
+    (``coldstart.check``), so the kernels' own modules do not say it again."""
+    from tswm_runtime.jit import coldstart
+    from tswm_runtime.paper import plan
+
+    groups = list((coldstart.check(("integrate", "dopri5", "batch")) or ([], None))[0])
+    models = [m for m in plan.SCENES.values() if coldstart.check((), m) is not None]
+    seconds = {plan.KERNELS: coldstart.estimate([g for g in groups if g == "integrate"], None),
+               plan.MODELS: coldstart.estimate([g for g in groups if g == "dopri5"], None)
+               + sum(coldstart.estimate((), m) for m in models),
+               plan.BATCH: coldstart.estimate([g for g in groups if g == "batch"], None)}
+    seconds = {stage: s for stage, s in seconds.items() if s > 0}
+    if not groups and not models:
+        return seconds, None
+    what = coldstart.describe(groups, None) if groups else ""
+    if models:
+        what += (" and " if what else "") + "the models " + ", ".join(f"`{m}`" for m in models)
+    here = seconds.get(plan.KERNELS, 0.0) + seconds.get(plan.BATCH, 0.0)
+    return seconds, (f"compiling {what} into numba's cache, once (later runs load them from there): about "
+                     f"{coldstart.about(here)} s here and {coldstart.about(seconds.get(plan.MODELS, 0.0))} s "
+                     "in a second process meanwhile (measured on 2 cores)")
+
+
 def run(args: argparse.Namespace) -> int:
     start = time.perf_counter()
     output_directory(args.output)
-    from tswm_runtime.paper.report import build_report, wall_time_text
+    cases = _cases(args.case)
+    _say(f"tswm paper: the paper's cases in four readings, report into {args.output}/; checking numba's cache")
+    from tswm_runtime.common.progress import Stages
+    from tswm_runtime.paper import plan
+    from tswm_runtime.paper.background import Background, BackgroundError
 
-    cases = None
-    if args.case:
-        try:
-            cases = [tuple(float(v) for v in item.split(",")) for item in args.case]
-        except ValueError:
-            cases = []
-        if not cases or any(len(c) != 2 for c in cases):
-            raise UsageError(f"--case {args.case!r}: expected M2,F2 in SI, e.g. --case 200,-15000")
-        for m2, F2 in cases:
-            if not (math.isfinite(m2) and math.isfinite(F2) and m2 > 0):
-                raise UsageError(f"--case {m2:g},{F2:g}: M2 must be a finite mass > 0 kg and F2 a finite force [N]")
-    from tswm_runtime.simulation.simulate import SimulationInputError
-
+    compile_s, cold = _cold_parts()
+    if cold:
+        _say(f"tswm paper: {cold}")
+    background = Background(Path(args.output), list(plan.SCENES.values()), derivation=not args.no_derivation)
+    stages = Stages(plan.estimates(compile_s, derivation=not args.no_derivation), desc="tswm paper",
+                    enabled=not args.no_progress)
     try:
-        report = build_report(args.output, cases, derivation=not args.no_derivation, progress=not args.no_progress,
-                              started=start)
-    except SimulationInputError as error:
-        raise UsageError(f"--case: {error}") from None
+        stages.begin(plan.KERNELS)
+        from tswm_runtime.paper.report import build_report, wall_time_text
+        from tswm_runtime.simulation.simulate import SimulationInputError
+
+        stages.begin(plan.MODELS, waiting=True)
+        background.models()
+        stages.begin(plan.BATCH)
+        import tswm_runtime.hybrid.batch  # noqa: F401  (compiled on import, if not cached)
+        try:
+            report = build_report(args.output, cases, document=background.document, stages=stages, started=start)
+        except SimulationInputError as error:
+            raise UsageError(f"--case: {error}") from None
+    except BackgroundError as error:
+        _say(f"tswm paper: error: {error}")
+        return 1
+    finally:
+        stages.close()
+        background.stop()
     for path in report["paths"].values():
         print(f"  wrote {path}")
     print(f"tswm paper: report in {Path(args.output) / 'paper-report.html'}; "

@@ -31,6 +31,7 @@ from types import ModuleType
 
 import numpy as np
 
+from tswm_runtime.common.words import plural
 from tswm_runtime.fitting import profile
 from tswm_runtime.fitting.inputs import FitInputError, Measured, default_bounds, parse_free, parse_noise, read_measured
 from tswm_runtime.fitting.problem import PENALTY, Problem
@@ -243,13 +244,16 @@ def _notes(problem, st, starts: list[Start], best: int, cases_failed) -> list[st
               and np.max(np.abs(np.array(s.x) - bx) / problem.width) > DISTINCT]
     if others:
         where = "; ".join(", ".join(f"{nm} = {v:.6g}" for nm, v in zip(names, starts[k].x)) for k in others[:4])
-        notes.append(f"not identifiable: start(s) {', '.join(str(k + 1) for k in others)} end at different values "
+        numbers = ", ".join(str(k + 1) for k in others)
+        notes.append(f"not identifiable: {'start' if len(others) == 1 else 'starts'} {numbers} "
+                     f"{'ends' if len(others) == 1 else 'end'} at different values "
                      f"({where}) with the same cost as the best ({best_cost:.6g})")
     if st["dof"] <= 0 and not math.isfinite(st["s2"]):
         notes.append("as many residuals as free parameters and no stated noise: no estimate of the noise; the "
                      "intervals rest on the numerical noise floor alone")
     if cases_failed:
-        notes.append(f"{len(cases_failed)} case(s) did not finish at the optimum (penalty {PENALTY:g} per residual): "
+        notes.append(f"{plural(len(cases_failed), 'case')} did not finish at the optimum (penalty {PENALTY:g} per "
+                     "residual): "
                      + "; ".join(f"{c['case']} ({c['status']})" for c in cases_failed[:5]))
     return notes
 

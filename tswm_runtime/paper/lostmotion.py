@@ -32,9 +32,10 @@ from pathlib import Path
 import numpy as np
 
 from tswm_runtime.paper.data import TABLE3_PRINTED
+from tswm_runtime.paper.plan import SCENES
 from tswm_common.files import write_atomic
 
-SCENE = "paper-lostmotion"
+SCENE = SCENES["lostmotion"]
 FREE = "load_at1"             # the scene's name for L
 L_MIN, L_MAX = 0.5e-3, 50e-3  # m of x2 (see the module docstring)
 FITTED = ("S1m", "S2m")       # the columns the fit compares (see the module docstring)

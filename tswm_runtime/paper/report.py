@@ -5,7 +5,7 @@ Every number in the report comes from ``simulate`` on the shipped generated modu
 own functions; the paper's printed numbers come from ``paper_data``. Readings (a) to (c)
 take nothing from Table 3; reading (d) has one number, the lost motion L, fitted to it by
 ``tswm fit`` (``paper_lostmotion``), and its cells are ``simulate`` runs at that L.
-This module does not import SymPy; only ``derivation_document`` does (on request).
+This module does not import SymPy; the derivation document is written by ``background``.
 """
 from __future__ import annotations
 
@@ -30,7 +30,10 @@ from tswm_common.files import write_atomic
 from tswm_runtime.paper.data import F2_LISTED, FIGURE2, M2_LISTED, SOURCE, TABLE3_PRINTED, printed
 from tswm_runtime.reference.paper_gear import cones
 from tswm_runtime.paper import lostmotion
+from tswm_runtime.paper.plan import DOCUMENT, FIGURES, FIT, RUNS, SCENES, WRITE
+from tswm_runtime.common.progress import Stages
 from tswm_runtime.common.provenance import machine, package_versions
+from tswm_runtime.common.words import difference, differences, plural
 from tswm_runtime.results.result import Result
 from tswm_runtime.simulation.simulate import simulate
 
@@ -39,6 +42,7 @@ NOISE = 1e-6      # a dissipation rate counts as negative below -NOISE * max |in
 QUANTITIES = (("S1m", "S1_max", "N"), ("KD1", "KD1", ""), ("S2m", "S2_max", "N"), ("KD2", "KD2", ""))
 VERSIONED = ("tswm", "numpy", "scipy", "numba", "sympy", "jinja2", "matplotlib", "pandas")
 FILES = {"md": "paper-report.md", "html": "paper-report.html", "json": "paper-report.json"}
+
 
 
 @dataclass(frozen=True)
@@ -54,11 +58,11 @@ class Reading:
 
 
 READINGS = (
-    Reading("consistent", "(a)", "paper", "consistent derivation, load from t = 0 (the scene as printed)",
+    Reading("consistent", "(a)", SCENES["consistent"], "consistent derivation, load from t = 0 (the scene as printed)",
             lambda m2, F2: {"m2": m2, "F2": F2}),
-    Reading("literal", "(b)", "paper-literal", "the paper's equations (6), (7), (9) as printed, load from t = 0",
+    Reading("literal", "(b)", SCENES["literal"], "the paper's equations (6), (7), (9) as printed, load from t = 0",
             lambda m2, F2: {"m2": m2, "F2": F2}),
-    Reading("runup", "(c)", "paper-runup", "consistent derivation, free run-up, then F2 from t_step = 0.3 s",
+    Reading("runup", "(c)", SCENES["runup"], "consistent derivation, free run-up, then F2 from t_step = 0.3 s",
             lambda m2, F2: {"m2": m2, "F2_after": F2}),
 )
 
@@ -157,27 +161,6 @@ def energy_balance(result: Result, module) -> dict:
 
 # ---------------------------------------------------------------- the report
 
-def derivation_document(out_dir: Path) -> dict:
-    """Write the derivation of scene ``paper`` exactly as ``tswm derive paper`` does (the same
-    functions); PDF when pdflatex is present, else the Markdown is the linked document."""
-    from derivation.document import build_document, render
-    from derivation.latex import TexUnavailable, build_pdf
-    from derivation.model import build_model
-    from derivation.scene import load_scene
-
-    doc = build_document(build_model(load_scene("paper")))
-    md = write_atomic(out_dir / "paper-derivation.md", render(doc, "markdown"))
-    latex = render(doc, "latex")
-    tex = write_atomic(out_dir / "paper-derivation.tex", latex)
-    try:
-        pdf = build_pdf(latex, out_dir / "paper-derivation.pdf")
-        return {"link": pdf.name, "note": "PDF built with pdflatex; Markdown and LaTeX beside it",
-                "files": [md.name, tex.name, pdf.name]}
-    except TexUnavailable:
-        return {"link": md.name, "note": "no pdflatex here: the Markdown version (LaTeX source beside it)",
-                "files": [md.name, tex.name]}
-
-
 def _statements(rows: list[dict], checks: dict, cases_printed: int, readings: tuple = READINGS,
                 lost: dict | None = None) -> list[dict]:
     """Which columns agree with the paper and why, each backed by the numbers of this run."""
@@ -202,8 +185,8 @@ def _statements(rows: list[dict], checks: dict, cases_printed: int, readings: tu
                         f"{st[0]['rho0_deg']:.2f} deg > gamma = {st[0]['gamma_deg']:.2f} deg the gear is "
                         f"self-locking, and breaking away against the load needs F1 > tan(gamma + rho(0)) |F2| = "
                         f"{brk} (hand statics: N = F1 sin(gamma) - F2 cos(gamma), T = F1 cos(gamma) + F2 "
-                        f"sin(gamma), stick while tan(rho(0)) |N| >= T; the generated module's stick_conditions "
-                        f"give the same cone margin, difference {diff:.1e} N). "
+                        f"sin(gamma), stick while tan(rho(0)) |N| >= T; its cone margin and the generated module's "
+                        f"stick_conditions {difference(diff, 'N')}). "
                         + ("So F1(0) lies inside the static friction cone in every case: "
                            if all_stick else "F1(0) leaves the cone in some cases: ")
                         + f"the runs say {' / '.join(words)}. S1 = F1(0) and S2 = F2 are static values; the "
@@ -287,7 +270,7 @@ def lostmotion_statement(rows: list[dict], checks: dict, lost: dict) -> str:
     text += (f"A longer one picks it up nearer the no-load speed, where F1 is small, and the peaks fall towards "
              f"reading (c)'s (cost {prof['cost_at_L_max']:.4g} at L = {lost['bounds'][1] * 1e3:g} mm). ")
     if stalled:
-        text += f"At the fitted L the drive stalls in the case(s) {'; '.join(stalled)}. "
+        text += f"At the fitted L the drive stalls in {plural(len(stalled), 'case')}: {'; '.join(stalled)}. "
     e = checks["energy"].get("lostmotion")
     if e:
         text += (f"Energy in the Figure 2 case: input work {e['W_in']:.4g} J, kinetic energy change {e['dKE']:.4g} J, "
@@ -339,8 +322,9 @@ def verdict(rows: list[dict], checks: dict, readings: tuple = READINGS, lost: di
     over_p = [abs(r["printed"]["S2m"]) - abs(r["F2"]) for r in printed_rows]
     n = scores[best.key]["cells"]
     fitted = next((r for r in readings if r.key == "lostmotion"), None)
-    headline = (f"No reading reproduces the printed numbers: of the {n} printed cells (S1m, KD1, S2m, KD2 of "
-                f"{len(printed_rows)} tests), " + ", ".join(f"{r.label} {r.scene} matches {scores[r.key]['agree']}"
+    headline = (f"No reading reproduces the printed numbers: of the {plural(n, 'printed cell')} (S1m, KD1, S2m, KD2 "
+                f"of {plural(len(printed_rows), 'test')}), "
+                + ", ".join(f"{r.label} {r.scene} matches {scores[r.key]['agree']}"
                                                            for r in READINGS)
                 + (f", and {fitted.label} {fitted.scene}, whose lost motion L is fitted to this table, "
                    f"{scores[fitted.key]['agree']}" if fitted else "")
@@ -377,7 +361,8 @@ def verdict(rows: list[dict], checks: dict, readings: tuple = READINGS, lost: di
         points.append(
             f"{b.label} `{b.scene}`: S1m is " + ("negative in every case" if max(s1) < 0 else
                                                 f"between {fmt(min(s1))} and {fmt(max(s1))} N")
-            + f" and {inverse} of {len(rows)} runs turn inverse-tractive, where the paper prints S1m > 0 and "
+            + f"; {inverse} of {plural(len(rows), 'run')} {'turns' if inverse == 1 else 'turn'} inverse-tractive, "
+            "where the paper prints S1m > 0 and "
             f"a tractive drive. Its energy balance (m2 = {lit['m2']:g} kg, F2 = {lit['F2']:g} N): input work {lit['W_in']:.0f} J, kinetic "
             f"energy change {lit['dKE']:.0f} J, so friction would dissipate {lit['E_diss']:.0f} J"
             + (": friction would supply energy, the printed equations are not physical." if lit["E_diss"] < 0
@@ -440,6 +425,7 @@ def _environment() -> jinja2.Environment:
                              autoescape=jinja2.select_autoescape(["html.j2"]), keep_trailing_newline=True,
                              trim_blocks=True, lstrip_blocks=True, undefined=jinja2.StrictUndefined)
     env.filters["code_html"] = _code_html
+    env.filters["plural"] = plural
     return env
 
 
@@ -480,45 +466,43 @@ def _fit_vs_simulate(rows: list[dict], lost: dict) -> dict:
         for q, entry in c["quantities"].items():
             d = abs(entry["model"] - r["lostmotion"]["values"][q])
             diff[q] = max(diff.get(q, 0.0), d)
-    return {"max_abs_difference": diff, "fit_run": {k: lost["fit"]["settings"][k] for k in ("rtol", "atol")}}
+    return {"max_abs_difference": diff, "text": differences(diff, {q: unit for q, _, unit in QUANTITIES}),
+            "fit_run": {k: lost["fit"]["settings"][k] for k in ("rtol", "atol")}}
 
 
 def build_report(out_dir: str | Path = "tswm-report", cases: list[tuple[float, float]] | None = None, *,
-                 derivation: bool = True, progress: bool = True, started: float | None = None) -> dict:
+                 document: Callable[[], dict | None] | None = None, stages: Stages | None = None,
+                 started: float | None = None) -> dict:
     """Run every reading for every case, write the report files into ``out_dir``; return
-    {'paths': {...}, 'data': the JSON sidecar's content}. ``started`` is the
+    {'paths': {...}, 'data': the JSON sidecar's content}. ``document``: returns the derivation
+    document's description once it is written (``background``), None for none. ``stages``:
+    the progress bar, with plan's stages FIT to WRITE among its own (None: no bar). ``started`` is the
     ``time.perf_counter()`` at which the command began (the CLI passes it), so that the
     wall time includes the start-up: imports and loading numba's compiled code."""
-    from tqdm import tqdm
-
     start = time.perf_counter()
     started = start if started is None else started
+    stages = stages or Stages({}, desc="tswm paper", enabled=False)
     out_dir = Path(out_dir)
     cases = list(cases) if cases is not None else all_cases()
     fig_case = (FIGURE2["m2"], FIGURE2["F2"])
     readings = READINGS + (lostmotion_reading(math.nan),)
     modules = {r.key: load_module(r.scene) for r in readings}
-    steps = len(cases) * len(readings) + len(readings) + len(cases) + (1 if derivation else 0) + 2
-    bar = tqdm(total=steps, desc="tswm paper", unit="step", disable=not progress, file=sys.stderr)
 
-    bar.set_postfix_str(f"fit L of {lostmotion.SCENE} to Table 3")
+    stages.begin(FIT)
     lost = lostmotion.fit_table3(out_dir)
     lost["Vmax"] = float(modules["lostmotion"].FIXED["Vmax"])
     tolerances = {k: lost["fit"]["settings"][k] for k in ("rtol", "atol")}
     readings = READINGS + (lostmotion_reading(lost["L"], tolerances),)
-    bar.update()
-
+    stages.begin(RUNS)
     rows, results = [], {}
     for test_index, (m2, F2) in enumerate(cases):
         paper = printed(m2, F2)
         row = {"m2": m2, "F2": F2, "test": paper.test if paper else None,
                "printed": None if paper is None else {q: getattr(paper, q) for q, _, _ in QUANTITIES}}
         for reading in readings:
-            bar.set_postfix_str(f"{reading.scene} m2={m2:g} F2={F2:g}")
             result = run(reading, m2, F2)
             results[(reading.key, m2, F2)] = result
             row[reading.key] = _cell(reading, result, paper)
-            bar.update()
         rows.append(row)
     # the same cells at the scene's own tolerances: does any case change its course?
     own, fitted = lostmotion_reading(lost["L"]), readings[-1]
@@ -547,7 +531,6 @@ def build_report(out_dir: str | Path = "tswm-report", cases: list[tuple[float, f
         lost["stall_below"] = [f"test {c.test} (m2 = {c.m2:g} kg, F2 = {c.F2:g} N)" for c in TABLE3_PRINTED
                                if drive_word(run(below, c.m2, c.F2)).startswith(("stalls", "does not start"))]
 
-    bar.set_postfix_str("statics and energy")
     consistent = modules["consistent"]
     checks = {"statics": [statics(consistent, F2) for F2 in sorted({F2 for _, F2 in cases}, reverse=True)],
               "energy": {}}
@@ -563,14 +546,12 @@ def build_report(out_dir: str | Path = "tswm-report", cases: list[tuple[float, f
             energy_rows.append({"reading": f"{reading.label} {reading.scene}", **e})
             if (m2, F2) == fig_case:
                 checks["energy"][reading.key] = e
-        bar.update()
     checks["energy_table"] = energy_rows
 
+    stages.begin(FIGURES)
     figures = []
     for reading in readings:
-        bar.set_postfix_str(f"figure {reading.scene}")
         if (reading.key, *fig_case) not in results:
-            bar.update()
             continue
         result = results[(reading.key, *fig_case)]
         png = _figure(result, modules[reading.key], reading, *fig_case)
@@ -579,13 +560,10 @@ def build_report(out_dir: str | Path = "tswm-report", cases: list[tuple[float, f
         figures.append({"file": name, "label": reading.label, "scene": reading.scene, "title": reading.title,
                         "regimes": regime_text(result), "drive": drive_word(result),
                         "data": base64.b64encode(png).decode("ascii")})
-        bar.update()
 
-    doc = None
-    if derivation:
-        bar.set_postfix_str("derivation document")
-        doc = derivation_document(out_dir)
-        bar.update()
+    stages.begin(DOCUMENT, waiting=True)
+    doc = document() if document is not None else None
+    stages.begin(WRITE)
 
     settings = {}
     for r in readings:
@@ -617,8 +595,7 @@ def build_report(out_dir: str | Path = "tswm-report", cases: list[tuple[float, f
     paths.update({Path(f).name: out_dir / f for f in lost.get("files", [])})
     if doc:
         paths.update({name: out_dir / name for name in doc["files"]})
-    bar.update()
-    bar.close()
+    stages.end()
     return {"paths": paths, "data": data}
 
 
@@ -629,27 +606,26 @@ def residual_text(value: float | None, q: str) -> str:
     return f"{value:+.0f}" if not q.startswith("KD") and abs(value) >= 10 else f"{value:+.3g}"
 
 
-def table3_rows(data: dict, readings: tuple = READINGS) -> tuple[list[str], list[list[str]]]:
-    """Table 3 side by side: header and rows of strings (agreeing cells marked ✓); with the
-    fitted reading (d), its residual per cell (printed - computed) after its column."""
+def table3_tables(data: dict, readings: tuple = READINGS) -> list[dict]:
+    """Table 3 side by side, one table per quantity so that each fits a page: its heading and
+    header and rows of strings (agreeing cells marked ✓); with the fitted reading (d), its
+    residual per cell (printed - computed) in the last column."""
     fitted = any(r.key == "lostmotion" for r in readings)
-    header = ["Test", "m2 [kg]", "F2 [N]"]
+    header = ["Test", "m2 [kg]", "F2 [N]", "paper", *(r.label for r in readings)]
+    header += ["paper − (d)"] if fitted else []
+    tables = []
     for q, _, unit in QUANTITIES:
-        header += [f"{q}{f' [{unit}]' if unit else ''} paper"] + [f"{q} {r.label}" for r in readings]
-        header += [f"{q} paper − (d)"] if fitted else []
-    rows = []
-    for row in data["cases"]:
-        cells = [str(row["test"]) if row["test"] else "–", f"{row['m2']:g}", f"{row['F2']:g}"]
-        for q, _, _ in QUANTITIES:
+        rows = []
+        for row in data["cases"]:
+            cells = [str(row["test"]) if row["test"] else "–", f"{row['m2']:g}", f"{row['F2']:g}"]
             cells.append((f"{row['printed'][q]:.2f}" if q.startswith("KD") else fmt(row["printed"][q]))
                          if row["printed"] else "not printed")
-            for r in readings:
-                cell = row[r.key]
-                cells.append(fmt(cell["values"][q]) + (" ✓" if cell["agree"][q] else ""))
+            cells += [fmt(row[r.key]["values"][q]) + (" ✓" if row[r.key]["agree"][q] else "") for r in readings]
             if fitted:
                 cells.append(residual_text(row["lostmotion"]["residual"][q], q))
-        rows.append(cells)
-    return header, rows
+            rows.append(cells)
+        tables.append({"quantity": q, "heading": f"{q} [{unit}]" if unit else q, "table": (header, rows)})
+    return tables
 
 
 def lostmotion_tables(data: dict) -> dict:
@@ -677,7 +653,6 @@ def lostmotion_tables(data: dict) -> dict:
 
 
 def _context(data: dict, figures: list[dict], readings: tuple = READINGS, profile_png: str | None = None) -> dict:
-    header, rows = table3_rows(data, readings)
     regime_header = ["Case (test)", "m2 [kg]", "F2 [N]"] + [f"{r.label} {r.scene}" for r in readings]
     regime_rows = [[str(row["test"]) if row["test"] else "–", f"{row['m2']:g}", f"{row['F2']:g}"]
                    + [f"{row[r.key]['drive']}: {row[r.key]['regimes']}"
@@ -698,7 +673,7 @@ def _context(data: dict, figures: list[dict], readings: tuple = READINGS, profil
     lost = data["lostmotion"]
     return {"data": data, "figures": figures, "readings": readings, "lost": lost,
             "lost_tables": lostmotion_tables(data), "profile_png": profile_png,
-            "table3": (header, rows), "regimes": (regime_header, regime_rows),
+            "table3": table3_tables(data, readings), "regimes": (regime_header, regime_rows),
             "statics": (statics_header, statics_rows), "energy": (energy_header, energy_rows),
             "settings": (["scene", "integrator", "rtol", "atol", "t_end", "output points", "max steps"],
                          settings_rows),
@@ -707,11 +682,12 @@ def _context(data: dict, figures: list[dict], readings: tuple = READINGS, profil
             "pdflatex": shutil.which("pdflatex") is not None}
 
 
-def read_markdown_table(text: str, first_header: str) -> list[list[str]]:
-    """The rows (header first) of the Markdown table whose first header cell is ``first_header``."""
-    lines = text.splitlines()
+def read_markdown_tables(text: str, first_header: str) -> list[list[list[str]]]:
+    """Every Markdown table whose first header cell is ``first_header``: its rows, header first."""
+    tables, lines = [], text.splitlines()
     for i, line in enumerate(lines):
-        if line.startswith("|") and [c.strip() for c in line.strip("|").split("|")][0] == first_header:
+        if line.startswith("|") and (i == 0 or not lines[i - 1].startswith("|")) \
+                and [c.strip() for c in line.strip("|").split("|")][0] == first_header:
             table = []
             for row in lines[i:]:
                 if not row.startswith("|"):
@@ -719,5 +695,13 @@ def read_markdown_table(text: str, first_header: str) -> list[list[str]]:
                 cells = [c.strip() for c in row.strip().strip("|").split("|")]
                 if not all(set(c) <= set("-: ") for c in cells):
                     table.append(cells)
-            return table
-    raise ValueError(f"no table starting with {first_header!r}")
+            tables.append(table)
+    return tables
+
+
+def read_markdown_table(text: str, first_header: str) -> list[list[str]]:
+    """The rows (header first) of the first Markdown table whose first header cell is ``first_header``."""
+    tables = read_markdown_tables(text, first_header)
+    if not tables:
+        raise ValueError(f"no table starting with {first_header!r}")
+    return tables[0]

@@ -1,0 +1,108 @@
+"""`tswm paper` on first contact: it says what it does before any heavy work, and its progress
+bar moves through every stage, compiling included."""
+import io
+import subprocess
+import sys
+
+import pytest
+
+from tswm_runtime.cli import paper as cli_paper
+from tswm_runtime.common.progress import INSIDE, Stages
+from tswm_runtime.jit import coldstart
+from tswm_runtime.paper import plan
+from tswm_runtime.paper.background import Background, BackgroundError
+
+# Stops the command where it first imports numba (the start of all heavy work: numba's cache
+# check, the kernels, the models) and says so on stderr after whatever the command said before.
+STOP_AT_NUMBA = """
+import sys
+class StopAtNumba:
+    def find_spec(self, name, path=None, target=None):
+        if name == "numba":
+            sys.stderr.write("<numba imported>\\n")
+            sys.stderr.flush()
+            raise SystemExit(3)
+sys.meta_path.insert(0, StopAtNumba())
+from tswm_runtime.cli import main
+sys.exit(main(["paper", "-o", sys.argv[1]]))
+"""
+
+
+def test_first_line_comes_before_numba_is_imported(tmp_path):
+    run = subprocess.run([sys.executable, "-c", STOP_AT_NUMBA, str(tmp_path / "report")], capture_output=True,
+                         text=True)
+    assert run.returncode == 3, run.stderr
+    lines = run.stderr.splitlines()
+    assert "<numba imported>" in lines, run.stderr
+    said = lines[:lines.index("<numba imported>")]
+    assert said and said[0].startswith("tswm paper: the paper's cases in four readings"), run.stderr
+
+
+class Clock:
+    def __init__(self):
+        self.now = 100.0
+
+    def __call__(self):
+        return self.now
+
+
+def test_stages_move_with_the_clock_inside_a_stage():
+    clock, wall, out = Clock(), Clock(), io.StringIO()
+    stages = Stages({"compile": 10.0, "wait": 4.0, "run": 2.0}, desc="job", file=out, clock=clock, wait_clock=wall)
+    stages.begin("compile")
+    clock.now += 4.0
+    stages.tick()
+    assert stages.position == pytest.approx(4.0)           # no call from the stage: the clock moved it
+    clock.now += 100.0
+    stages.tick()
+    assert stages.position == pytest.approx(INSIDE * 10.0)  # never past the stage before it ends
+    stages.begin("wait", waiting=True)
+    assert stages.position == pytest.approx(10.0)
+    clock.now += 3.0                                        # this process's CPU time: not a waiting stage's clock
+    stages.tick()
+    assert stages.position == pytest.approx(10.0)
+    wall.now += 1.0
+    stages.tick()
+    assert stages.position == pytest.approx(11.0)
+    stages.begin("run")
+    clock.now += 1.0
+    stages.tick()
+    assert stages.position == pytest.approx(15.0)
+    stages.close()
+    assert stages.position == pytest.approx(16.0)
+    text = out.getvalue()
+    assert text.index("compile") < text.index("wait") < text.index("run") and "100%" in text
+
+
+def test_estimates_follow_what_is_cold():
+    warm = plan.estimates({}, derivation=True)
+    cold = plan.estimates({plan.KERNELS: 40.0, plan.MODELS: 16.0, plan.BATCH: 3.0}, derivation=True)
+    assert list(warm) == list(cold) == [plan.KERNELS, plan.MODELS, plan.BATCH, plan.FIT, plan.RUNS, plan.FIGURES,
+                                        plan.DOCUMENT, plan.WRITE]
+    assert cold[plan.KERNELS] == 40.0 and cold[plan.BATCH] == 3.0
+    assert cold[plan.MODELS] == plan.WARM[plan.MODELS]   # compiled meanwhile by the second process
+    assert warm[plan.KERNELS] == plan.WARM[plan.KERNELS]
+    assert plan.estimates({}, derivation=False)[plan.DOCUMENT] == 0.0
+
+
+def test_cold_parts_name_what_compiles(monkeypatch):
+    monkeypatch.setattr(coldstart, "check", lambda groups=(), model=None: (list(groups), model) if groups or model
+                        else None)
+    seconds, text = cli_paper._cold_parts()
+    assert text.startswith("compiling the integration kernels")
+    assert all(f"`{scene}`" in text for scene in plan.SCENES.values())
+    assert seconds[plan.KERNELS] == coldstart.estimate(["integrate"], None)
+    assert seconds[plan.MODELS] == pytest.approx(coldstart.estimate(["dopri5"], None)
+                                                 + sum(coldstart.estimate((), m) for m in plan.SCENES.values()))
+    assert seconds[plan.BATCH] == coldstart.estimate(["batch"], None)
+    monkeypatch.setattr(coldstart, "check", lambda groups=(), model=None: None)
+    assert cli_paper._cold_parts() == ({}, None)
+
+
+def test_second_process_failure_is_an_error_naming_it(tmp_path):
+    background = Background(tmp_path, ["no-such-scene"], derivation=False)
+    try:
+        with pytest.raises(BackgroundError, match="no_such_scene"):
+            background.models()
+    finally:
+        background.stop()
