@@ -272,8 +272,8 @@ def fit(model: str | ModuleType, measured: str | Path | Measured, free: dict | l
     grid_points: misfit grid per axis (default 41 for one parameter, 15 for two); misfit=False
     skips the grid. noise: the measurement noise per measured quantity ({quantity: sigma} in SI
     or a list of ``QUANTITY=SIGMA``; every quantity, or none and the noise is estimated from
-    the residuals). profile_points: grid of each parameter's profile (default profile.POINTS). Raises FitInputError for
-    inputs that cannot be used."""
+    the residuals). profile_points: grid of each parameter's profile (default profile.POINTS).
+    Raises FitInputError for inputs that cannot be used."""
     from scipy.optimize import least_squares
 
     from tswm_runtime.common.provenance import TSWM_VERSION as __version__
