@@ -1,16 +1,19 @@
 """Emit one numba module per scene from the model IR, through a Jinja2 template.
 
-Fixed parameters become named module constants (``gamma = 0.083...  # wedge.gamma``), and
-every subexpression of fixed parameters only a derived constant defined by its formula
-(``tan_gamma = math.tan(gamma)``), evaluated once at import; numba folds module globals,
-so the code reads like the derivation at no cost. Free parameters are read from the
-parameter vector ``p``. Every function is a top-level ``@njit(cache=True)`` function
-calling the others as module globals, so numba caches and inlines them; a function whose
-body equals an earlier one's is emitted as an alias of it. The module imports math and
-numba only.
+Fixed parameters become named module constants written as the scene gives them
+(``gamma = math.radians(4.76)  # wedge.gamma``), and every subexpression of fixed
+parameters only a derived constant defined by its formula (``tan_gamma = math.tan(gamma)``),
+evaluated once at import; numba folds module globals, so the code reads like the derivation
+at no cost. Free parameters are read from the parameter vector ``p``. Every function is a
+top-level ``@njit(cache=True)`` function calling the others as module globals, so numba
+caches and inlines them. Mirror-image modes (the other flank or direction: the same
+equations with -rho for rho) share one set of functions taking ``rho_sign``; a function
+whose body equals an earlier one's is emitted as an alias of it. The module imports math
+and numba only.
 """
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import keyword
 import math
@@ -28,6 +31,7 @@ from derivation import mechanics
 from derivation.mechanics import S1, S2, t
 from derivation.model import Model, compose_laws as _compose, param_symbol
 from derivation.scene import NAME, SceneError
+from tswm_common import units
 from tswm_common.files import EditedModuleError, write_atomic
 
 GENERATOR_VERSION = "0.1.0"
@@ -72,6 +76,20 @@ def inert(value, name: str) -> str:
             raise GenerationError(f"module constant {name}: cannot emit a {type(v).__name__}")
     check(value)
     return repr(value)
+
+
+def source_form(value: float, written: tuple[float, str] | None, name: str) -> str:
+    """A fixed value as the scene file gives it, printed inertly and still a constant numba folds:
+    ``math.radians(4.76)`` for "4.76 deg", ``-20.0 * 1000.0`` for "-20 kN" (the same double as
+    the SI value); the SI value itself when it was given in SI."""
+    if written is None:
+        return inert(value, name)
+    number, unit = written
+    if unit == "deg" and math.radians(number) == value:
+        return f"math.radians({inert(number, name)})"
+    if number * units.factor(unit) == value:
+        return f"{inert(number, name)} * {inert(units.factor(unit), name)}"
+    return inert(value, name)
 
 
 def _comment(text: str) -> str:
@@ -137,6 +155,100 @@ def generator_digest() -> str:
     return h.hexdigest()
 
 
+RHO_SIGN = sp.Symbol("rho_sign", real=True)   # +1 or -1: the friction angle's sign in mirror-image modes
+
+
+@dataclass(frozen=True)
+class Call:
+    """Which functions a mode calls: those emitted for ``group``, with ``rho_sign`` = ``sign``
+    (0: the group's functions take no sign). ``leader`` is the mode they are derived from."""
+
+    group: str
+    leader: str
+    sign: int = 0
+
+    def __call__(self, prefix: str, args: str) -> str:
+        """Source of the call of the group's function ``prefix`` with ``args``."""
+        sign = f", {inert(float(self.sign), str(RHO_SIGN))}" if self.sign else ""
+        return f"{prefix}_{self.group}({args}{sign})"
+
+
+def _equations(model: Model, mode) -> tuple:
+    """Every expression the module emits as code for a mode: rates, reactions, consistency, contact."""
+    further = tuple(getattr(mode, name) for name, _ in _further_accelerations(model))
+    return (mode.accel, mode.S1, mode.S2, mode.denominator, mode.jam, *mode.mesh, *further,
+            *state_rates(model, mode))
+
+
+def mirror_calls(model: Model) -> dict[str, Call]:
+    """Each mode -> the functions it calls. A mode on a flank whose equations are an earlier
+    one's with rho replaced by -rho (the mirror flank, the other direction) shares that mode's
+    functions, emitted once with rho replaced by rho_sign rho; equal equations share them too."""
+    rho = _friction_symbol(model)
+    leaders: dict[str, tuple[tuple, tuple]] = {}       # leader -> (its equations, with -rho)
+    members: dict[str, list[tuple[str, int]]] = {}     # leader -> [(mode, rho_sign)]
+    for mode in model.modes:
+        if not mode.flank or rho is None or mode.slide is not None:
+            members[mode.name] = [(mode.name, 1)]
+            continue
+        equations = _equations(model, mode)
+        for leader, (same, mirrored) in leaders.items():
+            if equations in (same, mirrored):
+                members[leader].append((mode.name, 1 if equations == same else -1))
+                break
+        else:
+            leaders[mode.name] = (equations, tuple(e if e is None else e.subs(rho, -rho) for e in equations))
+            members[mode.name] = [(mode.name, 1)]
+    calls: dict[str, Call] = {}
+    for leader, group in members.items():
+        signed = any(sign < 0 for _, sign in group)
+        name = _group_name(leader, [m for m, _ in group], {c.group for c in calls.values()} | set(members))
+        calls.update({m: Call(name, leader, sign if signed else 0) for m, sign in group})
+    return calls
+
+
+def _friction_symbol(model: Model) -> sp.Symbol | None:
+    """The friction angle's symbol when both flanks share it (else the flanks are no mirror images)."""
+    friction = [q.symbol for q in model.laws if law_function_name(q.symbol).startswith("friction_angle")]
+    return friction[0] if len(friction) == 1 else None
+
+
+def _group_name(leader: str, modes: list[str], taken: set[str]) -> str:
+    """fwd_a with fwd_b -> fwd; with bwd_a, bwd_b too -> sliding (mesh_fwd_a ... -> mesh_sliding)."""
+    if len(modes) == 1:
+        return leader
+    bases = {re.sub(r"_[ab]$", "", m) for m in modes}
+    name = bases.pop() if len(bases) == 1 else re.sub(r"(fwd|bwd)_[ab]$", "sliding", leader)
+    return name if name not in taken - {leader} else leader
+
+
+def _signed(mode, call: Call, rho: sp.Symbol | None):
+    """The leader's equations under its group's name, with rho_sign rho for rho when the group is signed."""
+    if not call.sign:
+        return dataclasses.replace(mode, name=call.group)
+    flip = {rho: RHO_SIGN * rho}
+    changed = {f.name: _subs(getattr(mode, f.name), flip) for f in dataclasses.fields(mode)
+               if f.name not in ("name", "regime", "flank", "direction", "declared", "slide")}
+    return dataclasses.replace(mode, name=call.group, **changed)
+
+
+def _subs(value, sub: dict):
+    if isinstance(value, tuple):
+        return tuple(_subs(v, sub) for v in value)
+    return value.subs(sub) if isinstance(value, sp.Basic) else value
+
+
+def _where(model: Model, group: str, calls: dict[str, Call]) -> str:
+    """Docstring text naming the modes that call a group's functions, and their rho_sign."""
+    modes = [m for m in model.modes if calls[m.name].group == group]
+    if len(modes) == 1:
+        return f"mode {modes[0].name} ({modes[0].regime})"
+    if not calls[modes[0].name].sign:
+        return "modes " + ", ".join(m.name for m in modes)
+    by_sign = [(s, [m.name for m in modes if calls[m.name].sign == s]) for s in (1, -1)]
+    return "modes " + "; ".join(f"{', '.join(names)} (rho_sign = {s})" for s, names in by_sign if names)
+
+
 class _Printer(PythonCodePrinter):
     """Python source for numba: math-module functions, exact doubles for numbers."""
 
@@ -163,6 +275,11 @@ class _Emitter:
         self.derived: dict[sp.Expr, sp.Symbol] = {}   # subexpression of fixed parameters -> its constant
         self.law_functions = {q.symbol: law_function_name(q.symbol) for q in model.laws}
         self.inlined_laws = compose_laws(model)
+        self.calls = mirror_calls(model)
+        leaders = [self.calls[m.name] for m in model.modes if self.calls[m.name].leader == m.name]
+        self.emitted_modes = [_signed(model.mode(c.leader), c, _friction_symbol(model)) for c in leaders]
+        self.where = {c.group: _where(model, c.group, self.calls) for c in leaders}
+        self.args = {c.group: "t, y, p" + (f", {RHO_SIGN}" if c.sign else "") for c in leaders}
 
     def print(self, expr) -> str:
         return self.printer.doprint(expr)
@@ -263,9 +380,10 @@ class _Emitter:
                                f"cannot hold (inf, nan, or an underflow to 0) in {where[:300]}; choose a value "
                                "that keeps it finite, or make the parameter free")
 
-    def function(self, name: str, doc: str, outputs: list[sp.Expr], law: sp.Symbol | None = None) -> Function:
+    def function(self, name: str, doc: str, outputs: list[sp.Expr], law: sp.Symbol | None = None,
+                 args: str = "t, y, p") -> Function:
         lines, results = self.body(outputs, law)
-        return Function(name, "t, y, p", doc, tuple(lines), ", ".join(results))
+        return Function(name, args, doc, tuple(lines), ", ".join(results))
 
 
 def law_function_name(symbol: sp.Symbol) -> str:
@@ -286,35 +404,38 @@ def _short(expr: sp.Expr) -> str:
 
 def _mode_functions(em: _Emitter) -> list[Function]:
     out = []
-    for mode in em.model.modes:
-        out.append(em.function(f"outputs_{mode.name}", f"(a1, S1, S2, F1, F2) in mode {mode.name}: an output row, "
-                               "each law evaluated once", [mode.accel, mode.S1, mode.S2, mechanics.F1, mechanics.F2]))
-        out.append(em.function(f"accel_{mode.name}", f"a1 in mode {mode.name} ({mode.regime}): "
-                               f"{_short(mode.accel)}", [mode.accel]))
+    for mode in em.emitted_modes:
+        where, args = em.where[mode.name], em.args[mode.name]
+
+        def function(name, doc, outputs):
+            return em.function(name, doc, outputs, args=args)
+        out.append(function(f"outputs_{mode.name}", f"(a1, S1, S2, F1, F2) in {where}: an output row, "
+                            "each law evaluated once", [mode.accel, mode.S1, mode.S2, mechanics.F1, mechanics.F2]))
+        out.append(function(f"accel_{mode.name}", f"a1 in {where}: {_short(mode.accel)}", [mode.accel]))
         for name, doc in _further_accelerations(em.model):
             rate = getattr(mode, name)
-            out.append(em.function(f"{name}_{mode.name}", f"{doc} in mode {mode.name}: {_short(rate)}", [rate]))
+            out.append(function(f"{name}_{mode.name}", f"{doc} in {where}: {_short(rate)}", [rate]))
         if mode.slide is not None:
-            out.append(em.function(f"reactions_{mode.name}", f"(S1, S2) in mode {mode.name}: Filippov's combination "
-                                   "lambda (S1, S2)_fwd_a + (1 - lambda) (S1, S2)_fwd_b, lambda = rate_b / (rate_b - "
-                                   "rate_a)", [mode.S1, mode.S2]))
-            out.append(em.function("slide_exits", "(slide_exit_a, slide_exit_b) = (-rate_a, rate_b): sliding along "
-                                   "phi = 0 persists while both are > 0. rate_a (rate_b) = d phi/dt along fwd_a "
-                                   f"(fwd_b) = {_short(mode.slide.rate)} with that mode's a1",
-                                   [-mode.slide.rate_a, mode.slide.rate_b]))
+            out.append(function(f"reactions_{mode.name}", f"(S1, S2) in {where}: Filippov's combination "
+                                "lambda (S1, S2)_fwd_a + (1 - lambda) (S1, S2)_fwd_b, lambda = rate_b / (rate_b - "
+                                "rate_a)", [mode.S1, mode.S2]))
+            out.append(function("slide_exits", "(slide_exit_a, slide_exit_b) = (-rate_a, rate_b): sliding along "
+                                "phi = 0 persists while both are > 0. rate_a (rate_b) = d phi/dt along fwd_a "
+                                f"(fwd_b) = {_short(mode.slide.rate)} with that mode's a1",
+                                [-mode.slide.rate_a, mode.slide.rate_b]))
             continue
-        out.append(em.function(f"reactions_{mode.name}", f"(S1, S2) in mode {mode.name}: "
-                               f"S1 = {_short(mode.S1)}, S2 = {_short(mode.S2)}", [mode.S1, mode.S2]))
+        out.append(function(f"reactions_{mode.name}", f"(S1, S2) in {where}: "
+                            f"S1 = {_short(mode.S1)}, S2 = {_short(mode.S2)}", [mode.S1, mode.S2]))
         if mode.mesh:
             what = "(N, slip)" if mode.direction else "(N, cone_forward, cone_backward)"
-            out.append(em.function(f"contact_{mode.name}", f"{what} of the compliant contact in mode {mode.name}: "
-                                   f"N = {_short(mode.normal)}; the mode holds while each is >= 0 (the slip "
-                                   "keeps its sign)", list(mode.mesh)))
+            out.append(function(f"contact_{mode.name}", f"{what} of the compliant contact in {where}: "
+                                f"N = {_short(mode.normal)}; the mode holds while each is >= 0 (the slip "
+                                "keeps its sign)", list(mode.mesh)))
         if mode.denominator is not None:
             outs = [mode.denominator] + ([mode.jam] if mode.jam is not None else [])
-            out.append(em.function(f"consistency_{mode.name}", f"(D{', jam' if mode.jam is not None else ''}) "
-                                   f"in mode {mode.name}: the mode exists while each is > 0. D = "
-                                   f"{_short(mode.denominator)}", outs))
+            out.append(function(f"consistency_{mode.name}", f"(D{', jam' if mode.jam is not None else ''}) "
+                                f"in {where}: the mode exists while each is > 0. D = "
+                                f"{_short(mode.denominator)}", outs))
     return out
 
 
@@ -350,7 +471,8 @@ def _jacobian(em: _Emitter, mode) -> Function:
     n = len(states)
     targets = [f"J[{i}, {j}]" for i in range(n) for j in range(n)] + [f"dfdt[{i}]" for i in range(n)]
     lines += [f"{target} = {value}" for target, value in zip(targets, results)]
-    return Function(f"jac_{mode.name}", "t, y, p, J, dfdt", f"Jacobian of the right-hand side in mode {mode.name}.",
+    args = em.args[mode.name].replace("t, y, p", "t, y, p, J, dfdt")
+    return Function(f"jac_{mode.name}", args, f"Jacobian of the right-hand side in {em.where[mode.name]}.",
                     tuple(lines), "")
 
 
@@ -424,7 +546,7 @@ def _guards(em: _Emitter) -> Function:
             lines.append(f"    g[{names.index('gap_a')}], g[{names.index('gap_b')}] = {gaps[0]}, {gaps[1]}")
         elif mode.mesh:
             targets = ("mesh_normal", "slip") if mode.direction else ("mesh_normal", *STICK_GUARDS[:2])
-            lines.append(f"    {', '.join(f'g[{names.index(n)}]' for n in targets)} = contact_{mode.name}(t, y, p)")
+            lines.append(f"    {', '.join(f'g[{names.index(n)}]' for n in targets)} = {em.calls[mode.name]('contact', 't, y, p')}")
         elif mode.slide is not None:
             lines.append(f"    g[{names.index('v1')}] = y[{len(model.states) - 1}]")
             lines.append(f"    g[{names.index(SLIDE_GUARDS[0])}], g[{names.index(SLIDE_GUARDS[1])}] = "
@@ -433,9 +555,10 @@ def _guards(em: _Emitter) -> Function:
             lines.append(f"    g[{names.index('phi')}] = switching(t, y, p)")
             lines.append(f"    g[{names.index('v1')}] = y[{len(model.states) - 1}]")
             if mode.jam is not None:
-                lines.append(f"    g[{names.index('D')}], g[{names.index('jam')}] = consistency_{mode.name}(t, y, p)")
+                lines.append(f"    g[{names.index('D')}], g[{names.index('jam')}] = "
+                             f"{em.calls[mode.name]('consistency', 't, y, p')}")
             else:
-                lines.append(f"    g[{names.index('D')}] = consistency_{mode.name}(t, y, p)")
+                lines.append(f"    g[{names.index('D')}] = {em.calls[mode.name]('consistency', 't, y, p')}")
         else:
             targets = ", ".join(f"g[{names.index(n)}]" for n in STICK_GUARDS)
             lines.append(f"    {targets} = stick_conditions(t, y, p)")
@@ -506,7 +629,7 @@ def _functions(em: _Emitter) -> list[Function]:
         fns.append(em.function("stick_conditions", "(cone_forward, cone_backward, flank_normal) at v1 = 0: "
                                "stick holds while both cones are >= 0; flank_normal > 0 holds on flank a",
                                [st.cone_forward, st.cone_backward, st.flank_normal]))
-    fns += [_jacobian(em, mode) for mode in model.modes]
+    fns += [_jacobian(em, mode) for mode in em.emitted_modes]
     fns.append(_body2(em))
     return fns
 
@@ -555,7 +678,8 @@ def generate_module(model: Model, free: tuple[str, ...] | None = None) -> str:
     env.filters["inert"] = inert
     env.filters["comment"] = _comment
     body = env.get_template("module.py.j2").render(
-        scene=scene, model=model, functions=functions, free=free_params, latches=model.latches, fixed=fixed,
+        scene=scene, model=model, functions=functions, calls=em.calls,
+        sources={p.name: source_form(p.value, scene.written.get(p.key), p.name) for p in fixed}, free=free_params, latches=model.latches, fixed=fixed,
         pieces=model.pieces, derived=em.derived_constants(), guards_function=guards_function, impact=impact,
         rates=_rate_sources(model), accelerations=_further_accelerations(model),
         load_factors=load_factors,

@@ -97,6 +97,8 @@ class Scene:
     restitution: Param | None = None     # coefficient of restitution of a flank impact ([impact])
     mesh: dict[str, Param] | None = None # compliant flanks: stiffness, damping ([mesh]), None: rigid
     lost_motion: dict[str, Param] | None = None  # travel, stem_mass, restitution ([lost_motion]), None: none
+    written: dict[str, tuple[float, str]] = field(default_factory=dict)  # key -> (number, unit) as written,
+                                                                         # for values not written in SI
 
     def params(self) -> tuple[Param, ...]:
         """Every distinct model parameter once: wedge, friction, drive, torque switch, load, reference."""
@@ -164,7 +166,7 @@ RUN = {
     "x1": Rule("length", default=0.0),
     "v1": Rule("velocity", default=0.0),
     "gap": Rule("length", 0.0, lo_in=True, default=0.0),
-    "rtol": Rule("dimensionless", 1e-13, 1e-1, lo_in=True, hi_in=True, default=1e-6),
+    "rtol": Rule("dimensionless", 1e-13, 1e-2, lo_in=True, hi_in=True, default=1e-6),   # = simulate.RTOL_RANGE
     "atol": Rule("dimensionless", 1e-20, 1.0, lo_in=True, hi_in=True, default=1e-9),   # = simulate.ATOL_RANGE
     "max_steps": Rule("dimensionless", 1, 1e9, lo_in=True, hi_in=True, default=100000, integer=True),  # MAX_STEPS
 }
@@ -271,6 +273,7 @@ class _Reader:
     def __init__(self, source: str):
         self.source = source
         self.checks: list[tuple] = []   # Checks, as data: what a free value must satisfy at run time
+        self.written: dict[str, tuple[float, str]] = {}   # key -> (number, unit) of values not written in SI
 
     def rule(self, param: Param, rule: Rule, siblings: dict[str, Param] | None) -> None:
         """Record a parameter's rule as data: its range, and the sibling it must stay below."""
@@ -361,6 +364,9 @@ class _Reader:
                 hint = f"; plain numbers are SI (rad); write '{raw:g} deg'"
             self.fail(dotted, f"must be {_range(rule, hi, hi_key)}{hint}",
                       units.describe(raw, rule.quantity))
+        form = units.written(raw, rule.quantity)
+        if form is not None:
+            self.written[dotted] = form
         return value, free
 
     def unwrap(self, raw: object, dotted: str, free_ok: bool) -> tuple[object, bool]:
@@ -627,7 +633,7 @@ class _Reader:
         scene = Scene(name, description, equations, flanks, gamma, masses["m1"], masses["m2"],
                       friction, drive, load, reference or {}, modes, run,
                       self.source, digest, torque_switch, tuple(dict.fromkeys(self.checks)), clearance, restitution, mesh,
-                      lost_motion)
+                      lost_motion, dict(self.written))
         names = [p.name for p in scene.params()]
         assert len(set(names)) == len(names) and all(n.isidentifier() for n in names), names
         return scene

@@ -81,7 +81,10 @@ def test_the_page_examples_run_and_compute_the_truth(scene_cache, tmp_path, monk
     assert ns["swept"].table["t_step"].tolist() == pytest.approx([0.04, 0.04 + 0.26 / 3, 0.04 + 0.52 / 3, 0.3])
     assert ns["fitted"].estimate["m2"] == pytest.approx(M2_TRUE, rel=1e-6)
     assert ns["from_sweep"].estimate["m2"] == pytest.approx(M2_TRUE, rel=1e-6)
-    assert {p.name for p in (tmp_path / "fit").iterdir()} == {"fit-report.md", "fit.json", "misfit.png"}
+    assert ns["fitted"].profiles["m2"]["verdict"] == "determined"
+    assert ns["fitted"].ci["m2"][0] <= M2_TRUE <= ns["fitted"].ci["m2"][1]
+    assert {p.name for p in (tmp_path / "fit").iterdir()} == {"fit-report.md", "fit.json", "misfit.png",
+                                                              "profile.png"}
     assert (tmp_path / "block-derivation.md").read_text().count("$$") >= 2
     assert set(ns["sampled"].table["F2"]) == set(np.random.default_rng(1).uniform(-20000.0, 5000.0, 20))
 

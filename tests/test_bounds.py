@@ -20,6 +20,7 @@ from test_injection import PAPER
     (["--atol", "1e-300"], ["--atol", "in [1e-20, 1]"]),
     (["--atol", "1e300"], ["--atol", "in [1e-20, 1]"]),
     (["--rtol", "1e-300"], ["--rtol"]),
+    (["--rtol", "0.1"], ["--rtol", "rtol = 0.1", "in [1e-13, 0.01]"]),
     (["--t-end", "inf"], ["t_end", "finite"]),
     (["--set", "F2=1e400"], ["F2", "finite"]),
 ])
@@ -113,3 +114,30 @@ def test_promises_page_states_the_limits_the_code_enforces():
     }
     for text, constant in rows.items():
         assert text in page and constant in page, (text, constant)
+
+
+@pytest.mark.parametrize("command", [["sweep", "paper", "--grid", "F2=-5000:-4000:2", "--no-progress"],
+                                     ["fit", "paper", "--measured", "unused.csv", "--free", "m2=100:400"]])
+def test_sweep_and_fit_hold_rtol_to_the_same_bound(command, capsys, tmp_path):
+    """rtol 0.1 left S1 max of paper-runup 90 % off a run at rtol 1e-12 with status finished: refused
+    by every command that runs the model, naming the option."""
+    assert main([*command, "--rtol", "0.1", "-o", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err
+    assert "--rtol" in err and "rtol = 0.1" in err and "Traceback" not in err, err
+
+
+def test_scene_run_rtol_has_the_same_bound():
+    with pytest.raises(SceneError, match=r"run.rtol = 0.1: must be in \[1e-13, 0.01\]"):
+        parse_scene(PAPER.replace("rtol = 1e-6", "rtol = 0.1"), "s.toml")
+
+
+def test_atol_loose_against_the_states_reached_is_refused(capsys):
+    """paper-runup: v1 runs up towards the drive's V0 = 7.85 m/s (the scene file), so
+    atol = 1 m/s lets a step be off by 13 % of it; refused naming --atol (exit 2), and a tight atol runs."""
+    assert main(["simulate", "paper-runup", "--atol", "1"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("tswm simulate: error: --atol: atol = 1: must be <= 0.01 x the largest |state|"), err
+    assert "v1" in err
+    with pytest.raises(SimulationInputError, match=r"^atol = 0.1: "):
+        simulate("paper-runup", atol=0.1)
+    assert simulate("paper-runup", atol=1e-3).status == "finished"

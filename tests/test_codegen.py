@@ -224,8 +224,9 @@ def test_new_scene_file_generates_compiles_and_evaluates(tmp_path):
         a, S1, S2 = hand_sliding(m.MODE_FLANK[mode], m.MODE_DIRECTION[mode], F1, F2, rho, 0.5, 2.0, gamma)
         assert m.accel(mode, 0.0, y, p) == pytest.approx(a, rel=1e-9)
         assert m.reactions(mode, 0.0, y, p) == pytest.approx((S1, S2), rel=1e-9)
-    D, jam = m.consistency_fwd_a(0.0, y, p)
+    D, jam = m.consistency_sliding(0.0, y, p, 1.0)      # fwd_a: rho_sign = +1
     assert jam == pytest.approx(math.cos(gamma + rho)) and 0 < jam < 2e-3
+    assert m.consistency_sliding(0.0, y, p, -1.0)[1] == pytest.approx(math.cos(gamma - rho))
     g = np.zeros(len(m.GUARDS))
     m.guards(0, 0.0, y, p, g)
     assert g[m.GUARDS.index("load_contact")] == pytest.approx(x2 - 0.01)
@@ -361,27 +362,54 @@ def test_seating_torque_switch_equals_hand_formulas():
 
 
 def test_fixed_parameters_are_named_constants_not_anonymous_literals():
-    """Fixed parameters appear once, as module constants with their scene key; no function
-    body carries their value (or tan(gamma)) as a bare number."""
+    """Fixed parameters appear once, as module constants with their scene key, written as the
+    scene gives them (4.76 deg as math.radians(4.76)) and equal to the SI value bit for bit; no
+    function body carries their value (or tan(gamma)) as a bare number."""
     import re
 
     source = (Path(__file__).parents[1] / "generated" / "paper_runup.py").read_text()
     constants, _, functions = source.partition("\n@njit")
     m = load_module("paper_runup")
     for name, value in m.FIXED.items():
-        assert re.search(rf"^{name} = {re.escape(repr(value))}  # ", constants, re.M), name
-        assert getattr(m, name) == value
-    for number in (repr(11.8), repr(math.tan(m.FIXED["gamma"])), repr(m.FIXED["gamma"])):
+        written = re.search(rf"^{name} = (.+?)  # ", constants, re.M)[1]
+        assert eval(written, {"math": math}) == value == getattr(m, name), name
+    assert re.search(r"^gamma = math.radians\(4.76\)  # wedge.gamma", constants, re.M)
+    for number in (repr(11.8), repr(math.tan(m.FIXED["gamma"]))):
         assert number not in functions, number
+    assert repr(m.FIXED["gamma"]) not in constants.partition("FIXED = ")[2].partition("\n")[2]
     assert m.tan_gamma == math.tan(m.FIXED["gamma"])
 
 
-def test_equal_bodies_are_emitted_once_as_aliases():
-    """Backward on flank a has forward-on-b's FTF (f s = -1 in both): one body, two names."""
+def test_values_with_units_are_written_as_given_and_inert():
+    """A value given with a unit is printed from its number and the unit table only, and only
+    where that gives the SI double exactly; else the SI value."""
+    from derivation.codegen import GenerationError, source_form
+
+    assert source_form(math.radians(4.76), (4.76, "deg"), "gamma") == "math.radians(4.76)"
+    assert source_form(-20000.0, (-20.0, "kN"), "F2") == "-20.0 * 1000.0"
+    assert source_form(0.2 * 1e-3, (0.2, "mm"), "clearance") == "0.2 * 0.001"
+    assert source_form(0.1, (7.0, "deg"), "gamma") == "0.1"          # the form would not give the value
+    assert source_form(5.0, None, "m1") == "5.0"
+    with pytest.raises(GenerationError, match="gamma"):
+        source_form(math.inf, (math.inf, "deg"), "gamma")
+
+
+def test_mirror_modes_share_one_function_with_the_sign_of_rho():
+    """fwd_b is fwd_a with -rho for rho, bwd_a is fwd_b, bwd_b is fwd_a: one set of functions
+    taking rho_sign, no near-copies; the dispatch passes each mode's sign (each mode's a1, S1, S2
+    against hand formulas: test_new_scene_file_generates_compiles_and_evaluates)."""
+    import re
+
     m = load_module("seating")
-    assert m.jac_bwd_a is m.jac_fwd_b and m.accel_bwd_b is m.accel_fwd_a
     source = (Path(__file__).parents[1] / "generated" / "seating.py").read_text()
-    assert "def jac_bwd_a" not in source and "jac_bwd_a = jac_fwd_b" in source
+    for prefix in ("outputs", "accel", "reactions", "consistency"):
+        assert f"def {prefix}_sliding(t, y, p, rho_sign):" in source
+        assert not re.search(rf"def {prefix}_(fwd|bwd)_", source), prefix
+    assert "def jac_sliding(t, y, p, J, dfdt, rho_sign):" in source and "def jac_fwd" not in source
+    assert m.MODE_FLANK[:4] == (1, -1, 1, -1) and m.MODE_DIRECTION[:4] == (1, 1, -1, -1)
+    accel = source[source.index("def accel(mode"):]
+    for mode, sign in enumerate((1.0, -1.0, -1.0, 1.0)):
+        assert accel.split(f"mode == {mode}:\n")[1].split("\n")[0].strip() == f"return accel_sliding(t, y, p, {sign})"
 
 
 def test_generator_digest_covers_exactly_what_code_generation_reads():

@@ -53,6 +53,20 @@ def test_an_empty_cache_is_cold_and_checking_it_compiles_nothing(tmp_path):
     assert json.loads(out.stdout) == [["integrate", "batch"], True, False]
 
 
+def test_a_kernel_compiled_on_import_survives_the_first_stale_cache_check(tmp_path):
+    """The first compile into an empty cache writes the kernel marker and purges the kernel
+    caches without it; a kernel compiled eagerly before that purge (``segment.no_jacobian``,
+    compiled when segment.py is imported) lost its cache file, and the next run found the
+    integration kernels cold after a forced foreground compile."""
+    out = _python("from tswm_runtime.integration import segment\n"
+                  "from tswm_runtime.jit import cache_guard, coldstart\n"
+                  "cache_guard.check_kernel_caches()\n"
+                  "print(coldstart.is_cached(coldstart.RUNTIME / 'integration' / 'segment.py', 'no_jacobian',\n"
+                  "      'tswm_runtime.integration.segment', True, cache_guard.kernel_digest()))", tmp_path)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.split() == ["True"]
+
+
 WARM_CHECK = """
 import json
 from tswm_runtime.jit import coldstart

@@ -80,6 +80,101 @@ def test_interval_wider_than_the_bounds_is_flagged(runup_peaks, tmp_path):
     noisy.to_csv(path, index=False)
     res = fit("paper-runup", path, ["m2=248:252"], starts=2, misfit=False)
     assert any("covers its whole bound range" in n for n in res.notes), res.notes
+    assert res.profiles["m2"]["verdict"] == "not determined" and res.ci["m2"] == (-math.inf, math.inf)
+    assert any(n.startswith("m2 is not determined by these data") for n in res.notes), res.notes
+
+
+def _coverage(runup_peaks, tmp_path, cases: int) -> tuple[int, list[float]]:
+    """Synthetic data sets: the reference's peaks at m2 = 250 kg plus Gaussian noise of 1 % of each
+    quantity's RMS (seeded); even seeds estimate the noise from the residuals, odd seeds state it.
+    Returns how many 95 % profile intervals hold the truth, and their widths."""
+    sigma = 0.01 * np.sqrt((runup_peaks[["S1m", "S2m"]] ** 2).mean())
+    covered, widths = 0, []
+    for seed in range(cases):
+        noisy = runup_peaks.copy()
+        noisy[["S1m", "S2m"]] += np.random.default_rng(seed).standard_normal((len(noisy), 2)) * sigma.to_numpy()
+        path = tmp_path / f"noisy{seed}.csv"
+        noisy.to_csv(path, index=False)
+        stated = {"S1m": float(sigma["S1m"]), "S2m": float(sigma["S2m"])} if seed % 2 else None
+        res = fit("paper-runup", path, ["m2=50:600"], starts=1, misfit=False, noise=stated, profile_points=11)
+        prof = res.profiles["m2"]
+        assert prof["verdict"] == "determined" and prof["noise"] == ("stated" if stated else
+                                                                     "estimated from the residuals")
+        assert prof["minimum_on_edge"] is None and not (prof["lower"]["edge"] or prof["upper"]["edge"])
+        lo, hi = res.ci["m2"]
+        assert lo < res.estimate["m2"] < hi
+        covered += lo <= M2_TRUE <= hi
+        widths.append(hi - lo)
+    return covered, widths
+
+
+def test_profile_intervals_cover_the_truth(runup_peaks, tmp_path):
+    """At least 17 of 20 95 % profile intervals must hold the truth (binomial(20, 0.95) gives >= 17
+    with probability 0.98), and every interval must be a real one (determined, inside the bounds)."""
+    covered, widths = _coverage(runup_peaks, tmp_path, 20)
+    assert covered >= 17, covered
+    assert 1.0 < min(widths) and max(widths) < 50.0, widths   # noise is seen, and the data still decide
+
+
+@pytest.mark.slow
+def test_profile_intervals_cover_the_truth_over_200_cases(runup_peaks, tmp_path):
+    """The same over 200 data sets: at least 180 (90 %; binomial(200, 0.95) falls below that with
+    probability 0.001)."""
+    covered, _ = _coverage(runup_peaks, tmp_path, 200)
+    assert covered >= 180, covered
+
+
+@pytest.fixture(scope="module")
+def runup_after_speed():
+    """Reading (c) by the reference: the load acts once the run-up has reached the motor's no-load
+    speed (t = 0.3 s). Scene paper-lostmotion with L between 30 and 50 mm of x2 picks its load up
+    in that same steady state, so its peaks do not depend on L there."""
+    rows = []
+    for F2 in (-5000.0, -10000.0, -15000.0):
+        S1, S2 = _peaks(200.0, F2, 0.3)
+        rows.append({"case": f"F{-F2:g}", "F2_1": F2, "S1m": S1, "S2m": S2})
+    return pd.DataFrame(rows)
+
+
+def test_a_parameter_the_data_do_not_depend_on_is_not_determined(runup_after_speed, tmp_path):
+    """Noise-free peaks that do not depend on L: the misfit's differences over L are the
+    integrator's error, so L must be reported as not determined, with the range it could take,
+    however narrow the linearised interval from that noise is."""
+    path = tmp_path / "peaks.csv"
+    runup_after_speed.assign(m2=200.0).to_csv(path, index=False)
+    for seed in (1, 6):   # starts where the linearised interval alone was 18 and 3.4 mm wide, with no note
+        res = fit("paper-lostmotion", path, ["load_at1=0.03:0.05"], starts=1, seed=seed, misfit=False,
+                  profile_points=11)
+        assert res.cost < 1e-12   # the peaks match the reference: only the integrator's noise is left
+        prof = res.profiles["load_at1"]
+        assert prof["verdict"] == "not determined" and res.ci["load_at1"] == (-math.inf, math.inf)
+        assert prof["range"] == [0.03, 0.05]
+        assert prof["numerical"]["floor"] > 0 and prof["numerical"]["different_modes"] == 0
+        assert any(n.startswith("load_at1 is not determined by these data") for n in res.notes), res.notes
+    write_outputs(res, tmp_path / "out")
+    assert "| load_at1 [m] | " in (tmp_path / "out" / "fit-report.md").read_text()
+    assert (tmp_path / "out" / "profile.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_with_noise_or_a_second_free_parameter_it_stays_undetermined(runup_after_speed, tmp_path):
+    """Three noisy data sets (0.5 % of each quantity's RMS): L is never called determined. With m2
+    free as well (L re-optimised along m2's profile and the other way round) neither is: once the
+    drive runs at its no-load speed the reference's peaks are S2m = F2 and an S1m set by F2 alone,
+    whatever m2 is."""
+    sigma = 0.005 * np.sqrt((runup_after_speed[["S1m", "S2m"]] ** 2).mean()).to_numpy()
+    assert runup_after_speed["S2m"].tolist() == pytest.approx(runup_after_speed["F2_1"].tolist(), rel=1e-12)
+    for seed in range(3):
+        noisy = runup_after_speed.assign(m2=200.0)
+        noisy[["S1m", "S2m"]] += np.random.default_rng(seed).standard_normal((len(noisy), 2)) * sigma
+        path = tmp_path / f"noisy{seed}.csv"
+        noisy.to_csv(path, index=False)
+        res = fit("paper-lostmotion", path, ["load_at1=0.03:0.05"], starts=1, misfit=False, profile_points=7)
+        assert res.profiles["load_at1"]["verdict"] == "not determined", res.notes
+    path = tmp_path / "both.csv"
+    runup_after_speed.to_csv(path, index=False)
+    res = fit("paper-lostmotion", path, ["m2=100:400", "load_at1=0.03:0.05"], starts=1, misfit=False,
+              profile_points=5)
+    assert {p["verdict"] for p in res.profiles.values()} == {"not determined"}, res.notes
 
 
 def test_two_parameters_with_correlation_and_contour(runup_peaks, tmp_path):
@@ -87,14 +182,18 @@ def test_two_parameters_with_correlation_and_contour(runup_peaks, tmp_path):
     a contour plot."""
     path = tmp_path / "peaks.csv"
     runup_peaks.drop(columns=["F2_after"]).to_csv(path, index=False)
-    res = fit("paper-runup", path, ["m2=100:400", "F2_after=-6000:-1000"], starts=2, grid_points=5)
+    res = fit("paper-runup", path, ["m2=100:400", "F2_after=-6000:-1000"], starts=2, grid_points=5,
+              profile_points=7)
     assert res.estimate["m2"] == pytest.approx(M2_TRUE, rel=1e-5)
     assert res.estimate["F2_after"] == pytest.approx(F2_TRUE, rel=1e-5)
+    for name, truth in (("m2", M2_TRUE), ("F2_after", F2_TRUE)):   # profiles with the other re-optimised
+        lo, hi = res.ci[name]
+        assert res.profiles[name]["verdict"] == "determined" and lo <= truth <= hi and hi - lo < 1e-3 * abs(truth)
     corr = np.array(res.correlation)
     assert corr.shape == (2, 2) and np.allclose(np.diag(corr), 1) and abs(corr[0, 1]) < 1
     assert np.array(res.misfit["cost"]).shape == (5, 5)
     paths = write_outputs(res, tmp_path / "out")
-    assert sorted(p.name for p in paths) == ["fit-report.md", "fit.json", "misfit.png"]
+    assert sorted(p.name for p in paths) == ["fit-report.md", "fit.json", "misfit.png", "profile.png"]
     assert (tmp_path / "out" / "misfit.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
@@ -162,13 +261,13 @@ def test_cli_writes_the_report(runup_peaks, tmp_path, capsys):
                  "--grid-points", "5", "--no-progress", "-o", str(out)])
     assert code == 0
     text = capsys.readouterr().out
-    assert "m2 = 250" in text and "95% CI" in text
+    assert "m2 = 250" in text and "95% profile CI" in text and "determined" in text
     data = json.loads((out / "fit.json").read_text())
     assert data["estimate"]["m2"] == pytest.approx(M2_TRUE, rel=1e-6)
     assert data["provenance"]["model_digest"] and data["provenance"]["versions"]["scipy"]
     assert data["settings"]["rtol"] == 1e-9 and data["fit_settings"]["starts"] == 2
     assert len(data["starts"]) == 2 and len(data["cases"]) == 4
-    assert {"fit-report.md", "fit.json", "misfit.png"} <= {p.name for p in out.iterdir()}
+    assert {"fit-report.md", "fit.json", "misfit.png", "profile.png"} <= {p.name for p in out.iterdir()}
 
 
 BASE = "F2_after,t_step,S1m\n-3000,0.1,500\n-3000,0.3,400\n"
@@ -207,6 +306,24 @@ def test_bad_inputs_exit_2_naming_the_problem(tmp_path, capsys, text, free, expe
     err = capsys.readouterr().err
     assert err.startswith("tswm fit: error: ") and expected in err, err
     assert "Traceback" not in err and not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("noise, expected", [
+    (["S1m=-5"], "--noise S1m=-5: the noise must be a finite number > 0"),
+    (["S1m=5 kg"], "--noise S1m=5 kg: 'kg' is a mass unit"),
+    (["bogus=5"], "--noise bogus=5: 'bogus' is not a measured quantity of this file (S1m)"),
+    (["S1m=5", "S1m=6"], "--noise S1m: given twice"),
+])
+def test_bad_noise_exits_2(tmp_path, capsys, noise, expected):
+    path = tmp_path / "m.csv"
+    path.write_text(BASE)
+    argv = ["fit", "paper-runup", "--measured", str(path), "--free", "m2=50:600", "--no-progress",
+            "-o", str(tmp_path / "out")]
+    for item in noise:
+        argv += ["--noise", item]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert expected in err and "Traceback" not in err, err
 
 
 def test_bad_files_exit_2(tmp_path, capsys):

@@ -30,6 +30,22 @@ def report(tmp_path_factory):
     return pr.build_report(out, CASES), out
 
 
+def _table3(out) -> list[dict]:
+    """Table 3 of the Markdown report, its per-quantity tables joined: one dict per case, keyed
+    'm2 [kg]', 'F2 [N]' and '<quantity> <column>' ('S1m paper', 'S1m (a)', 'S1m paper − (d)')."""
+    tables = pr.read_markdown_tables((out / "paper-report.md").read_text(), "Test")
+    assert len(tables) == len(pr.QUANTITIES)
+    cases = []
+    for k in range(len(tables[0]) - 1):
+        cells = {}
+        for (q, _, _), table in zip(pr.QUANTITIES, tables):
+            row = dict(zip(table[0], table[k + 1]))
+            cells.update({"Test": row["Test"], "m2 [kg]": row["m2 [kg]"], "F2 [N]": row["F2 [N]"]})
+            cells.update({f"{q} {h}": v for h, v in row.items() if h not in ("Test", "m2 [kg]", "F2 [N]")})
+        cases.append(cells)
+    return cases
+
+
 def _direct(key, m2, F2):
     scene, params = DIRECT[key]
     return simulate(scene, params(m2, F2))
@@ -51,15 +67,13 @@ def test_json_numbers_are_direct_simulate_results(report):
 
 def test_markdown_table3_matches_simulate_and_the_printed_numbers(report):
     _, out = report
-    table = pr.read_markdown_table((out / "paper-report.md").read_text(), "Test")
-    header, rows = table[0], table[1:]
+    rows = _table3(out)
     assert len(rows) == len(CASES)
-    for row, (m2, F2) in zip(rows, CASES):
-        cells = dict(zip(header, row))
+    for cells, (m2, F2) in zip(rows, CASES):
         assert float(cells["m2 [kg]"]) == m2 and float(cells["F2 [N]"]) == F2
         paper = printed(m2, F2)
         for q, attr, unit in pr.QUANTITIES:
-            column = f"{q}{f' [{unit}]' if unit else ''} paper"
+            column = f"{q} paper"
             if paper is None:
                 assert cells[column] == "not printed"
             else:
@@ -185,8 +199,23 @@ def test_markdown_tables_have_as_many_cells_as_headers(report):
     _, out = report
     md = (out / "paper-report.md").read_text()
     for first in ("Test", "Case (test)", "F2 [N]", "reading", "scene"):
-        table = pr.read_markdown_table(md, first)
-        assert len(table) > 1 and {len(row) for row in table} == {len(table[0])}, first
+        for table in pr.read_markdown_tables(md, first):
+            assert len(table) > 1 and {len(row) for row in table} == {len(table[0])}, first
+
+
+def test_table3_is_split_so_that_each_table_fits_a_page(report):
+    """One table per quantity, each of at most 10 columns and Markdown lines of at most 100
+    characters (the side-by-side table had 28 columns)."""
+    _, out = report
+    md = (out / "paper-report.md").read_text()
+    tables = pr.read_markdown_tables(md, "Test")
+    assert len(tables) == len(pr.QUANTITIES)
+    for table in tables:
+        assert len(table[0]) <= 10 and len(table) == len(CASES) + 1
+    section = md[md.index("## Table 3 side by side"):md.index("## Lost motion fitted to Table 3")]
+    lines = [line for line in section.splitlines() if line.startswith("|")]
+    assert len(lines) == len(pr.QUANTITIES) * (len(CASES) + 2)
+    assert max(len(line) for line in lines) <= 100, max(lines, key=len)
 
 
 @pytest.mark.skipif(CHROMIUM is None and not NEED_CHROMIUM,
@@ -198,13 +227,17 @@ def test_html_renders_in_headless_chromium(report, tmp_path):
     assert "http://" not in html and "https://" not in html and "<link" not in html
     assert all(src.startswith("data:image/png;base64,") for src in re.findall(r'<img[^>]*src="([^"]*)"', html))
     url = (out / "paper-report.html").as_uri()
-    flags = ["--headless", "--no-sandbox", "--disable-gpu", "--virtual-time-budget=5000"]
+    flags = ["--headless", "--no-sandbox", "--disable-gpu", "--virtual-time-budget=5000",
+             "--window-size=1240,1754"]   # A4 at 150 dpi
     dom = subprocess.run([CHROMIUM, *flags, "--dump-dom", url], capture_output=True, text=True, timeout=60).stdout
     title = re.search(r"<title>([^<]*)</title>", dom).group(1)
     images = len(re.findall(r"<img", html))
-    assert images == 5 and title == f"ok {images}/{images} images, {len(CASES)} rows", title
+    expected = f"ok {images}/{images} images, {len(CASES)} rows, 4 tables of Table 3, "
+    assert images == 5 and title.startswith(expected), title
+    widest, page = map(int, re.search(r"widest (\d+) of (\d+) px", title).groups())
+    assert 0 < widest <= page <= 1240, title        # each of Table 3's tables fits an A4 page's width
     shot = tmp_path / "shot.png"
-    subprocess.run([CHROMIUM, *flags, f"--screenshot={shot}", "--window-size=1400,4000", url],
+    subprocess.run([CHROMIUM, *flags[:-1], f"--screenshot={shot}", "--window-size=1400,4000", url],
                    capture_output=True, timeout=60)
     png = shot.read_bytes()
     assert struct.unpack(">II", png[16:24]) == (1400, 4000)
@@ -231,23 +264,28 @@ def test_lostmotion_fit_uses_table3_and_stays_in_its_bounds(report):
         assert entry["known"] == {"m2": c.m2, "F2_1": c.F2}
         assert {q: v["measured"] for q, v in entry["quantities"].items()} == {"S1m": c.S1m, "S2m": c.S2m}
     assert (out / "lostmotion" / "fit.json").exists() and (out / "lostmotion" / "misfit.png").exists()
-    # both intervals are reported; the profile interval holds the estimate and is recomputed here
-    # from the fit's misfit grid with the F quantile
+    assert (out / "lostmotion" / "profile.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    # both intervals are reported; the profile interval holds the estimate, and its threshold is recomputed
+    # here from the profile's minimum with the F quantile plus the numerical floor
     from scipy import stats
 
-    prof = lost["profile"]
-    grid_L = np.array(lost["fit"]["misfit"]["axes"][0])
-    grid_cost = np.array(lost["fit"]["misfit"]["cost"])
-    best = min(lost["cost"], grid_cost.min())
-    threshold = best * (1 + stats.f.ppf(0.95, 1, lost["dof"]) / lost["dof"])
-    inside = grid_L[grid_cost <= threshold]
-    assert prof["threshold"] == pytest.approx(threshold, rel=1e-12)
-    assert (prof["lo"], prof["hi"]) == (inside.min(), inside.max()) and prof["lo"] <= lost["L"] <= prof["hi"]
+    prof, fp = lost["profile"], lost["fit"]["profiles"]["load_at1"]
+    floor = fp["numerical"]["floor"]
+    threshold = prof["cost_min"] * (1 + stats.f.ppf(0.95, 1, lost["dof"]) / lost["dof"]) + floor
+    assert prof["threshold"] == pytest.approx(threshold, rel=1e-12) and 0 < floor < 1e-3 * prof["cost_min"]
+    L, cost = np.array(fp["values"]), np.array(fp["cost"])
+    assert np.all((L >= prof["lo"]) & (L <= prof["hi"]) | (cost > threshold))
+    assert prof["lo"] <= lost["L"] <= prof["hi"] and prof["verdict"] == "determined"
+    # the headline value is an edge: just below it test 6 stalls (its mode sequence gains 'stick'), cost jumps
+    assert prof["minimum_on_edge"] and prof["below"] < lost["L"] and prof["cost_below"] > 5 * prof["cost_min"]
+    assert [c["case"] for c in prof["edge_changes"]] == ["test6"] and "stick" in prof["edge_changes"][0]["outside"]
+    assert lost["notes"][0].startswith(f"Verdict: the fitted L = {lost['L'] * 1e3:.3f} mm is an edge, not a minimum")
     md = (out / "paper-report.md").read_text()
     a, b = lost["ci_linear"]
     assert f"linearised interval {a * 1e3:.4f}-{b * 1e3:.4f} mm" in md
     assert f"profile interval {prof['lo'] * 1e3:.2f}-{prof['hi'] * 1e3:.2f} mm" in md
     assert f"**Fitted: L = {lost['L'] * 1e3:.3f} mm**" in md
+    assert "is an edge, not a minimum" in md and "(lostmotion/profile.png)" in md
 
 
 def test_lostmotion_cells_are_simulate_at_the_fitted_L(report):
@@ -256,15 +294,12 @@ def test_lostmotion_cells_are_simulate_at_the_fitted_L(report):
     lost = data["lostmotion"]
     L, tol = lost["L"], {k: lost["fit"]["settings"][k] for k in ("rtol", "atol")}
     assert tol == {"rtol": 1e-9, "atol": 1e-12}
-    table = pr.read_markdown_table((out / "paper-report.md").read_text(), "Test")
-    header, rows = table[0], table[1:]
-    for case, row in zip(data["cases"], rows):
+    for case, cells in zip(data["cases"], _table3(out)):
         m2, F2 = case["m2"], case["F2"]
         r = simulate("paper-lostmotion", {"m2": m2, "F2_1": F2, "load_at1": L}, **tol)   # independently
         cell = case["lostmotion"]
         assert cell["values"] == {"S1m": r.S1_max, "KD1": r.KD1, "S2m": r.S2_max, "KD2": r.KD2}
         assert cell["params"] == {"m2": m2, "load_at1": L, "F2_1": F2}
-        cells = dict(zip(header, row))
         for q, attr, _ in pr.QUANTITIES:
             assert cells[f"{q} (d)"].replace("✓", "").strip() == pr.fmt(getattr(r, attr))
         # the load acts from x2 = L on and not before (k = 1 N/m stands for zero)
@@ -279,14 +314,22 @@ def test_lostmotion_cells_are_simulate_at_the_fitted_L(report):
             x["test"] == int(c["case"][4:]) for x in data["cases"]) else None
         if row:
             assert c["quantities"]["S1m"]["model"] == pytest.approx(row["lostmotion"]["values"]["S1m"], rel=1e-9)
+    # and the report says how far apart they are: "agree exactly" for 0, never "at most 0"
+    largest = {}
+    for c in lost["fit"]["cases"]:
+        row = next((x for x in data["cases"] if f"test{x['test']}" == c["case"]), None)
+        for q, entry in c["quantities"].items() if row else ():
+            largest[q] = max(largest.get(q, 0.0), abs(entry["model"] - row["lostmotion"]["values"][q]))
+    exact = [q for q, d in largest.items() if d == 0]
+    md, html = (out / "paper-report.md").read_text(), (out / "paper-report.html").read_text()
+    for text in (md, html):
+        assert not re.search(r"at most 0(\.0*)?[^.\d]", text) and "at most 0 (" not in text
+        assert ("agree exactly in " + exact[0]) in text if exact else "differ by at most" in text
 
 
 def test_lostmotion_residuals_are_printed_minus_computed(report):
     result, out = report
-    table = pr.read_markdown_table((out / "paper-report.md").read_text(), "Test")
-    header, rows = table[0], table[1:]
-    for case, row in zip(result["data"]["cases"], rows):
-        cells = dict(zip(header, row))
+    for case, cells in zip(result["data"]["cases"], _table3(out)):
         paper = printed(case["m2"], case["F2"])
         for q, attr, _ in pr.QUANTITIES:
             computed = case["lostmotion"]["values"][q]

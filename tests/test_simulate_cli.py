@@ -271,9 +271,19 @@ F2 = "-20 N"
 t_end = "0.5 s"
 ''')
     before = sorted(p.name for p in (Path(__file__).parents[1] / "generated").iterdir())
+    capsys.readouterr()
     assert main(["simulate", str(scene), "--no-plot", "-o", str(tmp_path / "out")]) == 0
     cached = list((tmp_path / "cache" / "models").glob("block_*/block.py"))
     assert len(cached) == 1
+    out = capsys.readouterr().out
+    assert _printed_module(out) == cached[0].resolve()            # the module that ran, a real file
+    assert f", from {scene})" in out.splitlines()[0]
+    for line in out.splitlines():
+        if line.startswith("  wrote "):
+            assert Path(line[len("  wrote "):]).is_file(), line
+    assert main(["generate", str(scene), "-o", str(tmp_path / "gen")]) == 0     # generate names its file too
+    wrote = capsys.readouterr().out.split(":")[0]
+    assert wrote == f"wrote {tmp_path / 'gen' / 'block.py'}" and (tmp_path / "gen" / "block.py").is_file()
     stamp = cached[0].stat().st_mtime_ns
     assert main(["simulate", str(scene), "--no-plot"]) == 0
     assert cached[0].stat().st_mtime_ns == stamp                      # reused, not regenerated
@@ -286,6 +296,24 @@ t_end = "0.5 s"
     csv = (tmp_path / "out" / "block.csv").read_text().splitlines()
     last = [float(x) for x in csv[-1].split(",")[:3]]
     assert last[2] == pytest.approx(a1 * 0.5, rel=1e-9)
+
+
+def _printed_module(out: str) -> Path:
+    """The module path that simulate's first line names, checked to exist, resolved."""
+    import re
+
+    found = re.match(r"scene \S+ \((?:consistent|literal) equations, (.+?)(?:, from .+)?\)$", out.splitlines()[0])
+    assert found, out.splitlines()[0]
+    path = Path(found.group(1))
+    assert path.is_file() and path.suffix == ".py", out.splitlines()[0]
+    return path.resolve()
+
+
+def test_simulate_prints_the_path_of_the_module_that_ran(capsys):
+    from tswm_runtime.model.contract import load_module
+
+    assert main(["simulate", "paper", "--t-end", "0.01", "--points", "3", "--no-plot"]) == 0
+    assert _printed_module(capsys.readouterr().out) == Path(load_module("paper").__file__).resolve()
 
 
 @pytest.mark.parametrize("value, text", [(-15000.0, "-15 kN"), (-16932.7, "-16.93 kN"), (727.63, "727.6 N"),
@@ -302,7 +330,9 @@ def test_plot_labels_forces_without_exponents():
     from tswm_runtime.results.plot import figure
 
     r = simulate("paper", {"m2": 200.0, "F2": -15000.0}, points=11)
-    labels = [t.get_text() for ax in figure(r, load_module("paper")).axes for t in ax.texts]
+    from matplotlib.text import Text
+
+    labels = [t.get_text() for t in figure(r, load_module("paper")).findobj(Text)]
     assert r.S2_max == -15000.0
     assert any(label.startswith("S2 = -15 kN at t = ") for label in labels), labels
     assert not any("e+" in label for label in labels), labels

@@ -1,9 +1,10 @@
 """The layout's promises, read from the source (AST), lazy imports included: no import cycle in
 tswm_runtime/, derivation/ or tswm_common/; derivation/ never imports tswm_runtime/; tswm_common/
 imports neither; no folder of more than ten modules; docs/architecture.md names only modules that
-exist."""
+exist; the core kernels take their arguments as named bundles."""
 from __future__ import annotations
 
+import ast
 import importlib.util
 import re
 from pathlib import Path
@@ -131,3 +132,20 @@ def test_every_runtime_room_is_in_the_order():
     packages = {name.rpartition(".")[0] for name in GRAPH}
     rooms = {import_map.room(name, packages) for name in GRAPH if name.startswith("tswm_runtime.")}
     assert rooms - set(ROOM_ORDER) - OUTSIDE == set()
+
+
+# The core kernels take their arguments as named bundles (jit/structures.py: functions, settings,
+# state, record, work arrays), not as long positional lists.
+CORE_KERNELS = {"tswm_runtime/integration/segment.py": "run", "tswm_runtime/integration/painleve.py": "approach",
+                "tswm_runtime/hybrid/machine.py": "integrate_hybrid", "tswm_runtime/hybrid/entry.py": "integrate_at",
+                "tswm_runtime/hybrid/batch.py": "run_batch"}
+MAX_KERNEL_PARAMETERS = 8
+
+
+def test_core_kernels_take_named_bundles():
+    counts = {}
+    for path, name in CORE_KERNELS.items():
+        tree = ast.parse((ROOT / path).read_text())
+        (function,) = [node for node in tree.body if isinstance(node, ast.FunctionDef) and node.name == name]
+        counts[f"{path} {name}"] = len(function.args.args)
+    assert max(counts.values()) <= MAX_KERNEL_PARAMETERS, counts

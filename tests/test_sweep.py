@@ -10,7 +10,8 @@ from tswm_runtime.cli import main
 from tswm_runtime.model.contract import load_module
 from tswm_runtime.results.result import STATUS_NAMES
 from tswm_runtime.simulation.simulate import simulate
-from tswm_runtime.sweeps.sweep import REGIME_LETTERS, SweepInputError, grid_cases, parse_grid, read_table, sweep
+from tswm_runtime.sweeps.rows import REGIME_LETTERS
+from tswm_runtime.sweeps.sweep import SweepInputError, grid_cases, parse_grid, read_table, sweep
 
 LETTER = REGIME_LETTERS
 
@@ -88,7 +89,7 @@ def test_dask_local_cluster_rows_equal_in_process_rows():
     local = sweep(module, P, chunk_size=1)
     with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=False,
                                   dashboard_address=None) as cluster, distributed.Client(cluster) as client:
-        remote = sweep(module, P, chunk_size=1, client=client, scene_spec="paper-runup")
+        remote = sweep(module, P, chunk_size=1, client=client)
     assert remote.computed and sorted(remote.computed) == [0, 1, 2, 3]
     pd.testing.assert_frame_equal(local.table, remote.table)
 
@@ -143,7 +144,7 @@ def test_parse_grid_single_value_and_duplicates():
 def test_mode_sequences_are_spelt_per_case_and_long_ones_end_in_an_ellipsis():
     from types import SimpleNamespace
 
-    from tswm_runtime.sweeps.sweep import SEQ_LEN, sequence_texts
+    from tswm_runtime.sweeps.rows import SEQ_LEN, sequence_texts
 
     module = SimpleNamespace(MODE_REGIME=("tractive", "stick", "free flight"))
     seq = np.full((4, SEQ_LEN), -1)

@@ -173,7 +173,67 @@ def test_cli_prune_removes_stale_files(tmp_path, capsys):
     capsys.readouterr()
     assert main([*base, "--grid", "F2=-15000:-1000:6"]) == 0     # another grid: the old chunks are stale
     err = capsys.readouterr().err
-    assert "3 file(s)" in err and "--prune" in err
+    assert "3 files in" in err and "--prune" in err
     assert main([*base, "--grid", "F2=-15000:-1000:6", "--prune"]) == 0
-    assert "pruned 3 stale file(s)" in capsys.readouterr().err
+    assert "pruned 3 stale files" in capsys.readouterr().err
     assert len(chunk_files(tmp_path)) == 3 and not leftover.exists()
+
+
+def _module_at(paper, path, source: str):
+    """``paper``'s compiled functions in a module whose file is ``path``, holding ``source``."""
+    path.write_text(source)
+    module = types.ModuleType(path.stem)
+    module.__dict__.update({k: v for k, v in vars(paper).items() if not k.startswith("__")})
+    module.__file__ = str(path)
+    return module
+
+
+def _edited_body(paper) -> str:
+    """paper's source with one line of its body changed and its header (body-sha256 included) kept."""
+    source = open(paper.__file__).read()
+    edited = source.replace("\nimport math\n", "\nimport math  # edited by hand\n", 1)
+    assert edited != source and edited.splitlines()[:5] == source.splitlines()[:5]
+    return edited
+
+
+def test_hand_edited_body_with_its_old_header_reuses_nothing(paper, cases, reference, tmp_path):
+    """The key hashes the module's file as it is, not the body digest its header states: a body
+    edited by hand under an unchanged header (same '# body-sha256:' line) is recomputed."""
+    path = tmp_path / "paper_copy.py"
+    sweep(_module_at(paper, path, open(paper.__file__).read()), cases, SETTINGS, output=tmp_path, chunk_size=2)
+    again = sweep(_module_at(paper, path, _edited_body(paper)), cases, SETTINGS, output=tmp_path, chunk_size=2)
+    assert again.computed == [0, 1, 2] and again.skipped == [] and len(again.stale) == 3
+    pd.testing.assert_frame_equal(again.table, reference)
+
+
+def test_chunk_with_an_altered_result_column_is_recomputed_with_a_warning(paper, cases, reference, tmp_path):
+    """A result value changed in place (key and parameter rows intact, schema metadata kept): the
+    columns' checksum no longer matches, so the chunk is recomputed and the warning names the file."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    sweep(paper, cases, SETTINGS, output=tmp_path, chunk_size=2)
+    path = chunk_files(tmp_path)[1]
+    arrow = pq.read_table(path)
+    s1m = arrow.column("S1m").to_numpy().copy()
+    s1m[0] *= 2.0
+    altered = arrow.set_column(arrow.schema.get_field_index("S1m"), "S1m", pa.array(s1m))
+    pq.write_table(altered.replace_schema_metadata(arrow.schema.metadata), path)
+    assert pq.read_schema(path).metadata[chunks.METADATA_KEY] == arrow.schema.metadata[chunks.METADATA_KEY]
+    again = sweep(paper, cases, SETTINGS, output=tmp_path, chunk_size=2)
+    assert again.computed == [1] and again.skipped == [0, 2] and "checksum" in again.rejected[0][1]
+    assert any(str(path) in w and "checksum" in w and "recomputing" in w for w in again.warnings)
+    pd.testing.assert_frame_equal(again.table, reference)
+
+
+def test_simulate_warns_when_a_body_no_longer_matches_its_header(paper, tmp_path, capsys, monkeypatch):
+    from tswm_runtime.model import scenes
+
+    path = tmp_path / "paper_copy.py"
+    monkeypatch.setattr(scenes, "load_model", lambda spec: _module_at(paper, path, _edited_body(paper)))
+    assert main(["simulate", "paper", "--t-end", "0.01"]) == 0
+    err = capsys.readouterr().err
+    assert f"warning: {path}: its body no longer matches its '# body-sha256:' header" in err, err
+    monkeypatch.setattr(scenes, "load_model", lambda spec: _module_at(paper, path, open(paper.__file__).read()))
+    assert main(["simulate", "paper", "--t-end", "0.01"]) == 0
+    assert "warning" not in capsys.readouterr().err

@@ -1,6 +1,7 @@
 """Atomic file writes: a reader never sees a half-written file."""
 from __future__ import annotations
 
+import hashlib
 import os
 import tempfile
 from pathlib import Path
@@ -32,3 +33,15 @@ def _umask() -> int:
     mask = os.umask(0o022)
     os.umask(mask)
     return mask
+
+
+HEADER_LINES = 5   # a generated module's header: origin, scene, generator and body digests, version
+
+
+def body_digests(source: str) -> tuple[str | None, str]:
+    """(the ``# body-sha256:`` a generated module's header states, None without one; the sha256 of its
+    body as it is), so a hand edit of the body shows as a difference."""
+    lines = source.splitlines(keepends=True)
+    stated = next((line.split(":", 1)[1].strip() for line in lines[:HEADER_LINES]
+                   if line.startswith("# body-sha256:")), None)
+    return stated, hashlib.sha256("".join(lines[HEADER_LINES:]).encode()).hexdigest()

@@ -58,6 +58,19 @@ def to_si(raw: object, quantity: str) -> float:
     return value
 
 
+def written(raw: object, quantity: str) -> tuple[float, str] | None:
+    """(number, unit) of a valid value written with a unit other than the SI unit ("4.76 deg"), else None."""
+    if not isinstance(raw, str) or quantity == "dimensionless":
+        return None
+    number, unit = _split(raw, quantity)
+    return None if unit == si_unit(quantity) else (number, unit)
+
+
+def factor(unit: str) -> float:
+    """The factor to SI of a unit in the table."""
+    return next(table[unit] for table in UNITS.values() if unit in table)
+
+
 def describe(raw: int | float | str, quantity: str) -> str:
     """A valid value as written, followed by its display-unit value when that reads differently."""
     shown = show(to_si(raw, quantity), quantity)

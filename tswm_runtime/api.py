@@ -65,29 +65,35 @@ def simulate(scene, params: dict | None = None, *, t_end=None, rtol=None, atol=N
 
 
 def sweep(scene, grid=None, *, samples: int | None = None, ranges=None, seed: int = 0, output=None,
-          chunk_size: int = 512, client=None, large: bool = False, prune: bool = False, progress: bool = False,
-          t_end=None, rtol=None, atol=None, method=None, max_steps=None, max_events=None):
+          chunk_size: int = 512, client=None, wait_for_workers: float = 60.0, large: bool = False,
+          prune: bool = False, progress: bool = False, t_end=None, rtol=None, atol=None, method=None, max_steps=None, max_events=None):
     """``scene`` over a ``grid`` ({name: "START:STOP:COUNT" or a value}) or ``samples`` seeded
     random cases in ``ranges`` ({name: "LO:HI" or (lo, hi)}) (``tswm sweep``). ``output``: a
     directory for the chunks and SCENE-sweep.parquet, .csv and .json (resumable); ``client``: a
-    dask.distributed Client to run the chunks on (``--scheduler``). Returns the ``SweepOutcome``;
+    dask.distributed Client to run the chunks on (``--scheduler``; docs/cluster.md), ``wait_for_workers``
+    the seconds it may have no worker (``--wait-for-workers``); a lost cluster raises
+    ``SweepClusterLost`` with the chunks kept. Returns the ``SweepOutcome``;
     its ``table`` is a pandas DataFrame, one row per case (columns: tswm_runtime/sweeps/sweep.py)."""
     from tswm_runtime.sweeps.sweep import sweep as run, sweep_cases
 
     module = _model(scene)
     P = sweep_cases(module, grid, samples=samples, ranges=ranges, seed=seed, chunk_size=chunk_size, large=large)
     return run(module, P, _settings(t_end, rtol, atol, method, max_steps, max_events), output=output,
-               chunk_size=chunk_size, client=client, progress=progress, prune=prune)
+               chunk_size=chunk_size, client=client, progress=progress, prune=prune,
+               wait_for_workers=wait_for_workers)
 
 
 def fit(scene, measured, free, *, starts: int = 4, sampler: str = "sobol", seed: int = 0, magnitude: bool = False,
         confidence: float = 0.95, grid_points: int | None = None, output=None, plot: bool = True,
         progress: bool = False, t_end=None, rtol=None, atol=None, method=None, max_steps=None, max_events=None,
-        points=None):
+        points=None, noise=None, profile_points: int | None = None):
     """Fit the ``free`` parameters ({name: "LO:HI" or (lo, hi)}, or "NAME[=LO:HI]" strings) of
     ``scene`` to the ``measured`` table, a CSV or Parquet file: one written by ``tswm simulate -o``
     or ``tswm sweep -o`` as it is, or one of docs/fit.md (``tswm fit``). ``output``: a directory
-    for fit-report.md, fit.json and (with ``plot``) misfit.png. Returns the ``FitResult``."""
+    for fit-report.md, fit.json and (with ``plot``) misfit.png and profile.png. ``noise``: the
+    measurement noise of every measured quantity ({quantity: sigma} or "QUANTITY=SIGMA" strings;
+    default: estimated from the residuals); ``profile_points``: each profile's grid. Returns the
+    ``FitResult``."""
     from tswm_runtime.fitting.fit import FitInputError, fit as run
     from tswm_runtime.fitting.report import write_outputs
     from tswm_runtime.sweeps.sweep import SweepInputError, spec_items
@@ -102,7 +108,8 @@ def fit(scene, measured, free, *, starts: int = 4, sampler: str = "sobol", seed:
     result = run(module, measured, items, overrides=_settings(t_end, rtol, atol, method, max_steps, max_events,
                                                                points),
                  starts=starts, sampler=sampler, seed=seed, magnitude=magnitude, confidence=confidence,
-                 grid_points=grid_points, progress=progress, misfit=plot)
+                 grid_points=grid_points, progress=progress, misfit=plot, noise=noise,
+                 profile_points=profile_points)
     if output is not None:
         write_outputs(result, output, plot=plot)
     return result

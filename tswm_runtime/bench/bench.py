@@ -36,6 +36,7 @@ from pathlib import Path
 
 from tswm_runtime.bench import report
 from tswm_runtime.common import provenance
+from tswm_runtime.common.words import plural
 from tswm_runtime.bench.cases import (CASES, FIXED_COST_T_END, errors, reference, run_fixed_cost, run_peer,
                                            run_simulate, run_sweep)
 from tswm_runtime.bench.peers import available_methods
@@ -283,8 +284,8 @@ def main(quick: bool = False, output: str | os.PathLike = "tswm-report/bench", c
     for case in chosen:
         reference(case)
     t_ref = time.perf_counter() - t0
-    log(f"references for {len(chosen)} cases in {t_ref:.1f} s; {len(tols)} tolerances, peers {', '.join(peers)}, "
-        f"{repeats} rounds")
+    log(f"references for {plural(len(chosen), 'case')} in {t_ref:.1f} s; {plural(len(tols), 'tolerance')}, peers "
+        f"{', '.join(peers)}, {plural(repeats, 'round')}")
     rows = measure(configurations(chosen, tols, peers, sweep_n), repeats, log)
     verdicts = report.speedup_verdicts(rows)
     thr = throughput(cases or (1000 if quick else 10_000), log=log)
@@ -325,7 +326,7 @@ def _markdown(info, refs, t_ref, rows, verdicts, thr, flat, cold, empty, tols, r
           f"{sweep_n} (not comparable with one-thread calls: it uses {info['numba_threads']} threads); "
           f"peers as a careful user writes them (`tswm_runtime/bench/peers.py`: span split at load times, "
           f"directed terminal events, restart with the new flank, phi event armed only where phi can "
-          f"vanish). One untimed warm-up call per configuration, then {repeats} rounds over all "
+          f"vanish). One untimed warm-up call per configuration, then {plural(repeats, 'round')} over all "
           f"configurations, each in its own shuffled order (seeded; no configuration always follows the same "
           f"one, so none always finds the caches warm from a relative); median (min, max) seconds per call. Tolerances "
           f"{', '.join(f'{t:g}' for t in tols)}; atol = rtol x {ATOL_PER_RTOL:g} for every solver.", "",

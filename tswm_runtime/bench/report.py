@@ -115,17 +115,20 @@ def md_table(rows, keys, fmt=None) -> str:
     return "\n".join(lines)
 
 
-def plot(rows, path) -> None:
+def work_precision_figure(rows):
     """Work-precision: error (largest of the four) against median time per call, log-log,
-    one panel per case."""
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    one panel per case; the solvers named in one legend below the panels."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    from tswm_runtime.results.plot import fit_text
 
     cases = list(dict.fromkeys(r["case"] for r in rows))
     ncol = min(3, len(cases))
     nrow = math.ceil(len(cases) / ncol)
-    fig, axes = plt.subplots(nrow, ncol, figsize=(5.2 * ncol, 4.2 * nrow), squeeze=False)
+    fig = Figure(figsize=(5.2 * ncol, 4.2 * nrow + 0.6), layout="constrained")
+    FigureCanvasAgg(fig)
+    axes = fig.subplots(nrow, ncol, squeeze=False)
     for ax, case in zip(axes.flat, cases):
         for solver in dict.fromkeys(r["solver"] for r in rows):
             pts = sorted((-r["rtol"], r["t_med"], max(r["err"], ERR_FLOOR)) for r in rows if r["case"] == case
@@ -139,7 +142,18 @@ def plot(rows, path) -> None:
         ax.grid(True, which="both", alpha=0.3)
     for ax in list(axes.flat)[len(cases):]:
         ax.axis("off")
-    axes.flat[0].legend(fontsize=7)
-    fig.tight_layout()
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
+    named = {}
+    for ax in axes.flat:
+        named.update({label: handle for handle, label in zip(*ax.get_legend_handles_labels()) if label not in named})
+    fig.legend(list(named.values()), list(named), loc="outside lower center", ncols=max(1, min(len(named), 4)),
+               fontsize=7)
+    fig.draw_without_rendering()
+    for ax in list(axes.flat)[:len(cases)]:
+        fit_text(ax.title, ax.bbox.width)
+    fig.draw_without_rendering()
+    return fig
+
+
+def plot(rows, path) -> None:
+    """The work-precision figure written as a PNG."""
+    work_precision_figure(rows).savefig(path, dpi=90)

@@ -2,10 +2,10 @@
 from __future__ import annotations
 
 import argparse
-import math
 import sys
 import time
 
+from tswm_runtime.common.words import plural
 from tswm_runtime.cli.common import (UsageError, add_setting_options, output_directory, prepare_kernels, run_method,
                                      setting_error, setting_overrides)
 
@@ -33,26 +33,27 @@ def run(args: argparse.Namespace) -> int:
     try:
         result = fit(module, args.measured, args.free, overrides=overrides, starts=args.starts,
                      sampler=args.sampler, seed=args.seed, magnitude=args.magnitude, confidence=args.confidence,
-                     grid_points=args.grid_points, progress=not args.no_progress, misfit=not args.no_plot)
+                     grid_points=args.grid_points, progress=not args.no_progress, misfit=not args.no_plot,
+                     noise=args.noise, profile_points=args.profile_points)
     except KeyboardInterrupt:
         print(f"tswm fit {args.scene}: interrupted (Ctrl-C) after {time.perf_counter() - start:.3g} s; "
               "nothing written", file=sys.stderr)
         return 130
-    except FitInputError as error:
-        raise UsageError(str(error)) from None
-    except SimulationInputError as error:
+    except (FitInputError, SimulationInputError) as error:   # a run setting's is named by its option
         raise setting_error(error, overrides) from None
     except warmup.PYTHON_ONLY_ERRORS as error:
         if cold is None:
             raise
         return warmup.rerun_compiled(args.argv, error)
-    print(f"scene {result.scene}: {result.measured['form']} of {result.measured['cases']} case(s) from "
-          f"{args.measured}; {len(result.starts)} start(s), {result.fit_settings['model_runs']} model runs, "
+    print(f"scene {result.scene}: {result.measured['form']} of {plural(result.measured['cases'], 'case')} from "
+          f"{args.measured}; {plural(len(result.starts), 'start')}, "
+          f"{plural(result.fit_settings['model_runs'], 'model run')}, "
           f"{time.perf_counter() - start:.3g} s")
     for name, unit in zip(result.names, result.units):
-        lo, hi = result.ci[name]
-        ci = ("no CI" if math.isnan(lo) else "CI unbounded" if not (math.isfinite(lo) and math.isfinite(hi))
-              else f"{result.confidence:.0%} CI [{lo:.6g}, {hi:.6g}]")
+        p = result.profiles[name]
+        ci = (f"not determined by these data: any value in [{p['range'][0]:.6g}, {p['range'][1]:.6g}]"
+              if p["verdict"] == "not determined" else
+              f"{result.confidence:.0%} profile CI [{p['lo']:.6g}, {p['hi']:.6g}], {p['verdict']}")
         print(f"  {name} = {result.estimate[name]:.8g} {unit}  ({ci}; bounds {result.bounds[name][0]:g} to "
               f"{result.bounds[name][1]:g})")
     print(f"  cost {result.cost:.6g}, {result.dof} degrees of freedom, condition {result.condition:.4g}")
@@ -73,8 +74,9 @@ def add_parser(sub) -> None:
         description="Fit free parameters of a scene to measured values: peaks (one row per case: known "
                     "parameters, S1m, S2m, KD1, KD2) or a time history (columns t, case, S1, S2, v1), from a "
                     "CSV or Parquet file (the tables tswm sweep -o and tswm simulate -o write, as written), "
-                    "with scipy.optimize.least_squares from several starts. Writes "
-                    "DIR/fit-report.md, fit.json and misfit.png (see docs/fit.md). Exit status: 0 fitted, 1 "
+                    "with scipy.optimize.least_squares from several starts, and profile-likelihood intervals. "
+                    "Writes DIR/fit-report.md, fit.json, misfit.png and profile.png (see docs/fit.md). Exit "
+                    "status: 0 fitted, 1 "
                     "fitted but a case does not finish at the optimum (or no start converged), 2 bad input, "
                     "130 interrupted.")
     fit.add_argument("scene", help="a shipped scene name, a scene file (.toml) or a generated module's .py path")
@@ -92,11 +94,16 @@ def add_parser(sub) -> None:
                      "as the sweep reports them)")
     fit.add_argument("--confidence", type=float, default=0.95, help="confidence level of the intervals "
                      "(default 0.95)")
+    fit.add_argument("--noise", action="append", metavar="QUANTITY=SIGMA",
+                     help="measurement noise (one standard deviation) of a measured quantity, SI or with a unit: "
+                          "S1m='50 N'; give every quantity or none (default: estimated from the residuals)")
+    fit.add_argument("--profile-points", type=int, metavar="N",
+                     help="grid points of each parameter's profile (default 21, 5 to 201)")
     fit.add_argument("--grid-points", type=int, metavar="N",
                      help="misfit plot: points per axis (default 41 for one parameter, 15 for two)")
     add_setting_options(fit, FIT_SETTINGS)
     fit.add_argument("-o", "--output", default="tswm-report/fit", metavar="DIR",
-                     help="write DIR/fit-report.md, fit.json, misfit.png (default tswm-report/fit)")
-    fit.add_argument("--no-plot", action="store_true", help="no misfit grid and no misfit.png")
+                     help="write DIR/fit-report.md, fit.json, misfit.png, profile.png (default tswm-report/fit)")
+    fit.add_argument("--no-plot", action="store_true", help="no misfit grid, no misfit.png and no profile.png")
     fit.add_argument("--no-progress", action="store_true", help="no progress bars")
     fit.set_defaults(run=run)

@@ -7,6 +7,7 @@ import os
 import sys
 import time
 
+from tswm_runtime.common.words import plural
 from tswm_runtime.cli.common import (SETTING_OPTIONS, UsageError, add_setting_options, output_directory,
                                      parse_sets, prepare_kernels, run_method, setting_error, setting_overrides)
 
@@ -54,7 +55,7 @@ def _print_summary(result, module, origin: str, t_load: float, t_run: float) -> 
     params = ", ".join(f"{k} = {v:g} {units[k]}".rstrip() for k, v in result.params.items())
     print(f"  parameters: {params or 'none free'}")
     print(f"  run: t_end = {run['t_end']:g} s, x1(0) = {run['x1']:g} m, v1(0) = {run['v1']:g} m/s, "
-          f"{run['method']}, rtol {run['rtol']:g}, atol {run['atol']:g}, {run['points']} points")
+          f"{run['method']}, rtol {run['rtol']:g}, atol {run['atol']:g}, {plural(run['points'], 'point')}")
     print(f"  status: {result.status}: {result.message}")
     print(f"  phases ({len(result.phases)}):")
     rows = [("regime", "mode", "t_start [s]", "t_end [s]")]
@@ -82,6 +83,18 @@ def _print_summary(result, module, origin: str, t_load: float, t_run: float) -> 
     print(f"  wall time {t_load + t_run:.3g} s (runtime and module load {t_load:.3g} s, simulation {t_run:.3g} s)")
 
 
+def _warn_if_edited(module) -> None:
+    """A warning on stderr when a generated module's body no longer matches its header's digest."""
+    from tswm_common.files import body_digests
+    from tswm_common.text import printable
+
+    stated, actual = body_digests(open(module.__file__, encoding="utf-8", errors="replace").read())
+    if stated is not None and stated != actual:
+        print(f"tswm simulate: warning: {printable(module.__file__)}: its body no longer matches its "
+              "'# body-sha256:' header (edited by hand since it was generated); running the edited code",
+              file=sys.stderr)
+
+
 def run(args: argparse.Namespace) -> int:
     start = time.perf_counter()
     output_directory(args.output)
@@ -92,6 +105,7 @@ def run(args: argparse.Namespace) -> int:
     from tswm_runtime.startup import warmup
 
     module = load_model(spec)
+    _warn_if_edited(module)
     if cold is not None:
         warmup.begin(cold, run_method(args, module))
     t_load = time.perf_counter() - start

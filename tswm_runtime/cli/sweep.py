@@ -3,21 +3,74 @@
 from __future__ import annotations
 
 import argparse
+import logging
+import math
+import shlex
 import sys
 
+from tswm_runtime.common.words import plural
 from tswm_runtime.cli.common import (UsageError, add_setting_options, output_directory, prepare_kernels, run_method,
                                      setting_error, setting_overrides)
 
 SWEEP_SETTINGS = ("t_end", "rtol", "atol", "method", "max_steps", "max_events")
 
 
+CONNECT_TIMEOUT_S = 10
+
+
+class ClusterUnreachable(RuntimeError):
+    """No dask scheduler answers at the given address (exit 1: the run failed, the input may be right)."""
+
+
+def _notice(text: str) -> None:
+    print(f"tswm sweep: {text}", file=sys.stderr, flush=True)
+
+
+def _client(address: str):
+    """(dask Client, LocalCluster or None) for --scheduler ADDRESS ('local': a cluster in this process)."""
+    from distributed import Client, LocalCluster
+
+    if address == "local":
+        cluster = LocalCluster(n_workers=1, threads_per_worker=1, processes=False, dashboard_address=None)
+        return Client(cluster), cluster
+    try:
+        return Client(address, timeout=CONNECT_TIMEOUT_S), None
+    except ValueError as error:
+        raise UsageError(f"--scheduler {address!r}: {error}") from None
+    except OSError as error:   # TimeoutError and refused connections
+        raise ClusterUnreachable(f"no dask scheduler answers at {address} within {CONNECT_TIMEOUT_S} s "
+                                 f"({type(error).__name__}: {error})") from None
+
+
+def _quiet_dask() -> None:
+    """Silence distributed's loggers: closing a client that lost its scheduler logs reconnect
+    tracebacks that say no more than our message."""
+    for name in [n for n in logging.root.manager.loggerDict if n.split(".")[0] == "distributed"]:
+        logging.getLogger(name).setLevel(logging.CRITICAL + 1)
+
+
+def _wait_seconds(text: str) -> float:
+    value = float(text)
+    if math.isnan(value) or value < 0:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected seconds >= 0 (or inf)")
+    return value
+
+
 def run(args: argparse.Namespace) -> int:
+    try:
+        return _run(args)
+    except ClusterUnreachable as error:
+        print(f"tswm sweep: cluster problem: {error}", file=sys.stderr)
+        return 1
+
+
+def _run(args: argparse.Namespace) -> int:
     output_directory(args.output)
     spec, cold = prepare_kernels(args.scene, ("integrate", "batch"))
     from tswm_runtime.model.scenes import load_model
     from tswm_runtime.simulation.simulate import SimulationInputError
     from tswm_runtime.startup import warmup
-    from tswm_runtime.sweeps.sweep import SweepInputError, SweepInterrupted, sweep, sweep_cases
+    from tswm_runtime.sweeps.sweep import SweepClusterLost, SweepInputError, SweepInterrupted, sweep, sweep_cases
 
     module = load_model(spec)
     overrides = setting_overrides(args, SWEEP_SETTINGS)
@@ -29,21 +82,18 @@ def run(args: argparse.Namespace) -> int:
             if not warmup.interpreting_is_quicker(cold, module, P, overrides, method):
                 return warmup.rerun_compiled(args.argv)
             warmup.begin(cold, method)
-        client = cluster = None
-        if args.scheduler:
-            from distributed import Client, LocalCluster
-
-            if args.scheduler == "local":
-                cluster = LocalCluster(n_workers=1, threads_per_worker=1, processes=False,
-                                       dashboard_address=None)
-                client = Client(cluster)
-            else:
-                client = Client(args.scheduler)
+        client, cluster = _client(args.scheduler) if args.scheduler else (None, None)
         try:
             outcome = sweep(module, P, overrides, output=args.output, chunk_size=args.chunk_size,
-                            client=client, progress=not args.no_progress, prune=args.prune)
+                            client=client, progress=not args.no_progress, prune=args.prune,
+                            wait_for_workers=args.wait_for_workers, notice=_notice)
         except SweepInterrupted as stop:
             print(f"tswm sweep: {stop}", file=sys.stderr)
+            return 1
+        except SweepClusterLost as lost:
+            _quiet_dask()
+            print(f"tswm sweep: cluster problem: {lost}\n  resume with: tswm {shlex.join(args.argv)}",
+                  file=sys.stderr)
             return 1
         except warmup.PYTHON_ONLY_ERRORS as error:
             if cold is None or isinstance(error, (SweepInputError, SimulationInputError)):
@@ -51,7 +101,7 @@ def run(args: argparse.Namespace) -> int:
             return warmup.rerun_compiled(args.argv, error)
         finally:
             if client is not None:
-                client.close()
+                client.close(timeout=5)
             if cluster is not None:
                 cluster.close()
     except SweepInputError as error:
@@ -62,7 +112,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"tswm sweep: warning: {warning}", file=sys.stderr)
     table = outcome.table
     n = len(table)
-    print(f"scene {module.SCENE}: {n} cases in {outcome.seconds:.3g} s "
+    print(f"scene {module.SCENE}: {plural(n, 'case')} in {outcome.seconds:.3g} s "
           f"({n / outcome.seconds if outcome.seconds else 0:.4g} cases/s incl. load and writing); "
           f"chunks computed {len(outcome.computed)} (of them {len(outcome.rejected)} rejected on disk), "
           f"reused {len(outcome.skipped)}")
@@ -86,7 +136,9 @@ def add_parser(sub) -> None:
                     "DIR/SCENE-sweep.parquet and .csv. Work is done in chunks written to DIR/chunks/, each holding its key "
                     "(model, runtime, settings, rows); a rerun reuses only chunks that prove they hold "
                     "the asked rows and recomputes others with a warning. Exit status: 0 done, 1 "
-                    "interrupted (complete chunks are kept: rerun to resume), 2 bad input.")
+                    "interrupted or the cluster failed (complete chunks are kept: rerun to resume), 2 bad "
+                    "input. With --scheduler the model's source travels with the work and every worker is "
+                    "checked first (docs/cluster.md).")
     sweep.add_argument("scene", help="a shipped scene name, a scene file (.toml) or a generated module's .py path")
     sweep.add_argument("--grid", action="append", default=[], metavar="NAME=START:STOP:COUNT",
                        help="COUNT values from START to STOP (both included), or NAME=VALUE; numbers in SI or "
@@ -101,6 +153,9 @@ def add_parser(sub) -> None:
     sweep.add_argument("--scheduler", metavar="ADDRESS",
                        help="run the chunks on a dask.distributed scheduler at ADDRESS; 'local' starts a "
                             "LocalCluster in this process")
+    sweep.add_argument("--wait-for-workers", type=_wait_seconds, default=60.0, metavar="SECONDS",
+                       help="with --scheduler: give up (exit 1) when the cluster has had no worker for SECONDS "
+                            "(default 60; inf waits for ever); a status line says so every 10 s")
     add_setting_options(sweep, SWEEP_SETTINGS)
     sweep.add_argument("--large", action="store_true",
                        help="allow a sweep of more than 10^6 cases (its size is stated when refused)")

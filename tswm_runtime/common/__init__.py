@@ -1,1 +1,2 @@
-"""Runtime leaves: provenance (tswm's version, the machine and versions) of results. Imports nothing of tswm."""
+"""Runtime leaves: provenance (tswm's version, the machine and versions) of results; words (counts and
+differences in printed sentences). Imports nothing of tswm."""

@@ -15,6 +15,10 @@ confidence intervals with Student's t (m - n degrees of freedom) and the correla
 matrix. Identifiability notes: J^T J rank-deficient or ill-conditioned (singular values of
 J with columns scaled to the bound widths), a confidence interval covering the whole
 bound range, |correlation| > 0.99, starts that end at different values with equal cost.
+These linearised intervals are kept as ``ci_linear``; the reported intervals ``ci`` are
+profile-likelihood intervals above the noise floor of the misfit
+(``tswm_runtime.fitting.profile``), which also decide whether the data determine a
+parameter at all and whether the minimum sits on a jump of the cost.
 """
 from __future__ import annotations
 
@@ -27,7 +31,9 @@ from types import ModuleType
 
 import numpy as np
 
-from tswm_runtime.fitting.inputs import FitInputError, Measured, default_bounds, parse_free, read_measured
+from tswm_runtime.common.words import plural
+from tswm_runtime.fitting import profile
+from tswm_runtime.fitting.inputs import FitInputError, Measured, default_bounds, parse_free, parse_noise, read_measured
 from tswm_runtime.fitting.problem import PENALTY, Problem
 
 __all__ = ["FitInputError", "FitResult", "Measured", "PENALTY", "Start", "fit", "parse_free", "read_measured"]
@@ -69,7 +75,7 @@ class FitResult:
     bound_source: dict
     estimate: dict
     stderr: dict
-    ci: dict  # name -> (lo, hi); (-inf, inf) where not identifiable; NaN where no CI (m = n)
+    ci: dict  # name -> (lo, hi), the profile interval; (-inf, inf) where not determined by the data
     confidence: float
     covariance: list
     correlation: list
@@ -90,6 +96,9 @@ class FitResult:
     fit_settings: dict
     provenance: dict
     misfit: dict = field(default_factory=dict)
+    ci_linear: dict = field(default_factory=dict)  # name -> (lo, hi) from s^2 (J^T J)^-1; NaN where m = n
+    profiles: dict = field(default_factory=dict)  # name -> profile.profile(): points, threshold, verdict
+    noise: dict = field(default_factory=dict)  # stated measurement noise per quantity (SI), empty if estimated
     seconds: float = 0.0
 
     @property
@@ -167,13 +176,14 @@ def _jacobian(problem: Problem, x: np.ndarray, r0: np.ndarray):
     return J, h
 
 
-def _statistics(problem: Problem, x: np.ndarray, r: np.ndarray, J: np.ndarray, confidence: float):
+def _statistics(problem: Problem, x: np.ndarray, r: np.ndarray, J: np.ndarray, confidence: float, stated: bool):
+    """Linearised statistics; with stated noise the residuals are already in units of sigma (s^2 = 1)."""
     from scipy import stats
 
     m, n = J.shape
     dof = m - n
     ssr = float(r @ r)
-    s2 = ssr / dof if dof > 0 else math.nan
+    s2 = 1.0 if stated else ssr / dof if dof > 0 else math.nan
     Js = J * problem.width  # columns per bound width: conditioning independent of units
     U, sv, Vt = np.linalg.svd(Js, full_matrices=False)
     smax = float(sv[0]) if sv.size else 0.0
@@ -185,8 +195,9 @@ def _statistics(problem: Problem, x: np.ndarray, r: np.ndarray, J: np.ndarray, c
     cov = s2 * inv * np.outer(problem.width, problem.width)
     null = Vt[~keep]
     unidentified = [problem.names[j] for j in range(n) if null.size and np.max(np.abs(null[:, j])) > 0.1]
-    se = np.sqrt(np.clip(np.diag(cov), 0, None)) if dof > 0 else np.full(n, math.nan)
-    tq = float(stats.t.ppf((1 + confidence) / 2, dof)) if dof > 0 else math.nan
+    se = np.sqrt(np.clip(np.diag(cov), 0, None)) if dof > 0 or stated else np.full(n, math.nan)
+    tq = (float(stats.norm.ppf((1 + confidence) / 2)) if stated
+          else float(stats.t.ppf((1 + confidence) / 2, dof)) if dof > 0 else math.nan)
     ci = {}
     for j, name in enumerate(problem.names):
         if name in unidentified:
@@ -218,7 +229,7 @@ def _notes(problem, st, starts: list[Start], best: int, cases_failed) -> list[st
     for j, name in enumerate(names):
         lo, hi = st["ci"][name]
         if name not in st["unidentified"] and lo <= problem.lo[j] and hi >= problem.hi[j]:
-            notes.append(f"not identifiable: the {st.get('confidence', 0.95):.0%} confidence interval of {name} "
+            notes.append(f"not identifiable: the linearised {st.get('confidence', 0.95):.0%} interval of {name} "
                          f"[{lo:.6g}, {hi:.6g}] covers its whole bound range [{problem.lo[j]:g}, {problem.hi[j]:g}]")
     for i in range(n):
         for j in range(i + 1, n):
@@ -233,12 +244,16 @@ def _notes(problem, st, starts: list[Start], best: int, cases_failed) -> list[st
               and np.max(np.abs(np.array(s.x) - bx) / problem.width) > DISTINCT]
     if others:
         where = "; ".join(", ".join(f"{nm} = {v:.6g}" for nm, v in zip(names, starts[k].x)) for k in others[:4])
-        notes.append(f"not identifiable: start(s) {', '.join(str(k + 1) for k in others)} end at different values "
+        numbers = ", ".join(str(k + 1) for k in others)
+        notes.append(f"not identifiable: {'start' if len(others) == 1 else 'starts'} {numbers} "
+                     f"{'ends' if len(others) == 1 else 'end'} at different values "
                      f"({where}) with the same cost as the best ({best_cost:.6g})")
-    if st["dof"] <= 0:
-        notes.append("as many residuals as free parameters: no estimate of the noise, no confidence intervals")
+    if st["dof"] <= 0 and not math.isfinite(st["s2"]):
+        notes.append("as many residuals as free parameters and no stated noise: no estimate of the noise; the "
+                     "intervals rest on the numerical noise floor alone")
     if cases_failed:
-        notes.append(f"{len(cases_failed)} case(s) did not finish at the optimum (penalty {PENALTY:g} per residual): "
+        notes.append(f"{plural(len(cases_failed), 'case')} did not finish at the optimum (penalty {PENALTY:g} per "
+                     "residual): "
                      + "; ".join(f"{c['case']} ({c['status']})" for c in cases_failed[:5]))
     return notes
 
@@ -246,7 +261,8 @@ def _notes(problem, st, starts: list[Start], best: int, cases_failed) -> list[st
 def fit(model: str | ModuleType, measured: str | Path | Measured, free: dict | list, *,
         overrides: dict | None = None, starts: int = 4, sampler: str = "sobol", seed: int = 0,
         magnitude: bool = False, confidence: float = 0.95, grid_points: int | None = None,
-        progress: bool = False, misfit: bool = True) -> FitResult:
+        progress: bool = False, misfit: bool = True, noise: dict | list | None = None,
+        profile_points: int | None = None) -> FitResult:
     """Fit the free parameters ``free`` ({name: (lo, hi)} or a list of ``NAME[=LO:HI]``) of
     ``model`` to the measured table (a CSV/Parquet path or a ``Measured``).
 
@@ -254,7 +270,10 @@ def fit(model: str | ModuleType, measured: str | Path | Measured, free: dict | l
     also points); FIT_RUN's tolerances unless given. starts: multi-start count (qmc
     ``sampler`` 'sobol' or 'lhs', ``seed``). magnitude: compare |S1m|, |S2m|.
     grid_points: misfit grid per axis (default 41 for one parameter, 15 for two); misfit=False
-    skips the grid. Raises FitInputError for inputs that cannot be used."""
+    skips the grid. noise: the measurement noise per measured quantity ({quantity: sigma} in SI
+    or a list of ``QUANTITY=SIGMA``; every quantity, or none and the noise is estimated from
+    the residuals). profile_points: grid of each parameter's profile (default profile.POINTS). Raises FitInputError for
+    inputs that cannot be used."""
     from scipy.optimize import least_squares
 
     from tswm_runtime.common.provenance import TSWM_VERSION as __version__
@@ -283,6 +302,9 @@ def fit(model: str | ModuleType, measured: str | Path | Measured, free: dict | l
         raise FitInputError(f"--sampler {sampler!r}: expected sobol or lhs")
     if grid_points is not None and not 2 <= grid_points <= MAX_GRID:
         raise FitInputError(f"--grid-points {grid_points}: must be in [2, {MAX_GRID}]")
+    profile_points = profile.POINTS if profile_points is None else profile_points
+    if not 5 <= profile_points <= MAX_GRID:
+        raise FitInputError(f"--profile-points {profile_points}: must be in [5, {MAX_GRID}]")
     given = {k: v for k, v in (overrides or {}).items() if v is not None}
     try:
         run = settings(module, {**FIT_RUN, **given})
@@ -291,6 +313,9 @@ def fit(model: str | ModuleType, measured: str | Path | Measured, free: dict | l
     if not isinstance(measured, Measured):
         measured = read_measured(measured, module, list(free), run)
     problem = Problem(module, measured, free, run, magnitude)
+    sigma = parse_noise(noise, measured.quantities) if noise else {}
+    if sigma:
+        problem.scale = np.array([sigma[q] for q in measured.quantities])
     if problem.n_residuals < len(problem.names):
         raise FitInputError(f"--measured: {problem.n_residuals} measured values for {len(problem.names)} free "
                             "parameters; need at least as many values as parameters")
@@ -331,17 +356,22 @@ def fit(model: str | ModuleType, measured: str | Path | Measured, free: dict | l
     R, values, status = problem.residuals(x)
     r = R[0]
     J, h = _jacobian(problem, x, r)
-    st = _statistics(problem, x, r, J, confidence)
+    st = _statistics(problem, x, r, J, confidence, bool(sigma))
     st["confidence"] = confidence
     cases, failed = _case_table(problem, values[0], status[0])
     notes = _notes(problem, st, results, best, failed)
+    profiles = {name: profile.profile(problem, x, j, points=profile_points, confidence=confidence, dof=st["dof"],
+                                      stated=bool(sigma), cost_best=0.5 * float(r @ r))
+                for j, name in enumerate(problem.names)}
+    notes = profile.notes(profiles, st["ci"], problem.names) + notes
     units = dict(zip(module.PARAM_NAMES, module.PARAM_UNITS))
     res = FitResult(
         scene=module.SCENE, names=problem.names, units=[units[n] for n in problem.names],
         bounds={n: (float(a), float(b)) for n, a, b in zip(problem.names, problem.lo, problem.hi)},
         bound_source={n: "scene" if default_bounds(module, n) == free[n] else "given" for n in problem.names},
         estimate=dict(zip(problem.names, x.tolist())), stderr=dict(zip(problem.names, st["se"].tolist())),
-        ci=st["ci"], confidence=confidence, covariance=st["cov"].tolist(), correlation=st["corr"].tolist(),
+        ci={n: profile.interval(pr) for n, pr in profiles.items()}, ci_linear=st["ci"], profiles=profiles,
+        noise=sigma, confidence=confidence, covariance=st["cov"].tolist(), correlation=st["corr"].tolist(),
         cost=0.5 * float(r @ r), dof=st["dof"], s2=st["s2"], singular_values=st["sv"].tolist(),
         condition=st["cond"], rank=st["rank"], jacobian=J.tolist(), notes=notes, starts=results,
         best_start=best, cases=cases, failed=failed,
@@ -354,6 +384,7 @@ def fit(model: str | ModuleType, measured: str | Path | Measured, free: dict | l
         settings=dict(problem.run),
         fit_settings={"starts": starts, "sampler": sampler, "seed": seed, "magnitude": magnitude,
                       "confidence": confidence, "t_quantile": st["tq"], "penalty": PENALTY,
+                      "profile_points": profile_points, "noise": "stated" if sigma else "estimated",
                       "diff_step": DIFF_STEP, "jacobian_step": dict(zip(problem.names, h.tolist())),
                       "max_nfev": MAX_NFEV, "method": "scipy.optimize.least_squares trf in bounds",
                       "cost": "0.5 sum ((model - measured) / scale)^2"},

@@ -407,3 +407,31 @@ def parse_free(items: list[str], module: ModuleType) -> dict[str, tuple[float, f
                 raise FitInputError(f"--free {name}: give bounds as {name}=LO:HI{_rule_text(module, name)}")
             free[name] = bounds
     return free
+
+
+def parse_noise(noise: dict | list, quantities: list[str]) -> dict[str, float]:
+    """``QUANTITY=SIGMA`` items (or {quantity: sigma}) -> {quantity: sigma in SI}, one per measured quantity."""
+    items = noise.items() if isinstance(noise, dict) else [str(i).partition("=")[::2] for i in noise]
+    sigma: dict[str, float] = {}
+    for q, raw in items:
+        q = str(q).strip()
+        if q not in quantities:
+            raise FitInputError(f"--noise {q}={raw}: {q!r} is not a measured quantity of this file "
+                                f"({', '.join(quantities)})")
+        try:
+            value = float(raw)  # SI
+        except (ValueError, TypeError):
+            try:
+                value = units.to_si(str(raw), QUANTITY[q])  # "50 N"
+            except units.UnitError as error:
+                raise FitInputError(f"--noise {q}={raw}: {error}") from None
+        if not (math.isfinite(value) and value > 0):
+            raise FitInputError(f"--noise {q}={raw}: the noise must be a finite number > 0")
+        if q in sigma:
+            raise FitInputError(f"--noise {q}: given twice")
+        sigma[q] = value
+    missing = [q for q in quantities if q not in sigma]
+    if missing:
+        raise FitInputError(f"--noise: give the noise of every measured quantity or of none; missing "
+                            f"{', '.join(missing)}")
+    return sigma

@@ -48,6 +48,20 @@ class Problem:
         self.scale = np.where(rms > 0, rms, 1.0)
         self.evaluations = 0
         self.runs = 0
+        self.last_modes = np.empty((0, 0), dtype=object)  # mode sequence per point and case, last evaluate()
+
+    def tightened(self, factor: float) -> "Problem":
+        """The same problem run at rtol and atol divided by ``factor``, no tighter than simulate
+        accepts (own counters)."""
+        from copy import copy
+
+        from tswm_runtime.simulation.simulate import ATOL_RANGE, RTOL_RANGE
+
+        tight = copy(self)
+        tight.run = {**self.run, "rtol": max(self.run["rtol"] / factor, RTOL_RANGE[0]),
+                     "atol": max(self.run["atol"] / factor, ATOL_RANGE[0])}
+        tight.evaluations = tight.runs = 0
+        return tight
 
     @property
     def n_residuals(self) -> int:
@@ -77,7 +91,8 @@ class Problem:
                                             f"(case {cases[row]!r}): {reason}")
 
     def evaluate(self, X: np.ndarray):
-        """Model values (k x rows x quantities; NaN where failed) and per-case status (k x cases)."""
+        """Model values (k x rows x quantities; NaN where failed) and per-case status (k x cases);
+        each case's sequence of mode names is kept in ``last_modes`` (k x cases)."""
         X = np.atleast_2d(np.asarray(X, dtype=np.float64))
         self.evaluations += X.shape[0]
         self.runs += X.shape[0] * len(self.measured.cases)
@@ -96,6 +111,9 @@ class Problem:
                 if q in ("S1m", "S2m"):
                     values[:, :, j] = np.abs(values[:, :, j])
         status = np.array(table["status"], dtype=object).reshape(k, n)
+        names = {c: " ".join(self.module.MODES[int(i)] if i.isdigit() else i for i in c.split())
+                 for c in set(table["modes"])}
+        self.last_modes = np.array([names[c] for c in table["modes"]], dtype=object).reshape(k, n)
         bad = (status != "finished")[:, :, None] | ~np.isfinite(values)
         values = np.where(bad, np.nan, values)
         return values, status
@@ -107,6 +125,7 @@ class Problem:
         k = X.shape[0]
         values = np.full((k, m.values.shape[0], len(m.quantities)), np.nan)
         status = np.empty((k, len(m.cases)), dtype=object)
+        self.last_modes = np.full((k, len(m.cases)), "", dtype=object)
         P = self.matrix(X)
         for e in range(k):
             for c in range(len(m.cases)):
@@ -117,6 +136,7 @@ class Problem:
                     status[e, c] = "invalid-parameter"
                     continue
                 status[e, c] = result.status
+                self.last_modes[e, c] = " ".join(phase.mode for phase in result.phases)
                 if result.status != "finished":
                     continue
                 rows = np.flatnonzero(m.row_case == c)

@@ -3,16 +3,16 @@
 ``run_batch`` integrates case after case (one row of parameters each) with
 ``hybrid.integrate_hybrid``, in a ``prange`` loop: every case has its own work
 arrays (parameter copy, event log, monitor, counters), one output point (t_end),
-and writes one row of results. The model functions are numba first-class
-function arguments (``signatures``), so, like ``integrate_hybrid``, the batch
-function is compiled once with an explicit signature, cached on disk and reused
-for every model (numba's ``parallel=True`` accepts function-typed arguments: the
-prange body is outlined into a gufunc that takes the function pointers as
-arguments). Calling ``integrate_hybrid`` from Python costs about 20 us per call for
+and writes one row of results. The functions come as addresses (``entry.functions``:
+the mode machine, the method's step, the model's), so, like ``integrate_hybrid``, the
+batch function is compiled once with an explicit signature, cached on disk and reused
+for every model. Calling ``integrate_hybrid`` from Python costs about 20 us per call for
 unboxing its arguments (a run to t_end = 1e-9 s through its entry point, session 7);
-inside this loop a case costs only its integration. ``integrate_hybrid`` itself is such an argument (``INTEGRATE``): called
-through its address, its compiled code is not linked into this kernel, whose cold
+inside this loop a case costs only its integration. ``integrate_hybrid`` is called
+through its address: its compiled code is not linked into this kernel, whose cold
 compile then skips re-optimizing the whole mode machine (issue 13: 24 s of 72).
+Arguments travel as named structures: the run's Start (its p unused: each case's is a
+row of P) and Settings, and the Results it writes.
 
 Per case the result rows hold:
     out_f[c] = (t_stop, S1m, tS1m, S2m, tS2m, x1, v1, impact energy)   (x1, v1 at t_stop;
@@ -24,92 +24,121 @@ Per case the result rows hold:
                 event's to-mode that differs from the mode before; at most
                 seq.shape[1], the rest is cut off and n_modes counts them all).
 """
+from collections import namedtuple
+
 import numpy as np
 from numba import prange, types
 
-from tswm_runtime.hybrid import machine as hybrid
-
-from tswm_runtime.jit import cache_guard
+from tswm_runtime.hybrid import entry
+from tswm_runtime.hybrid.machine import HYBRID_SIG
 from tswm_runtime.integration import segment
-from tswm_runtime.jit.signatures import MATRIX, VECTOR, GuardsFunction, JacFunction, RhsFunction, compiled
-from tswm_runtime.jit.structures import JUMP_WIDTH, MODE_TABLES, TOLERANCES, EventLog, Outputs
+from tswm_runtime.jit import cache_guard
+from tswm_runtime.jit.addresses import function_at
+from tswm_runtime.jit.cache_guard import njit
+from tswm_runtime.jit.signatures import MATRIX
+from tswm_runtime.jit.structures import (JUMP_WIDTH, MODE_TABLES, SETTINGS, START, EventLog, Outputs, Record,
+                                         Settings, Start, Tolerances)
 
 F_T_STOP, F_S1M, F_TS1M, F_S2M, F_TS2M, F_X1, F_V1, F_IMPACT_E = range(8)
 N_F = 8
 I_STATUS, I_EVENTS, I_STEPS, I_REJECTED, I_RHS, I_JAC, I_FIRST, I_NMODES, I_IMPACTS = range(9)
 N_I = 9
 
-#: hybrid.integrate_hybrid as the first-class function value run_batch takes.
-INTEGRATE = compiled(hybrid.integrate_hybrid, hybrid.HYBRID_SIG)
+#: Where run_batch writes, one row per case: out_f (N_F floats), out_i (N_I integers), seq.
+Results = namedtuple("Results", "f i seq")
+RESULTS = types.NamedTuple((MATRIX, types.int64[:, ::1], types.int64[:, ::1]), Results)
+
+#: The mode machine at its address (the C wrapper: a case's failure is its status).
+_machine_at = function_at(types.FunctionType(HYBRID_SIG))
 
 BATCH_SIG = types.none(
-    types.FunctionType(hybrid.HYBRID_SIG),  # integrate: INTEGRATE
-    types.int64, segment.AttemptFunction,  # method, attempt: segment.attempt_function(method)
-    RhsFunction, JacFunction, GuardsFunction, GuardsFunction, GuardsFunction,  # rhs, jac, guards, observe, impact
-    MATRIX, MODE_TABLES,  # P (cases x parameters, latches included), mode tables
-    VECTOR, VECTOR, types.float64,  # y0, quad, t_end
-    TOLERANCES, types.int64, types.int64,  # tol, max_steps, max_events
-    types.int64,  # number of observables
-    MATRIX, types.int64[:, ::1], types.int64[:, ::1],  # out_f, out_i, seq
+    entry.ADDRESSES, MODE_TABLES,  # functions: entry.functions(method, model); mode tables
+    MATRIX, START,  # P (cases x parameters, latches included); start (start.p is not used: a row of P is)
+    SETTINGS, types.int64, types.int64,  # settings, max_events, number of observables
+    RESULTS,
 )
 
 
+@njit(cache=True, error_model="numpy")
+def _case_record(t_end, width, n_params, max_events, n_obs):
+    """A case's Record: one output point (the state at t_end), an event log of max_events, the
+    maxima of n_obs observables, the counters."""
+    out = Outputs(np.full(1, t_end), np.full((1, width), np.nan), np.empty(1, np.int64), np.empty((1, n_params)))
+    log = EventLog(np.empty(max_events), np.empty((max_events, 3), np.int64), np.empty((max_events, width)),
+                   np.zeros((max_events, JUMP_WIDTH)))
+    return Record(out, log, np.zeros((n_obs, 3)), np.zeros(segment.N_COUNTERS, np.int64))
+
+
+@njit(cache=True, error_model="numpy")
+def _write_floats(row, t_stop, n_ev, n, record):
+    """t_stop, the maxima of S1 and S2, and x1, v1 at t_stop into ``row`` (out_f[c])."""
+    out, log, mon = record.out, record.log, record.mon
+    width = out.y.shape[1]
+    n_obs = mon.shape[0]
+    row[F_T_STOP] = t_stop
+    # The state at t_stop: the output point at t_end, else the last event's state
+    # if the run stopped at it, else unknown (NaN).
+    ys = out.y[0]
+    if out.mode[0] < 0:
+        ys = np.full(width, np.nan)
+        if n_ev > 0 and log.t[n_ev - 1] == t_stop:
+            ys = log.state[n_ev - 1].copy()
+    row[F_X1] = ys[n] if n == 1 else ys[0]
+    row[F_V1] = ys[n - 1]
+    if n_obs > 0:
+        row[F_S1M], row[F_TS1M] = mon[0, 1], mon[0, 2]
+    else:
+        row[F_S1M], row[F_TS1M] = np.nan, np.nan
+    if n_obs > 1:
+        row[F_S2M], row[F_TS2M] = mon[1, 1], mon[1, 2]
+    else:
+        row[F_S2M], row[F_TS2M] = np.nan, np.nan
+
+
+@njit(cache=True, error_model="numpy")
+def _write_sequence(row_f, row_i, seq_row, first, n_ev, log):
+    """The modes visited into seq_row and their number, the impacts and the energy they took."""
+    n_seq = seq_row.size
+    n_modes = 0
+    prev = -1
+    if first >= 0:
+        if n_seq > 0:
+            seq_row[0] = first
+        n_modes, prev = 1, first
+    impacts, lost = 0, 0.0
+    for e in range(n_ev):
+        to = log.index[e, 2]
+        if to >= 0 and to != prev:
+            if n_modes < n_seq:
+                seq_row[n_modes] = to
+            n_modes += 1
+            prev = to
+        if not np.isnan(log.jump[e, 0]):  # an impact (the log's jump is NaN for other events)
+            impacts += 1
+            lost += log.jump[e, 2]
+    row_i[I_NMODES] = n_modes
+    row_i[I_IMPACTS], row_f[F_IMPACT_E] = impacts, lost
+
+
 @cache_guard.compile_cached(BATCH_SIG, parallel=True, error_model="numpy")
-def run_batch(integrate, method, attempt, rhs, jac, guards, observe, impact, P, tables, y0, quad, t_end, tol, max_steps,
-              max_events, n_obs, out_f, out_i, seq):
-    """Integrate every row of P from (0, y0) to t_end; results into out_f, out_i, seq."""
-    n = y0.size
-    width = n + quad.size
-    n_seq = seq.shape[1]
+def run_batch(functions, tables, P, start, settings, max_events, n_obs, results):
+    """Integrate every row of P from ``start`` to settings.t_end; results into ``results``."""
+    n = start.y.size
+    width = n + start.quad.size
+    # The prange body takes a named tuple only as an argument or built by a call: no tuple of
+    # tuples, none unpacked from one.
+    method, t_end, max_steps = settings.method, settings.t_end, settings.max_steps
+    tol = Tolerances(settings.tol.rtol, settings.tol.atol, settings.tol.hmin, settings.tol.hmax)
     for c in prange(P.shape[0]):
-        p = P[c].copy()
-        out = Outputs(np.full(1, t_end), np.full((1, width), np.nan), np.empty(1, np.int64),
-                      np.empty((1, p.size)))  # one output point: the state at t_end
-        log = EventLog(np.empty(max_events), np.empty((max_events, 3), np.int64), np.empty((max_events, width)),
-                       np.zeros((max_events, JUMP_WIDTH)))
-        mon = np.zeros((n_obs, 3))
-        counters = np.zeros(segment.N_COUNTERS, np.int64)
-        status, t_stop, n_ev, last, need, first = integrate(
-            method, attempt, rhs, jac, guards, observe, impact, p, tables, 0.0, y0, quad, -1, t_end, tol, max_steps,
-            out, log, mon, counters)
-        out_f[c, F_T_STOP] = t_stop
-        # The state at t_stop: the output point at t_end, else the last event's state
-        # if the run stopped at it, else unknown (NaN).
-        ys = out.y[0]
-        if out.mode[0] < 0:
-            ys = np.full(width, np.nan)
-            if n_ev > 0 and log.t[n_ev - 1] == t_stop:
-                ys = log.state[n_ev - 1].copy()
-        out_f[c, F_X1] = ys[n] if n == 1 else ys[0]
-        out_f[c, F_V1] = ys[n - 1]
-        if n_obs > 0:
-            out_f[c, F_S1M], out_f[c, F_TS1M] = mon[0, 1], mon[0, 2]
-        else:
-            out_f[c, F_S1M], out_f[c, F_TS1M] = np.nan, np.nan
-        if n_obs > 1:
-            out_f[c, F_S2M], out_f[c, F_TS2M] = mon[1, 1], mon[1, 2]
-        else:
-            out_f[c, F_S2M], out_f[c, F_TS2M] = np.nan, np.nan
-        out_i[c, I_STATUS], out_i[c, I_EVENTS] = status, n_ev
+        record = _case_record(t_end, width, P.shape[1], max_events, n_obs)
+        case = Start(start.t, start.y, start.quad, start.mode, P[c].copy())
+        integrate = _machine_at(functions[0])
+        status, t_stop, n_ev, last, need, first = integrate(entry.model_functions(functions), tables, case,
+                                                            Settings(method, t_end, tol, max_steps), record)
+        _write_floats(results.f[c], t_stop, n_ev, n, record)
+        out_i = results.i[c]
+        out_i[I_STATUS], out_i[I_EVENTS] = status, n_ev
         for k in range(4):
-            out_i[c, I_STEPS + k] = counters[k]
-        out_i[c, I_FIRST] = first
-        n_modes = 0
-        prev = -1
-        if first >= 0:
-            if n_seq > 0:
-                seq[c, 0] = first
-            n_modes, prev = 1, first
-        impacts, lost = 0, 0.0
-        for e in range(n_ev):
-            to = log.index[e, 2]
-            if to >= 0 and to != prev:
-                if n_modes < n_seq:
-                    seq[c, n_modes] = to
-                n_modes += 1
-                prev = to
-            if not np.isnan(log.jump[e, 0]):  # an impact (the log's jump is NaN for other events)
-                impacts += 1
-                lost += log.jump[e, 2]
-        out_i[c, I_NMODES] = n_modes
-        out_i[c, I_IMPACTS], out_f[c, F_IMPACT_E] = impacts, lost
+            out_i[I_STEPS + k] = record.counters[k]
+        out_i[I_FIRST] = first
+        _write_sequence(results.f[c], out_i, results.seq[c], first, n_ev, record.log)

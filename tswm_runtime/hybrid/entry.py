@@ -1,7 +1,8 @@
 """The mode machine called from Python: ``integrate`` builds its arguments from plain values.
 
 ``integrate_at`` is ``machine.integrate_hybrid`` with its six functions (the method's step,
-the model's rhs, jac, guards, observe, impact) given as addresses (``jit.addresses``):
+the model's rhs, jac, guards, observe, impact) given as addresses (``jit.addresses``;
+``model_functions`` turns them back into the Functions, here and in ``batch.run_batch``):
 numba unboxes a function-typed argument through Python, 1-2 us each and several times that
 right after other code has run, an address in nanoseconds. The machine itself is called
 through its addresses too, so its compiled code is not linked into this small kernel (as
@@ -15,23 +16,34 @@ from tswm_runtime.hybrid.machine import HYBRID_SIG, integrate_hybrid
 from tswm_runtime.jit import cache_guard
 from tswm_runtime.integration import segment
 from tswm_runtime.jit.addresses import function_at, guards_at, jac_at, rhs_at
+from tswm_runtime.jit.cache_guard import njit
 from tswm_runtime.jit.signatures import GUARDS_SIG, JAC_SIG, RHS_SIG, address, jit_address
-from tswm_runtime.jit.structures import JUMP_WIDTH, EventLog, Outputs, Tolerances
+from tswm_runtime.jit.structures import (JUMP_WIDTH, EventLog, Functions, Outputs, Record, Settings, Start,
+                                         Tolerances)
 
 _machine_at = function_at(types.FunctionType(HYBRID_SIG), raises=True)
 _attempt_at = function_at(segment.AttemptFunction)
 
-#: integrate_hybrid's signature with its method and six functions replaced by (addresses, method).
-ENTRY_SIG = HYBRID_SIG.return_type(types.UniTuple(types.int64, 8), types.int64, *HYBRID_SIG.args[7:])
+#: What ``functions`` gives: eight addresses.
+ADDRESSES = types.UniTuple(types.int64, 8)
+#: integrate_hybrid's signature with its functions replaced by their addresses.
+ENTRY_SIG = HYBRID_SIG.return_type(ADDRESSES, *HYBRID_SIG.args[1:])
+
+
+@njit(cache=True, error_model="numpy")
+def model_functions(functions):
+    """The Functions (the method's step, the model's rhs, jac, guards, observe, impact) at the
+    last six of the addresses ``functions``."""
+    _, _, attempt, rhs, jac, guards, observe, impact = functions
+    return Functions(_attempt_at(attempt), rhs_at(rhs), jac_at(jac), guards_at(guards), guards_at(observe),
+                     guards_at(impact))
 
 
 @cache_guard.compile_cached(ENTRY_SIG, error_model="numpy", nogil=True)
-def integrate_at(functions, method, p, tables, t0, y0, quad, mode0, t_end, tol, max_steps, out, log, mon, counters):
+def integrate_at(functions, tables, start, settings, record):
     """``integrate_hybrid`` with its functions at the addresses ``functions`` (see ``functions``)."""
-    machine, machine_jit, attempt, rhs, jac, guards, observe, impact = functions
-    integrate = _machine_at(machine, machine_jit)
-    return integrate(method, _attempt_at(attempt), rhs_at(rhs), jac_at(jac), guards_at(guards), guards_at(observe),
-                     guards_at(impact), p, tables, t0, y0, quad, mode0, t_end, tol, max_steps, out, log, mon, counters)
+    integrate = _machine_at(functions[0], functions[1])
+    return integrate(model_functions(functions), tables, start, settings, record)
 
 
 def functions(method: int, model) -> tuple:
@@ -78,8 +90,8 @@ def integrate(method, model, p, tables, y0, t_end, *, rtol, atol, t_out, max_eve
     mon, counters = np.zeros((len(model.OBSERVABLES), 3)), np.zeros(segment.N_COUNTERS, np.int64)
     atol = (np.full(y0.size, atol, dtype=np.float64) if np.ndim(atol) == 0
             else np.array(np.broadcast_to(np.asarray(atol, np.float64), y0.shape)))
-    tol = Tolerances(float(rtol), atol, float(hmin), float(hmax))
-    args = (functions(method, model), method, p, tables, float(t0), y0, quad, int(mode0), float(t_end), tol,
-            int(max_steps), out, log, mon, counters)
+    settings = Settings(method, float(t_end), Tolerances(float(rtol), atol, float(hmin), float(hmax)), int(max_steps))
+    args = (functions(method, model), tables, Start(float(t0), y0, quad, int(mode0), p), settings,
+            Record(out, log, mon, counters))
     result = call(integrate_at, args, counters)
     return (*result, out, log, mon, counters)

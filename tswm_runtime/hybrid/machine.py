@@ -30,6 +30,8 @@ integer tables built in ``modes.py``):
 Chattering guard: more than MAX_SAME_TIME events without the time advancing
 stops the run with status CHATTERING instead of looping.
 """
+from collections import namedtuple
+
 import numpy as np
 from numba import types
 
@@ -39,9 +41,8 @@ from tswm_runtime.integration import painleve
 from tswm_runtime.integration import segment
 from tswm_runtime.jit.borrow import borrowed
 from tswm_runtime.jit.cache_guard import njit
-from tswm_runtime.jit.signatures import MATRIX, VECTOR, GuardsFunction, JacFunction, RhsFunction
-from tswm_runtime.jit.structures import (EVENT_LOG, JUMP_WIDTH, MODE_TABLES, OUTPUTS, TOLERANCES,
-                                                 EventSettings)
+from tswm_runtime.jit.structures import (JUMP_WIDTH, MODE_TABLES, RECORD, SETTINGS, START, EventSettings, Segment,
+                                         Settings, State)
 
 # Guard kinds (modes.GUARD_KINDS maps the generated GUARDS names to these).
 (G_PHI, G_V1, G_D, G_JAM, G_CONE_F, G_CONE_B, G_FLANK_N, G_LAW, G_SLIDE_A, G_SLIDE_B, G_TRIP, G_GAP_A, G_GAP_B,
@@ -502,117 +503,204 @@ def _log(log, n_ev, t, k, mode_from, mode_to, y, quad, jump):
     return n_ev + 1
 
 
-HYBRID_SIG = types.Tuple((types.int64, types.float64, types.int64, types.int64, types.int64,
-                          types.int64))(
-    types.int64, segment.AttemptFunction,  # method, attempt: segment.attempt_function(method)
-    RhsFunction, JacFunction, GuardsFunction, GuardsFunction, GuardsFunction,  # rhs, jac, guards, observe, impact
-    VECTOR, MODE_TABLES,  # p (its latches are written), tables
-    types.float64, VECTOR, VECTOR, types.int64, types.float64,  # t0, y0, quad, mode0, t_end
-    TOLERANCES, types.int64,  # tol, max_steps
-    OUTPUTS, EVENT_LOG,  # out, log
-    MATRIX, types.int64[::1],  # mon, counters
-)
+#: The mode machine's work arrays: guard values, a state and a rate, an impact's frame and jump,
+#: the observables, and the segments' (``segment.segment_work``).
+MachineWork = namedtuple("MachineWork", "g y_tmp f frame jump obs segment")
 
 
-@cache_guard.compile_cached(HYBRID_SIG, error_model="numpy", nogil=True)
-def integrate_hybrid(method, attempt, rhs, jac, guards, observe, impact, p, tables, t0, y0, quad, mode0, t_end,
-                     tol, max_steps, out, log, mon, counters):
-    """Integrate the model from (t0, y0) to t_end through its mode changes.
+@njit(cache=True, error_model="numpy")
+def _work(n, n_guards, n_quad, n_obs):
+    """The machine's work arrays for n states, n_guards guards, n_quad integrals, n_obs observables."""
+    return MachineWork(np.empty(n_guards), np.empty(n), np.empty(n), np.empty(IMPACT_FRAME), np.empty(JUMP_WIDTH),
+                       np.empty(n_obs), segment.segment_work(n, n_guards, n_quad, n_obs))
 
-    tables: the ModeTables from ``modes.tables``. p: parameters and latches;
-        the runtime writes the latches (a torque switch's trip time, the piece of
-        each piecewise law, set at the start and at every law event), so pass a copy.
-    quad: the integral of the states at t0 (x1 when v1 is the only state), carried
-        in columns n: of y_out and ev_y; size 0 for none. mode0: the initial mode,
-        or -1 to select it from y0 (at v1 = 0 from the friction cones).
-    tol: Tolerances (rtol, atol per state, hmin, hmax); max_steps bounds step attempts.
-    out: Outputs: times (sorted, >= t0) and the rows filled there: state, mode and the
-        parameter vector with the latches in force (a row at an event time belongs to
-        the segment that ends there: its left limit); rows after a stop keep their
-        contents, mode -1.
-    log: the EventLog (time; guard, from-mode, to-mode (-1: stop); state after the event;
-        an impact's (P_n, P_t, energy lost, v1 before)), its capacity is log.t.size.
-        impact: the model's impact frame (a collision when a gap closes with a clearance,
-        the stem's pickup with lost motion). mon: (K, 3) running max |observable k|
-        as (|value|, value, t), K = number of observables; pass zeros.
-    counters: int64[4] as in segment (steps, rejected, rhs calls, jac calls).
 
-    Where D heads for 0 in a sliding mode, the segment hands over to
-    ``painleve.approach``, which locates D = 0 (status INCONSISTENT, event guard D);
-    for INCONSISTENT the maxima in mon are +-inf (no finite reaction exists).
+@njit(cache=True, error_model="numpy")
+def _valid(tables, start, settings, record):
+    """The sizes agree and the settings make sense (the array accesses below are unchecked)."""
+    n, n_quad, out, log = start.y.size, start.quad.size, record.out, record.log
+    return (n >= 1 and settings.t_end > start.t and settings.tol.rtol > 0.0 and (n_quad == 0 or n_quad == n)
+            and out.y.shape[1] == n + n_quad and out.mode.size == out.t.size
+            and out.p.shape[0] == out.t.size and out.p.shape[1] == start.p.size
+            and log.state.shape[1] == n + n_quad and tables.guard_direction.shape[0] == tables.kind.size)
 
-    Returns (status, t_stop, number of events, last mode (for INCONSISTENT the mode
-    found inconsistent), need, initial mode).
-    """
-    n = y0.size
-    n_guards = tables.guard_direction.shape[1]
-    if not (n >= 1 and t_end > t0 and tol.rtol > 0.0 and (quad.size == 0 or quad.size == n)
-            and out.y.shape[1] == n + quad.size and out.mode.size == out.t.size
-            and out.p.shape[0] == out.t.size and out.p.shape[1] == p.size
-            and log.state.shape[1] == n + quad.size and tables.guard_direction.shape[0] == tables.kind.size):
-        return INVALID_INPUT, t0, 0, -1, NEED_NOTHING, -1
-    p, tables, y0, quad, tol, out, log, mon, counters = borrowed((p, tables, y0, quad, tol, out, log, mon, counters))
-    y, q = y0.copy(), quad.copy()
-    g, y_tmp, f = np.empty(n_guards), np.empty(n), np.empty(n)
-    scratch = segment.segment_work(n, n_guards, quad.size, mon.shape[0])
-    frame, jump = np.empty(IMPACT_FRAME), np.empty(JUMP_WIDTH)
-    m_free = _mode(M_FREE, 0, 0, tables)
-    mesh = _guard(G_MESH_N, tables.guard_kind) >= 0  # compliant flanks: no impacts, contact by overlap
-    obs = np.empty(mon.shape[0])
-    out.mode[:] = -1
-    k_d = _guard(G_D, tables.guard_kind)
-    _latch_pieces(guards, t0, y, p, tables, g)
-    _carry_at_start(impact, guards, t0, y, p, tables, g, frame)
-    mode, need, status = mode0, NEED_NOTHING, FINISHED
+
+@njit(cache=True, error_model="numpy")
+def _first_mode(fns, tables, start, y, p, tol, w):
+    """(mode, need) the run starts in at (start.t, y): start.mode, or (-1) free flight off
+    the flanks, compliant contact where pressed onto one, at rest or sliding the way v1 points;
+    a carried stem pulled off at once is released first."""
+    rhs = fns.rhs  # (one name a line: numba unifies a tuple of functions, with a warning)
+    guards = fns.guards
+    g, y_tmp, f = w.g, w.y_tmp, w.f
+    t0, mode, need = start.t, start.mode, NEED_NOTHING
     if mode < 0:
-        v = y[n - 1]
+        v = y[y.size - 1]
+        m_free = _mode(M_FREE, 0, 0, tables)
         flank = _touching(guards, t0, y, p, tables, g)
         if m_free >= 0 and flank == 0:
             mode = m_free
-        elif mesh:
+        elif _guard(G_MESH_N, tables.guard_kind) >= 0:
             mode, need = (_mesh_enter(flank, guards, t0, y, p, tables, g) if _pressed(flank, rhs, t0, y, p, tables, f)
                           else (m_free, NEED_NOTHING))
         elif v == 0.0:
             mode, need = _at_rest(flank, rhs, guards, t0, y, p, tol, tables, g, y_tmp, f, True)
         else:
-            mode, need = _sliding(1 if v > 0.0 else -1, flank, rhs, guards, t0, y, p, tol, tables,
-                                  g, y_tmp, f)
+            mode, need = _sliding(1 if v > 0.0 else -1, flank, rhs, guards, t0, y, p, tol, tables, g, y_tmp, f)
     if mode >= 0 and _released(mode, guards, t0, y, p, tables, g):  # carried from the start, pulled off at once
         mode, need = _moving_on(0, rhs, guards, t0, y, p, tol, tables, g, y_tmp, f)
+    return mode, need
+
+
+@njit(cache=True, error_model="numpy")
+def _segment(fns, tables, settings, mode, p, state, record, i, scratch, singular):
+    """One segment in ``mode`` from ``state`` (``segment.run``), handed over to the Painleve
+    approach where D heads for 0 (``singular``) or where steps in t shrank to nothing near it.
+    Returns (status as segment's (APPROACH: back from the approach, on in t), t, guard, next
+    output row, next step, whether the next segment may hand over again)."""
+    counters = record.counters
+    steps = counters[segment.N_STEPS] + counters[segment.N_REJECTED]
+    k_d = _guard(G_D, tables.guard_kind)
+    k_singular = k_d if singular and k_d >= 0 and tables.guard_direction[mode, k_d] != 0 else -1
+    ev = EventSettings(tables.guard_direction[mode], 0.0, 0.0, True, k_singular, True)
+    budget = Settings(settings.method, settings.t_end, settings.tol, max(settings.max_steps - steps, 0))
+    seg_status, t_new, k, i, h = segment.run(fns, budget, Segment(mode, p, ev), state, record, i, scratch)
+    stalled = seg_status == segment.STEP_TOO_SMALL or seg_status == segment.NOT_FINITE
+    if k_singular >= 0 and stalled and counters[segment.N_STEPS] > 0:
+        seg_status = segment.APPROACH  # steps in t shrank to nothing: try Sundman's time
+    if seg_status != segment.APPROACH:
+        return seg_status, t_new, k, i, h, True
+    ev = EventSettings(tables.guard_direction[mode], 0.0, 0.0, True, k_d, False)
+    left = max(settings.max_steps - counters[segment.N_STEPS] - counters[segment.N_REJECTED], 0)
+    budget = Settings(settings.method, settings.t_end, settings.tol, left)
+    outcome, t_new, i = painleve.approach(fns, budget, Segment(mode, p, ev), State(t_new, state.y, state.quad, h),
+                                          record, i)
+    if outcome == painleve.ZERO:
+        return segment.EVENT, t_new, k_d, i, h, True
+    if outcome == painleve.END:
+        return segment.REACHED_END, t_new, k, i, h, True
+    if outcome == painleve.OTHER or outcome == painleve.CLEAR:
+        # go on in t (OTHER: locate that guard there first, without handing over again)
+        return segment.APPROACH, t_new, k, i, h, outcome == painleve.CLEAR
+    return outcome, t_new, k, i, h, True
+
+
+@njit(cache=True, error_model="numpy")
+def _latch(kind, k, t, y, p, tables, guards, g):
+    """The laws' latches in p after guard k (of ``kind``) fired at (t, y); returns p as it was
+    before the event (its left limit): a copy if the event changes it."""
+    latching = kind == G_TRIP or kind == G_LAW or kind == G_STEM_GAP or kind == G_STEM_N
+    p_left = p.copy() if latching else p  # the laws up to the event: its left limit
+    if kind == G_TRIP:
+        p[tables.guard_latch[k]] = t
+    elif kind == G_LAW:
+        _latch_pieces(guards, t, y, p, tables, g)
+    return p_left
+
+
+@njit(cache=True, error_model="numpy")
+def _jump(fns, tables, tol, mode, kind, k, t, y, p, w):
+    """(next mode, status, need) after guard k (of ``kind``) fired in ``mode``: an impact where a
+    gap closes or body 2 reaches the stem (its jump into w.jump, the flight time to the next
+    landing into w.frame[0], else inf), the stem's release, else the mode machine's choice."""
+    rhs = fns.rhs
+    guards = fns.guards
+    g, y_tmp, f, frame, jump = w.g, w.y_tmp, w.f, w.frame, w.jump
+    frame[0] = np.inf  # a collision or pickup leaves here the flight time to the next landing
+    mesh = _guard(G_MESH_N, tables.guard_kind) >= 0  # compliant flanks: no impacts, contact by overlap
+    if (kind == G_GAP_A or kind == G_GAP_B) and mesh:  # the flanks begin to overlap
+        return _outcome(*_mesh_enter(1 if kind == G_GAP_A else -1, guards, t, y, p, tables, g))
+    if kind == G_GAP_A or kind == G_GAP_B:  # the gap closed: a collision on that flank
+        return _collide(fns.impact, 1 if kind == G_GAP_A else -1, rhs, guards, t, y, p, tol, tables, g, y_tmp, f,
+                        frame, jump)
+    if kind == G_STEM_GAP:  # body 2 reaches the stem: the pickup
+        return _pickup(fns.impact, k, rhs, guards, t, y, p, tol, tables, g, y_tmp, f, frame, jump)
+    if kind == G_STEM_N:  # the stem leaves body 2: the load and its mass leave with it
+        p[tables.guard_latch[k]] = np.inf
+        return _outcome(*_moving_on(0, rhs, guards, t, y, p, tol, tables, g, y_tmp, f))
+    return _select(mode, kind, rhs, guards, t, y, p, tol, tables, g, y_tmp, f)
+
+
+@njit(cache=True, error_model="numpy")
+def _checked(fns, tables, tol, mode, new, status, need, t, y, p, p_left, mon, w):
+    """(mode, status, need) after a jump: a carried stem the new mode pulls off is released; a
+    new mode without a consistent contact force stops the run (INCONSISTENT, maxima unbounded)."""
+    rhs = fns.rhs
+    guards = fns.guards
+    g = w.g
+    if status == FINISHED and _released(new, guards, t, y, p, tables, g):
+        new, status, need = _outcome(*_moving_on(0, rhs, guards, t, y, p, tol, tables, g, w.y_tmp, w.f))
+    if status == FINISHED and not _consistent(new, guards, t, y, p, tables, g):
+        status = INCONSISTENT
+        _unbounded(fns.observe, guards, mode, t, y, p_left, -1, mon, w.obs, g)
+    return new, status, need
+
+
+#: integrate_hybrid(functions, tables, start, settings, record) -> (status, t_stop, events, last mode, need, first mode)
+HYBRID_SIG = types.Tuple((types.int64, types.float64, types.int64, types.int64, types.int64,
+                          types.int64))(segment.FUNCTIONS, MODE_TABLES, START, SETTINGS, RECORD)
+
+
+@cache_guard.compile_cached(HYBRID_SIG, error_model="numpy", nogil=True)
+def integrate_hybrid(fns, tables, start, settings, record):
+    """Integrate the model from ``start`` to settings.t_end through its mode changes.
+
+    fns: the Functions (the method's step; the model's rhs, jac, guards, observe and impact:
+        its impact frame, a collision when a gap closes with a clearance, the stem's pickup
+        with lost motion). tables: the ModeTables from ``modes.tables``.
+    start: Start. start.p: parameters and latches; the runtime writes the latches (a
+        torque switch's trip time, the piece of each piecewise law, set at the start and
+        at every law event), so pass a copy. start.quad: the integral of the states at
+        start.t (x1 when v1 is the only state), carried in columns n: of out.y and
+        log.state; size 0 for none. start.mode: the initial mode, or -1 to select it from
+        start.y (at v1 = 0 from the friction cones).
+    settings: Settings (method, t_end, Tolerances: rtol, atol per state, hmin, hmax;
+        max_steps bounds step attempts).
+    record: Record. out: Outputs: times (sorted, >= t0) and the rows filled there:
+        state, mode and the parameter vector with the latches in force (a row at an
+        event time belongs to the segment that ends there: its left limit); rows after
+        a stop keep their contents, mode -1. log: the EventLog (time; guard, from-mode,
+        to-mode (-1: stop); state after the event; an impact's (P_n, P_t, energy lost,
+        v1 before)), its capacity is log.t.size. mon: (K, 3) running max |observable k|
+        as (|value|, value, t), K = number of observables; pass zeros. counters:
+        int64[4] as in segment (steps, rejected, rhs calls, jac calls).
+
+    A sequence of named steps: ``_first_mode``, then per segment ``_segment`` (the step
+    loop, and the Painleve approach where D heads for 0: it locates D = 0, status
+    INCONSISTENT, event guard D; the maxima in mon are then +-inf, no finite reaction
+    exists) and at its event ``_latch``, ``_jump``, ``_checked``, ``_log``.
+
+    Returns (status, t_stop, number of events, last mode (for INCONSISTENT the mode
+    found inconsistent), need, initial mode).
+    """
+    t0 = start.t
+    if not _valid(tables, start, settings, record):
+        return INVALID_INPUT, t0, 0, -1, NEED_NOTHING, -1
+    tables, start, settings, record = borrowed((tables, start, settings, record))
+    out, log, mon, p, t_end = record.out, record.log, record.mon, start.p, settings.t_end
+    guards = fns.guards
+    observe = fns.observe
+    n = start.y.size
+    y, q = start.y.copy(), start.quad.copy()
+    w = _work(n, tables.guard_direction.shape[1], q.size, mon.shape[0])
+    g, jump = w.g, w.jump
+    out.mode[:] = -1
+    k_d = _guard(G_D, tables.guard_kind)
+    _latch_pieces(guards, t0, y, p, tables, g)
+    _carry_at_start(fns.impact, guards, t0, y, p, tables, g, w.frame)
+    mode, need = _first_mode(fns, tables, start, y, p, settings.tol, w)
     if mode < 0:
         return UNDECLARED, t0, 0, -1, need, -1
     if not _consistent(mode, guards, t0, y, p, tables, g):
-        _unbounded(observe, guards, mode, t0, y, p, -1, mon, obs, g)
+        _unbounded(observe, guards, mode, t0, y, p, -1, mon, w.obs, g)
         return INCONSISTENT, t0, 0, mode, NEED_NOTHING, mode
-    first = mode
+    first, status = mode, FINISHED
     t, i, n_ev, same, h = t0, 0, 0, 0, 0.0
     singular = True  # hand over to the Painleve approach when D heads for 0
     while True:
-        steps = counters[segment.N_STEPS] + counters[segment.N_REJECTED]
         i0 = i
-        k_singular = k_d if singular and k_d >= 0 and tables.guard_direction[mode, k_d] != 0 else -1
-        ev = EventSettings(tables.guard_direction[mode], 0.0, 0.0, True, k_singular, True)
-        seg_status, t_new, k, i, h = segment.run(method, attempt, rhs, jac, guards, observe, mode, p, t, t_end, tol,
-                                                 max(max_steps - steps, 0), h, ev, out, i, y, q, mon, counters,
-                                                 scratch)
-        singular = True
-        stalled = seg_status == segment.STEP_TOO_SMALL or seg_status == segment.NOT_FINITE
-        if k_singular >= 0 and stalled and counters[segment.N_STEPS] > 0:
-            seg_status = segment.APPROACH  # steps in t shrank to nothing: try Sundman's time
-        if seg_status == segment.APPROACH:
-            ev = EventSettings(tables.guard_direction[mode], 0.0, 0.0, True, k_d, False)
-            left = max(max_steps - counters[segment.N_STEPS] - counters[segment.N_REJECTED], 0)
-            outcome, t_new, i = painleve.approach(rhs, guards, observe, mode, p, ev, t_new, y, q, t_end, h, tol,
-                                                  left, out, i, mon, counters)
-            if outcome == painleve.ZERO:
-                seg_status, k = segment.EVENT, k_d
-            elif outcome == painleve.END:
-                seg_status = segment.REACHED_END
-            elif outcome == painleve.OTHER or outcome == painleve.CLEAR:
-                seg_status = segment.APPROACH  # go on in t (OTHER: locate that guard there first)
-                singular = outcome == painleve.CLEAR
-            else:
-                seg_status = outcome
+        seg_status, t_new, k, i, h, singular = _segment(fns, tables, settings, mode, p, State(t, y, q, h), record, i,
+                                                        w.segment, singular)
         out.mode[i0:i] = mode
         out.p[i0:i] = p
         if seg_status == segment.APPROACH:  # back from the approach, on in t
@@ -633,39 +721,18 @@ def integrate_hybrid(method, attempt, rhs, jac, guards, observe, impact, p, tabl
         jump[:] = np.nan  # no impact, unless a collision or pickup fills it
         if kind == G_V1:  # at rest exactly: the left limits of the observables there, v1 = 0
             y[n - 1] = 0.0
-            _observe_max(observe, mode, t, y, p, mon, obs)
+            _observe_max(observe, mode, t, y, p, mon, w.obs)
         if kind == G_D or kind == G_JAM:  # D or the jam factor of this mode reached 0
             if mon.shape[0] > 0 and mon[0, 0] != np.inf:  # (the approach marked them already)
-                _unbounded(observe, guards, mode, t, y, p, k_d, mon, obs, g)
+                _unbounded(observe, guards, mode, t, y, p, k_d, mon, w.obs, g)
             n_ev = _log(log, n_ev, t, k, mode, -1, y, q, jump)
             status = INCONSISTENT
             break
-        latching = kind == G_TRIP or kind == G_LAW or kind == G_STEM_GAP or kind == G_STEM_N
-        p_left = p.copy() if latching else p  # the laws up to the event: its left limit
-        if kind == G_TRIP:
-            p[tables.guard_latch[k]] = t
-        elif kind == G_LAW:
-            _latch_pieces(guards, t, y, p, tables, g)
-        frame[0] = np.inf  # a collision or pickup leaves here the flight time to the next landing
-        if (kind == G_GAP_A or kind == G_GAP_B) and mesh:  # the flanks begin to overlap
-            new, status, need = _outcome(*_mesh_enter(1 if kind == G_GAP_A else -1, guards, t, y, p, tables, g))
-        elif kind == G_GAP_A or kind == G_GAP_B:  # the gap closed: a collision on that flank
-            new, status, need = _collide(impact, 1 if kind == G_GAP_A else -1, rhs, guards, t, y, p, tol,
-                                         tables, g, y_tmp, f, frame, jump)
-        elif kind == G_STEM_GAP:  # body 2 reaches the stem: the pickup
-            new, status, need = _pickup(impact, k, rhs, guards, t, y, p, tol, tables, g, y_tmp, f, frame, jump)
-        elif kind == G_STEM_N:  # the stem leaves body 2: the load and its mass leave with it
-            p[tables.guard_latch[k]] = np.inf
-            new, status, need = _outcome(*_moving_on(0, rhs, guards, t, y, p, tol, tables, g, y_tmp, f))
-        else:
-            new, status, need = _select(mode, kind, rhs, guards, t, y, p, tol, tables, g, y_tmp, f)
-        if frame[0] < np.inf:  # a first step inside the bounce, so that the gap's guard is armed again
-            h = 0.25 * frame[0] if h <= 0.0 else min(h, 0.25 * frame[0])
-        if status == FINISHED and _released(new, guards, t, y, p, tables, g):
-            new, status, need = _outcome(*_moving_on(0, rhs, guards, t, y, p, tol, tables, g, y_tmp, f))
-        if status == FINISHED and not _consistent(new, guards, t, y, p, tables, g):
-            status = INCONSISTENT
-            _unbounded(observe, guards, mode, t, y, p_left, -1, mon, obs, g)
+        p_left = _latch(kind, k, t, y, p, tables, guards, g)
+        new, status, need = _jump(fns, tables, settings.tol, mode, kind, k, t, y, p, w)
+        if w.frame[0] < np.inf:  # a first step inside the bounce, so that the gap's guard is armed again
+            h = 0.25 * w.frame[0] if h <= 0.0 else min(h, 0.25 * w.frame[0])
+        new, status, need = _checked(fns, tables, settings.tol, mode, new, status, need, t, y, p, p_left, mon, w)
         if status == FINISHED and new == mode and kind == G_PHI:
             continue  # phi crossed within its noise (the probe keeps the flank): no event
         n_ev = _log(log, n_ev, t, k, mode, new if status == FINISHED else -1, y, q, jump)
@@ -676,4 +743,3 @@ def integrate_hybrid(method, attempt, rhs, jac, guards, observe, impact, p, tabl
         if t == t_end:
             break
     return status, t, n_ev, mode, need, first
-

@@ -23,7 +23,10 @@ where the segment loop saw D heading for zero, until
 Output rows inside the approach are filled by solving t(sigma) = t_out on
 re-taken steps; the observables' running maxima are updated at step ends.
 """
+from collections import namedtuple
+
 import numpy as np
+
 from tswm_runtime.jit.cache_guard import njit
 
 from tswm_runtime.integration import control
@@ -51,24 +54,42 @@ def too_steep(d_start, d_end):
     return not d_start / MAX_CHANGE < d_end < MAX_CHANGE * d_start
 
 
+#: The approach's work arrays: the augmented state z = (t, y, q) at a step's start, at its end
+#: and on a re-taken step (z_tmp), the error estimate, the stages K and the rate at z (K_row),
+#: the model's state y and rate f, the guards at a step's start (g) and end (g_new), the
+#: observables, and z's absolute tolerances.
+Sundman = namedtuple("Sundman", "z z_new z_tmp err K K_row y f g g_new obs atol")
+
+
 @njit(cache=True, error_model="numpy")
-def _rate(rhs, guards, mode, p, k_d, n, z, g, y, f, dz):
-    """dz = d(t, y, q)/dsigma at z; returns D."""
-    y[:] = z[1:1 + n]
-    guards(mode, z[0], y, p, g)
-    d = g[k_d]
-    rhs(mode, z[0], y, p, f)
+def _work(n, n_quad, n_guards, n_obs):
+    """The Sundman work arrays for n states, n_quad integrals, n_guards guards, n_obs observables."""
+    m = 1 + n + n_quad
+    return Sundman(np.empty(m), np.empty(m), np.empty(m), np.empty(m), np.empty((dopri5.N_STAGES + 1, m)),
+                   np.empty(m), np.empty(n), np.empty(n), np.empty(n_guards), np.empty(n_guards), np.empty(n_obs),
+                   np.empty(m))
+
+
+@njit(cache=True, error_model="numpy")
+def _rate(fns, seg, z, g, dz, w):
+    """dz = d(t, y, q)/dsigma at z (the guards there into g); returns D."""
+    n = w.y.size
+    w.y[:] = z[1:1 + n]
+    fns.guards(seg.mode, z[0], w.y, seg.p, g)
+    d = g[seg.ev.singular]
+    fns.rhs(seg.mode, z[0], w.y, seg.p, w.f)
     dz[0] = d
     for i in range(n):
-        dz[1 + i] = d * f[i]
+        dz[1 + i] = d * w.f[i]
     for i in range(z.size - 1 - n):
-        dz[1 + n + i] = d * y[i]
+        dz[1 + n + i] = d * w.y[i]
     return d
 
 
 @njit(cache=True, error_model="numpy")
-def _step(rhs, guards, mode, p, k_d, n, z, h, K, z_new, g, y, f):
-    """One DOPRI5 step of size h in sigma from z (K[0] = rate at z on entry); fills K[6]."""
+def _step(fns, seg, z, h, z_new, g, w):
+    """One DOPRI5 step of size h in sigma from z (w.K[0] = rate at z on entry); fills w.K[6]."""
+    K = w.K
     m = z.size
     for s in range(1, dopri5.N_STAGES):
         for i in range(m):
@@ -76,34 +97,35 @@ def _step(rhs, guards, mode, p, k_d, n, z, h, K, z_new, g, y, f):
             for j in range(s):
                 acc += dopri5.A[s, j] * K[j, i]
             z_new[i] = z[i] + h * acc
-        _rate(rhs, guards, mode, p, k_d, n, z_new, g, y, f, K[s])
+        _rate(fns, seg, z_new, g, K[s], w)
     for i in range(m):
         acc = 0.0
         for j in range(dopri5.N_STAGES):
             acc += dopri5.B[j] * K[j, i]
         z_new[i] = z[i] + h * acc
-    return _rate(rhs, guards, mode, p, k_d, n, z_new, g, y, f, K[dopri5.N_STAGES])
+    return _rate(fns, seg, z_new, g, K[dopri5.N_STAGES], w)
 
 
 @njit(cache=True, error_model="numpy")
-def _retake(rhs, guards, mode, p, k_d, n, z, K0, h, K, z_out, g, y, f):
-    """z_out = a full step of length h from z (K0: the rate at z); returns D there."""
-    K[0, :] = K0
-    return _step(rhs, guards, mode, p, k_d, n, z, h, K, z_out, g, y, f)
+def _retake(fns, seg, h, z_out, w):
+    """z_out = a full step of length h from w.z (w.K_row: the rate there); returns D there."""
+    w.K[0, :] = w.K_row
+    return _step(fns, seg, w.z, h, z_out, w.g_new, w)
 
 
 @njit(cache=True, error_model="numpy")
-def _root(rhs, guards, mode, p, k_d, n, z, K0, h, K, z_out, g, y, f, which, target, tol, far):
-    """sigma in (0, h] where component ``which`` of the re-taken step (D for which < 0)
-    reaches ``target``, by Illinois; z_out holds the state on the far side of it (far)
-    or on the near side. Returns that sigma."""
-    f_a = (K0[0] if which < 0 else z[which]) - target
-    d_b = _retake(rhs, guards, mode, p, k_d, n, z, K0, h, K, z_out, g, y, f)
+def _root(fns, seg, h, z_out, w, which, target, tol, far):
+    """sigma in (0, h] where component ``which`` of the step re-taken from w.z (D for which < 0)
+    reaches ``target``, by Illinois; z_out holds the state on the far side of it (far) or on
+    the near side. Returns that sigma."""
+    z = w.z
+    f_a = (w.K_row[0] if which < 0 else z[which]) - target
+    d_b = _retake(fns, seg, h, z_out, w)
     state = events.bracket_start(0.0, f_a, h, (d_b if which < 0 else z_out[which]) - target)
     z_far, z_near = z_out.copy(), z.copy()
     while not events.bracket_done(state, tol):
         c = events.bracket_next(state, tol)
-        d_c = _retake(rhs, guards, mode, p, k_d, n, z, K0, c, K, z_out, g, y, f)
+        d_c = _retake(fns, seg, c, z_out, w)
         state = events.bracket_update(state, c, (d_c if which < 0 else z_out[which]) - target)
         if state[2] == c:
             z_far[:] = z_out
@@ -114,117 +136,156 @@ def _root(rhs, guards, mode, p, k_d, n, z, K0, h, K, z_out, g, y, f, which, targ
 
 
 @njit(cache=True, error_model="numpy")
-def approach(rhs, guards, observe, mode, p, ev, t, y_io, q_io, t_end, h_t, tol, max_steps, out, i,
-             mon, counters):
-    """Follow the mode from (t, y_io, q_io) in Sundman time; see the module docstring.
+def _begin(fns, settings, seg, state, w):
+    """z and its absolute tolerances from the state; returns D there (the rate into w.K[0],
+    the guards into w.g)."""
+    n, z = state.y.size, w.z
+    w.atol[0] = settings.tol.rtol * max(abs(state.t), 1e-3)
+    w.atol[1:1 + n] = settings.tol.atol
+    for i_q in range(state.quad.size):
+        w.atol[1 + n + i_q] = settings.tol.atol[i_q]
+    z[0], z[1:1 + n], z[1 + n:] = state.t, state.y, state.quad
+    return _rate(fns, seg, z, w.g, w.K[0], w)
 
-    ev: the segment's EventSettings (ev.singular is D's guard); tol: Tolerances; h_t:
-    the last step in t; out: Outputs, rows from i on. y_io, q_io are updated to the
-    returned state. Returns (outcome, t, next output row): outcome ZERO, END, OTHER,
-    CLEAR or -1 (step too small), -2 (max steps) as the segment's codes.
+
+@njit(cache=True, error_model="numpy")
+def _stop_inside(fns, seg, t_end, d_new, w):
+    """What ends the approach inside the accepted step from w.z to w.z_new (ZERO before END before
+    OTHER: the order in sigma), -1 if nothing does."""
+    if not d_new > 0.0:
+        return ZERO
+    z_new = w.z_new
+    if z_new[0] >= t_end:
+        return END
+    n = w.y.size
+    directions, g, g_new = seg.ev.directions, w.g, w.g_new
+    w.y[:] = z_new[1:1 + n]
+    fns.guards(seg.mode, z_new[0], w.y, seg.p, g_new)
+    stop = -1
+    for k in range(directions.size):
+        if k == seg.ev.singular or g[k] == 1.0 and g_new[k] == 1.0:
+            continue
+        crossed = (g[k] > 0.0) != (g_new[k] > 0.0)
+        wanted = directions[k] == 0 or (directions[k] > 0) == (g_new[k] > 0.0)
+        if crossed and wanted:
+            stop = OTHER
+    return stop
+
+
+@njit(cache=True, error_model="numpy")
+def _unbounded(fns, seg, mon, w):
+    """D reaches 0: the reactions grow without bound, with the signs they have at w.z (D > 0)."""
+    n = w.y.size
+    w.y[:] = w.z[1:1 + n]
+    fns.observe(seg.mode, w.z[0], w.y, seg.p, w.obs)
+    for k in range(mon.shape[0]):
+        mon[k, 0], mon[k, 1] = np.inf, np.inf if w.obs[k] >= 0.0 else -np.inf
+
+
+@njit(cache=True, error_model="numpy")
+def _land(fns, seg, stop, t_end, h, d, tol_t, w):
+    """w.z_new on D = 0 (ZERO) or on t = t_end (END), located in the step of size h.
+    END: the far side (t >= t_end, then set to t_end); ZERO: the near side, where D > 0
+    still: the state's formulas there are the limits at the Painleve point."""
+    which, target = (-1, 0.0) if stop == ZERO else (0, t_end)
+    _root(fns, seg, h, w.z_new, w, which, target, tol_t / max(d, 1e-300) if stop == END else 1e-15 * h,
+          stop == END)
+    if stop == END:
+        w.z_new[0] = t_end
+
+
+@njit(cache=True, error_model="numpy")
+def _write_rows(fns, seg, out, i, h, d, tol_t, w):
+    """Output rows in (t, t_new] of the step from w.z to w.z_new: t(sigma) = t_out solved on
+    re-taken steps. Returns the next row."""
+    n, t_out, z_new, z_tmp = w.y.size, out.t, w.z_new, w.z_tmp
+    while i < t_out.size and t_out[i] <= z_new[0]:
+        if t_out[i] == z_new[0]:
+            z_tmp[:] = z_new
+        else:
+            _root(fns, seg, h, z_tmp, w, 0, t_out[i], tol_t / max(d, 1e-300), True)
+        out.y[i, :n] = z_tmp[1:1 + n]
+        out.y[i, n:] = z_tmp[1 + n:]
+        i += 1
+    return i
+
+
+@njit(cache=True, error_model="numpy")
+def _observe_max(fns, seg, mon, w):
+    """The observables' running maxima with their values at w.z."""
+    n, z = w.y.size, w.z
+    w.y[:] = z[1:1 + n]
+    fns.observe(seg.mode, z[0], w.y, seg.p, w.obs)
+    for k in range(mon.shape[0]):
+        if abs(w.obs[k]) > mon[k, 0]:
+            mon[k, 0], mon[k, 1], mon[k, 2] = abs(w.obs[k]), w.obs[k], z[0]
+
+
+@njit(cache=True, error_model="numpy")
+def approach(fns, settings, seg, state, record, i):
+    """Follow the mode from ``state`` in Sundman time; see the module docstring.
+
+    fns: the segment's Functions; settings: Settings (t_end, tol, max_steps: the attempts
+    left); seg: the Segment (seg.ev.singular is D's guard); state: the State where the segment
+    loop stopped (state.h: its last step in t), whose y and quad are updated to the returned
+    state; record: the Record (record.out: rows from i on). Returns (outcome, t, next output
+    row): outcome ZERO, END, OTHER, CLEAR or -1 (step too small), -2 (max steps) as the
+    segment's codes.
     """
-    k_d, directions, rtol, atol = ev.singular, ev.directions, tol.rtol, tol.atol
-    t_out, y_out = out.t, out.y
-    n, nq = y_io.size, q_io.size
-    m = 1 + n + nq
-    z, z_new, z_tmp, err = np.empty(m), np.empty(m), np.empty(m), np.empty(m)
-    K, K_row = np.empty((dopri5.N_STAGES + 1, m)), np.empty(m)
-    y, f = np.empty(n), np.empty(n)
-    n_g = directions.size
-    g, g_new, obs = np.empty(n_g), np.empty(n_g), np.empty(mon.shape[0])
-    scale_atol = np.empty(m)
-    scale_atol[0] = rtol * max(abs(t), 1e-3)
-    scale_atol[1:1 + n] = atol
-    for i_q in range(nq):
-        scale_atol[1 + n + i_q] = atol[i_q]
-    z[0], z[1:1 + n], z[1 + n:] = t, y_io, q_io
-    d = _rate(rhs, guards, mode, p, k_d, n, z, g, y, f, K[0])   # also the guards at z, into g
+    t_end, counters, mon = settings.t_end, record.counters, record.mon
+    n = state.y.size
+    w = _work(n, state.quad.size, seg.ev.directions.size, mon.shape[0])
+    z, z_new, K = w.z, w.z_new, w.K
+    d = _begin(fns, settings, seg, state, w)
     counters[2] += 1
     if not d > 0.0:
-        return ZERO, t, i
-    h = h_t / d
-    tol_t = events.time_tolerance(t, 0.0)
+        return ZERO, state.t, i
+    h = state.h / d
+    tol_t = events.time_tolerance(state.t, 0.0)
     outcome = -2
-    for _ in range(max_steps):
-        K_row[:] = K[0]
-        d_new = _step(rhs, guards, mode, p, k_d, n, z, h, K, z_new, g_new, y, f)
+    for _ in range(settings.max_steps):
+        w.K_row[:] = K[0]
+        d_new = _step(fns, seg, z, h, z_new, w.g_new, w)
         counters[2] += dopri5.N_STAGES
-        dopri5.error_estimate(h, K, err)
-        e = control.error_norm(err, z, z_new, scale_atol, rtol)
+        dopri5.error_estimate(h, K, w.err)
+        e = control.error_norm(w.err, z, z_new, w.atol, settings.tol.rtol)
         factor = control.step_factor(e, dopri5.ERROR_ORDER, dopri5.SAFETY, dopri5.MIN_FACTOR,
                                      dopri5.MAX_FACTOR)
         if not (e < 1.0 and np.isfinite(e)):
             counters[1] += 1
-            K[0, :] = K_row
+            K[0, :] = w.K_row
             h *= factor
             if h * max(d, 1e-300) <= 10.0 * (np.nextafter(z[0], np.inf) - z[0]):
                 outcome = -1
                 break
             continue
         counters[0] += 1
-        # What ends the approach inside this step, in the order of sigma.
-        stop = -1
-        if not d_new > 0.0:
-            stop = ZERO
-        elif z_new[0] >= t_end:
-            stop = END
-        else:
-            y[:] = z_new[1:1 + n]
-            guards(mode, z_new[0], y, p, g_new)
-            for k in range(n_g):
-                if k == k_d or g[k] == 1.0 and g_new[k] == 1.0:
-                    continue
-                crossed = (g[k] > 0.0) != (g_new[k] > 0.0)
-                wanted = directions[k] == 0 or (directions[k] > 0) == (g_new[k] > 0.0)
-                if crossed and wanted:
-                    stop = OTHER
-        if stop == ZERO:  # the reactions grow without bound, with the signs they have here (D > 0)
-            y[:] = z[1:1 + n]
-            observe(mode, z[0], y, p, obs)
-            for k in range(mon.shape[0]):
-                mon[k, 0], mon[k, 1] = np.inf, np.inf if obs[k] >= 0.0 else -np.inf
+        stop = _stop_inside(fns, seg, t_end, d_new, w)
+        if stop == ZERO:
+            _unbounded(fns, seg, mon, w)
         if stop == ZERO or stop == END:
-            which, target = (-1, 0.0) if stop == ZERO else (0, t_end)
-            # END: the far side (t >= t_end, then set to t_end); ZERO: the near side, where
-            # D > 0 still: the state's formulas there are the limits at the Painleve point.
-            _root(rhs, guards, mode, p, k_d, n, z, K_row, h, K, z_new, g_new, y, f, which, target,
-                  tol_t / max(d, 1e-300) if stop == END else 1e-15 * h, stop == END)
-            if stop == END:
-                z_new[0] = t_end
+            _land(fns, seg, stop, t_end, h, d, tol_t, w)
         if stop == OTHER:
             outcome = OTHER
             break
-        # Output rows in (t, t_new]: solve t(sigma) = t_out on re-taken steps.
-        while i < t_out.size and t_out[i] <= z_new[0]:
-            if t_out[i] == z_new[0]:
-                z_tmp[:] = z_new
-            else:
-                _root(rhs, guards, mode, p, k_d, n, z, K_row, h, K, z_tmp, g_new, y, f, 0,
-                      t_out[i], tol_t / max(d, 1e-300), True)
-            y_out[i, :n] = z_tmp[1:1 + n]
-            y_out[i, n:] = z_tmp[1 + n:]
-            i += 1
+        i = _write_rows(fns, seg, record.out, i, h, d, tol_t, w)
         z[:] = z_new
         if stop == ZERO:
             for k in range(mon.shape[0]):
                 mon[k, 2] = z[0]
             outcome = ZERO
             break
-        y[:] = z[1:1 + n]
-        observe(mode, z[0], y, p, obs)
-        for k in range(mon.shape[0]):
-            if abs(obs[k]) > mon[k, 0]:
-                mon[k, 0], mon[k, 1], mon[k, 2] = abs(obs[k]), obs[k], z[0]
+        _observe_max(fns, seg, mon, w)
         if stop == END:
             outcome = END
             break
         d_prev = d
-        d = _rate(rhs, guards, mode, p, k_d, n, z, g, y, f, K[0])   # and the guards at z, into g
+        d = _rate(fns, seg, z, w.g, K[0], w)   # and the guards at z, into g
         counters[2] += 1
         if d >= d_prev or d > CLEAR_STEPS * (d_prev - d):
             outcome = CLEAR
             break
         h *= factor
-    y_io[:] = z[1:1 + n]
-    q_io[:] = z[1 + n:]
+    state.y[:] = z[1:1 + n]
+    state.quad[:] = z[1 + n:]
     return outcome, z[0], i

@@ -25,13 +25,15 @@ not valid across a switch, scipy issue 18039), the caller restarts after events.
 ``single.integrate_segment`` calls ``run`` for one segment from Python (no noise
 band, no quadrature, no monitored observables; for tests and tools, and compiled
 only where they import it); the hybrid driver (``hybrid``) calls it with all three.
-Arguments travel in the named structures of ``structures`` (Tolerances,
-EventSettings, Outputs, Step, StepWork).
+Arguments travel in the named structures of ``structures``: the functions
+(Functions), the run's Settings, the Segment (mode, p, EventSettings), the State it
+starts from, the Record it writes to, and its work arrays (``SegmentWork``). ``run``
+is a sequence of named steps: ``_start``, then per step attempt ``_rejected`` or
+``_accepted``, ``_first_event``, ``_advance``, ``_hold`` at a stable rest, ``_next_step``.
 """
 from collections import namedtuple
 
 import numpy as np
-import numba
 from numba import types
 
 from tswm_runtime.jit import cache_guard
@@ -43,8 +45,8 @@ from tswm_runtime.integration import rosenbrock
 from tswm_runtime.integration import steady
 from tswm_runtime.jit.borrow import borrowed
 from tswm_runtime.jit.cache_guard import njit
-from tswm_runtime.jit.signatures import JAC_SIG, VECTOR, RhsFunction, compiled
-from tswm_runtime.jit.structures import INTS, STEP_WORK, TOLERANCES, Step, StepWork
+from tswm_runtime.jit.signatures import JAC_SIG, VECTOR, GuardsFunction, JacFunction, RhsFunction, compiled
+from tswm_runtime.jit.structures import INTS, STEP_WORK, TOLERANCES, Functions, Step, StepWork
 
 # Method codes.
 DOPRI5 = 0  # Dormand-Prince 5(4), explicit (dopri5.py).
@@ -70,7 +72,7 @@ MIN_STEP_ULPS = 10.0  # A step must exceed 10 ulp(t) to move t reliably (scipy's
 
 
 
-@numba.njit(JAC_SIG, cache=True)
+@cache_guard.compile_cached(JAC_SIG)   # after the stale-cache check, which would purge it
 def no_jacobian(mode, t, y, p, J, dfdt):
     """Placeholder ``jac`` for DOPRI5 runs (DOPRI5 never calls it); fills NaN."""
     J[:, :] = np.nan
@@ -87,10 +89,10 @@ def _all_finite(x):
 
 
 @njit(cache=True, error_model="numpy")
-def _eval_guards(guards, mode, t, y, p, g):
+def _eval_guards(fns, seg, t, y, g):
     """Guards into g (skipped when the model has none); True if all are finite."""
     if g.size > 0:
-        guards(mode, t, y, p, g)
+        fns.guards(seg.mode, t, y, seg.p, g)
     return _all_finite(g)
 
 
@@ -147,6 +149,9 @@ ATTEMPT_SIG = types.UniTuple(types.float64, 2)(
     RhsFunction, types.int64, types.float64, VECTOR, VECTOR, types.float64, VECTOR, STEP_WORK, VECTOR, VECTOR,
     VECTOR, TOLERANCES, INTS, types.boolean)
 AttemptFunction = types.FunctionType(ATTEMPT_SIG)
+#: The numba type of ``structures.Functions``.
+FUNCTIONS = types.NamedTuple((AttemptFunction, RhsFunction, JacFunction, GuardsFunction, GuardsFunction,
+                              GuardsFunction), Functions)
 _ATTEMPTS = {DOPRI5: dopri5_attempt, ROSENBROCK23: rosenbrock23_attempt}
 
 
@@ -162,21 +167,21 @@ def attempt_function(method):
 
 
 @njit(cache=True, error_model="numpy")
-def _state_at(attempt, rhs, guards, mode, p, step, t, work, y, g, tol, counters):
-    """y = state at t in the step by a full step from t_a (exact at the ends); g = guards."""
+def _state_at(fns, seg, tol, step, t, y, s, counters):
+    """y = state at t in the step by a full step from t_a (exact at the ends); s.g_tmp = guards."""
     if t == step.t_b:
         y[:] = step.y_b
     elif t == step.t_a:
         y[:] = step.y_a
     else:
-        attempt(rhs, mode, step.t_a, step.y_a, p, t - step.t_a, step.f_a, work, y, y, y, tol, counters, False)
-    _eval_guards(guards, mode, t, y, p, g)
+        fns.attempt(fns.rhs, seg.mode, step.t_a, step.y_a, seg.p, t - step.t_a, step.f_a, s.work, y, y, y, tol,
+                    counters, False)
+    _eval_guards(fns, seg, t, y, s.g_tmp)
 
 
 @njit(cache=True, error_model="numpy")
-def _event_state(attempt, rhs, guards, mode, p, step, k, t_star, j, G, ev, tol, work, y_ev, y_tmp, g_tmp,
-                 counters):
-    """(event time, True) and state y_ev for guard k crossing at t_star (found on the
+def _event_state(fns, seg, tol, step, k, t_star, j, s, counters):
+    """(event time, True) and state s.y_ev for guard k crossing at t_star (found on the
     dense output); (t_star, False) if the re-taken steps show no crossing (the
     interpolant's error made it: no event).
 
@@ -186,8 +191,9 @@ def _event_state(attempt, rhs, guards, mode, p, step, k, t_star, j, G, ev, tol, 
     The first bracket is tight about t_star: [t_star - w, t_star] or [t_star, t_star
     + w] with w 1e-3 of the step, widened to [t_a, .] or [., sample j] if needed.
     """
-    post = G[j, k]
-    _state_at(attempt, rhs, guards, mode, p, step, t_star, work, y_ev, g_tmp, tol, counters)
+    ev, y_ev, y_tmp, g_tmp = seg.ev, s.y_ev, s.y_tmp, s.g_tmp
+    post = s.G[j, k]
+    _state_at(fns, seg, tol, step, t_star, y_ev, s, counters)
     g_star = g_tmp[k]
     t_far = events.sample_time(step.t_a, step.t_b, j)
     if (g_star != 0.0 and abs(g_star) <= ev.gtol) or (g_star == 0.0 and t_star >= t_far):
@@ -195,11 +201,11 @@ def _event_state(attempt, rhs, guards, mode, p, step, k, t_star, j, G, ev, tol, 
     far = g_star * post > 0.0
     w = 1e-3 * step.h
     t_probe = max(t_star - w, step.t_a) if far else min(t_star + w, t_far)
-    _state_at(attempt, rhs, guards, mode, p, step, t_probe, work, y_tmp, g_tmp, tol, counters)
+    _state_at(fns, seg, tol, step, t_probe, y_tmp, s, counters)
     g_probe = g_tmp[k]
     if (g_probe * post > 0.0) == far:  # the probe is on the same side: widen to the ends
         t_probe = step.t_a if far else t_far
-        _state_at(attempt, rhs, guards, mode, p, step, t_probe, work, y_tmp, g_tmp, tol, counters)
+        _state_at(fns, seg, tol, step, t_probe, y_tmp, s, counters)
         g_probe = g_tmp[k]
         if (g_probe * post > 0.0) == far:
             if far:  # already across at t_a (it crossed inside the noise band): report t_a
@@ -214,7 +220,7 @@ def _event_state(attempt, rhs, guards, mode, p, step, k, t_star, j, G, ev, tol, 
     ttol = events.time_tolerance(state[2], ev.ttol)
     while not events.bracket_done(state, ttol):
         c = events.bracket_next(state, ttol)
-        _state_at(attempt, rhs, guards, mode, p, step, c, work, y_tmp, g_tmp, tol, counters)
+        _state_at(fns, seg, tol, step, c, y_tmp, s, counters)
         state = events.bracket_update(state, c, g_tmp[k])
         if state[2] == c:
             y_ev[:] = y_tmp
@@ -259,14 +265,15 @@ MaxWindow = namedtuple("MaxWindow", "f y Q s")  # per observable: 2 steps' (t_a,
 
 
 @njit(cache=True, error_model="numpy")
-def _monitor(observe, mode, t, y, p, mon, obs, step, t_hi, win):
+def _monitor(fns, seg, t, y, mon, step, t_hi, s):
     """Track max |observable k| at (t, y) in mon[k] = (|value|, value, t).
 
     A new maximum at the end of ``step`` (None at a segment start) remembers that step's
     dense output in slot 0 of the refinement window, and the following step in slot 1:
     the true maximum lies in one of the two (``_refine``).
     """
-    observe(mode, t, y, p, obs)
+    obs, win = s.obs, s.win
+    fns.observe(seg.mode, t, y, seg.p, obs)
     for k in range(mon.shape[0]):
         if abs(obs[k]) > mon[k, 0]:
             mon[k, 0], mon[k, 1], mon[k, 2] = abs(obs[k]), obs[k], t
@@ -288,21 +295,22 @@ _GOLDEN = 0.5 * (3.0 - np.sqrt(5.0))
 
 
 @njit(cache=True, error_model="numpy")
-def _window_value(observe, mode, p, k, t, win, y_tmp, obs):
+def _window_value(fns, seg, k, t, s):
     """|Observable k| at t, from the window slot whose step contains t."""
+    win = s.win
     slot = 0 if (t <= win.f[k, 0, 2] or win.s[k] < 2) else 1
     t_a, h = win.f[k, slot, 0], win.f[k, slot, 1]
-    events.dense_eval(win.y[k, slot], h, win.Q[k, slot], (t - t_a) / h, y_tmp)
-    observe(mode, t, y_tmp, p, obs)
-    return abs(obs[k])
+    events.dense_eval(win.y[k, slot], h, win.Q[k, slot], (t - t_a) / h, s.y_tmp)
+    fns.observe(seg.mode, t, s.y_tmp, seg.p, s.obs)
+    return abs(s.obs[k])
 
 
 @njit(cache=True, error_model="numpy")
-def _brent_max(observe, mode, p, k, win, y_tmp, obs, a, b, x):
+def _brent_max(fns, seg, k, s, a, b, x):
     """(t, |observable k|) at its largest on [a, b], from x: Brent's bounded method (parabolic
     steps with a golden-section fallback; scipy's fminbound), to REFINE_XTOL of b - a."""
     xatol = REFINE_XTOL * (b - a)
-    fx = -_window_value(observe, mode, p, k, x, win, y_tmp, obs)
+    fx = -_window_value(fns, seg, k, x, s)
     v, w, fv, fw = x, x, fx, fx
     rat, e = 0.0, 0.0
     for _ in range(REFINE_MAX_CALLS):
@@ -330,7 +338,7 @@ def _brent_max(observe, mode, p, k, win, y_tmp, obs, a, b, x):
             e = (a - x) if x >= xm else (b - x)
             rat = _GOLDEN * e
         u = x + (max(abs(rat), tol1) if rat >= 0.0 else -max(abs(rat), tol1))
-        fu = -_window_value(observe, mode, p, k, u, win, y_tmp, obs)
+        fu = -_window_value(fns, seg, k, u, s)
         if fu <= fx:
             if u >= x:
                 a = x
@@ -350,17 +358,18 @@ def _brent_max(observe, mode, p, k, win, y_tmp, obs, a, b, x):
 
 
 @njit(cache=True, error_model="numpy")
-def _refine(observe, mode, p, mon, obs, win, y_tmp):
+def _refine(fns, seg, mon, s):
     """Locate max |observable| in each pending window (Brent, from the largest step end) and
     reset them."""
+    win = s.win
     for k in range(mon.shape[0]):
         if win.s[k] == 0:
             continue
         lo, hi, t_m = win.f[k, 0, 0], win.f[k, win.s[k] - 1, 2], mon[k, 2]
-        t_best, best = _brent_max(observe, mode, p, k, win, y_tmp, obs, lo, hi, min(max(t_m, lo), hi))
+        t_best, best = _brent_max(fns, seg, k, s, lo, hi, min(max(t_m, lo), hi))
         if best > mon[k, 0]:
-            _window_value(observe, mode, p, k, t_best, win, y_tmp, obs)
-            mon[k, 0], mon[k, 1], mon[k, 2] = best, obs[k], t_best
+            _window_value(fns, seg, k, t_best, s)
+            mon[k, 0], mon[k, 1], mon[k, 2] = best, s.obs[k], t_best
         win.s[k] = 0
 
 
@@ -382,57 +391,175 @@ def segment_work(n, m, n_quad, n_obs):
                   np.zeros(n_obs, np.int64)))
 
 
-@njit(cache=True, error_model="numpy")
-def run(method, attempt, rhs, jac, guards, observe, mode, p, t0, t_end, tol, max_steps, h0, ev, out, i, y,
-        quad, mon, counters, scratch):
-    """The step loop of one segment; y is the current state (updated in place).
+#: The step-size controller's memory in a segment: whether the last attempt at t was rejected,
+#: that rejected step and its error, and the last accepted step and its error.
+Control = namedtuple("Control", "rejected h_rej e_rej h_acc e_acc")
+_STEPPING = 3  # _start's code for a segment that has steps to take
 
-    attempt: the method's step, ``attempt_function(method)``.
-    tol: Tolerances; ev: EventSettings (ev.singular: a guard (D) whose zero the model
-    cannot be integrated to in t; the loop stops with APPROACH after a step that takes
-    it towards 0 fast, -1: none); out: Outputs (rows from i on are filled);
-    observe and mon: observables tracked for their maxima (mon.shape[0] of them,
-    none if 0); quad: the integral of y, carried along if quad.size == y.size.
+
+@njit(cache=True, error_model="numpy")
+def _start(fns, settings, seg, state, record, s):
+    """Set up the segment at ``state``: the maxima there, f_a and the guards G[0] (armed), their
+    rates, the first step. Returns (_STEPPING, first step), or (REACHED_END or NOT_FINITE,
+    state.h) when there is nothing to step."""
+    t, y, counters = state.t, state.y, record.counters
+    s.win.s[:] = 0
+    if record.mon.shape[0] > 0:
+        _monitor(fns, seg, t, y, record.mon, None, t, s)
+    if settings.t_end == t:
+        return REACHED_END, state.h
+    fns.rhs(seg.mode, t, y, seg.p, s.f_a)
+    counters[N_RHS] += 1
+    if not (_eval_guards(fns, seg, t, y, s.G[0]) and _all_finite(y) and _all_finite(s.f_a)):
+        return NOT_FINITE, state.h
+    events.arm_guards(s.G[0], seg.ev.gtol, s.sgn)
+    h = state.h
+    if h <= 0.0:
+        tol = settings.tol
+        h = control.select_initial_step(fns.rhs, seg.mode, t, y, seg.p, s.f_a, settings.t_end, tol.hmax,
+                                        _error_order(settings.method), tol.rtol, tol.atol, s.y_b, s.f_b)
+        counters[N_RHS] += 1
+    events.guard_rates(fns.guards, seg.mode, t, y, s.f_a, seg.p, s.G[0], h, s.y_tmp, s.g_tmp, s.rate_a)
+    return _STEPPING, h
+
+
+@njit(cache=True, error_model="numpy")
+def _jacobian(fns, seg, t, y, work, counters):
+    """The Jacobian and df/dt at (t, y) into work; True if they are finite."""
+    fns.jac(seg.mode, t, y, seg.p, work.J, work.dfdt)
+    counters[N_JAC] += 1
+    return _all_finite(work.J) and _all_finite(work.dfdt)
+
+
+@njit(cache=True, error_model="numpy")
+def _rejected(ctl, h, e, factor, counters):
+    """After a step of size h rejected with error e: (control, the next step size)."""
+    counters[N_REJECTED] += 1
+    if ctl.rejected and ctl.e_rej > e > 0.0 and ctl.h_rej > h:  # rejected again at t: the order the error shows
+        factor = min(factor, control.observed_order_factor(e, np.log(ctl.e_rej / e) / np.log(ctl.h_rej / h)))
+    return Control(True, h, e, ctl.h_acc, ctl.e_acc), h * factor
+
+
+@njit(cache=True, error_model="numpy")
+def _too_steep(ctl, h, counters):
+    """After a step of size h rejected for changing D too much: (control, half the step)."""
+    counters[N_REJECTED] += 1
+    return Control(True, ctl.h_rej, 0.0, ctl.h_acc, ctl.e_acc), 0.5 * h
+
+
+@njit(cache=True, error_model="numpy")
+def _accepted(ctl, h, h_want, e, factor, order, counters):
+    """After a step of size h (h_want before it was clipped to t_end) accepted with error e:
+    (control, the next step size)."""
+    counters[N_STEPS] += 1
+    if ctl.h_acc > 0.0 and e > 0.0:  # Gustafsson's predictive controller: follow the trend of the steps
+        factor = min(factor, control.predictive_factor(h, e, ctl.h_acc, ctl.e_acc, order))
+    if ctl.rejected:
+        factor = min(1.0, factor)
+    # A step clipped to land on t_end says nothing against the step wanted.
+    h_next = max(h * factor, h_want) if h < h_want else h * factor
+    return Control(ctl.rejected, ctl.h_rej, ctl.e_rej, h, max(e, control.PREDICTIVE_MIN_ERR)), h_next
+
+
+@njit(cache=True, error_model="numpy")
+def _first_event(fns, seg, tol, step, t_end, s, counters):
+    """(guard, time) of the first event in the accepted ``step`` (its state into s.y_ev), or
+    (-1, step.t_b); the guards' rates at t_b into s.rate_b."""
+    G, g_b, ignore = s.G, s.G[events.GUARD_SUBINTERVALS], s.ignore
+    k, j = -1, 1
+    t_new = step.t_b
+    ignore[:] = False
+    events.guard_rates(fns.guards, seg.mode, t_new, step.y_b, s.f_b, seg.p, g_b, step.h, s.y_tmp, s.g_tmp, s.rate_b)
+    clear = events.clear_of_zero(G[0], g_b, s.rate_a, s.rate_b, step.h, s.sgn, seg.ev.gtol)
+    for _ in range(0 if clear else seg.ev.directions.size):  # each pass finds an event or ignores one more guard
+        k, t_star, j = events.find_event(fns.guards, seg.mode, seg.p, step, G, seg.ev, tol, s.sgn, t_new == t_end,
+                                         s.cand, s.y_tmp, s.g_tmp, s.y_pert, j, ignore)
+        if k < 0:
+            break
+        t_ev, real = _event_state(fns, seg, tol, step, k, t_star, j, s, counters)
+        if real:
+            t_new = t_ev
+            break
+        ignore[k] = True  # an artefact of the interpolant: look on from sample j
+        k = -1
+    return k, t_new
+
+
+@njit(cache=True, error_model="numpy")
+def _advance(fns, seg, record, i, step, t_new, y_hi, quad, s):
+    """The rows, the integral and the maxima up to t_new (state y_hi) in ``step``; returns the
+    next output row."""
+    i = _write_samples(record.out, i, step, t_new, y_hi, quad, s.q_tmp)
+    if quad.size > 0:
+        events.dense_integral(step.y_a, step.h, step.Q, (t_new - step.t_a) / step.h, s.q_tmp)
+        quad += s.q_tmp
+    if record.mon.shape[0] > 0:
+        _monitor(fns, seg, t_new, y_hi, record.mon, step, t_new, s)
+    return i
+
+
+@njit(cache=True, error_model="numpy")
+def _stable_rest(fns, seg, tol, t, y, quad, s, counters):
+    """True if (t, y) is a stable equilibrium of the autonomous scalar segment (``steady``); the
+    Jacobian there is left in s.work."""
+    work = s.work
+    fns.jac(seg.mode, t, y, seg.p, work.J, work.dfdt)
+    counters[N_JAC] += 1
+    return steady.at_stable_rest(s.f_b, work.J, work.dfdt, tol, y, quad)
+
+
+@njit(cache=True, error_model="numpy")
+def _hold(fns, seg, t_end, t, state, record, i, s):
+    """Hold the state at its equilibrium (one Newton step onto it) up to the next guard crossing
+    or t_end. Returns (t, guard or -1, next output row)."""
+    y, quad, g_b = state.y, state.quad, s.G[events.GUARD_SUBINTERVALS]
+    y[0] -= s.f_b[0] / s.work.J[0, 0]  # one Newton step onto the equilibrium itself
+    fns.guards(seg.mode, t, y, seg.p, g_b)
+    t_hold, k = steady.hold(fns.guards, seg.mode, t, y, seg.p, t_end, g_b, seg.ev, s.g_tmp)
+    i = _hold_samples(record.out, i, t, t_hold, y, quad)
+    if quad.size > 0:
+        quad += y * (t_hold - t)
+    return t_hold, k, i
+
+
+@njit(cache=True, error_model="numpy")
+def _next_step(s):
+    """The end of the accepted step becomes the start of the next."""
+    s.f_a[:] = s.f_b
+    s.G[0, :] = s.G[events.GUARD_SUBINTERVALS]
+    s.rate_a[:] = s.rate_b
+
+
+@njit(cache=True, error_model="numpy")
+def run(fns, settings, seg, state, record, i, scratch):
+    """The step loop of one segment from ``state``, whose y and quad are updated in place.
+
+    fns: Functions (fns.attempt: the method's step, ``attempt_function(settings.method)``;
+    fns.impact is not called). settings: Settings (max_steps: the step attempts allowed).
+    seg: Segment; seg.ev.singular: a guard (D) whose zero the model cannot be integrated to
+    in t, the loop stops with APPROACH after a step that takes it towards 0 fast (-1: none).
+    state: State; state.quad, the integral of y, is carried along if its size is y's.
+    record: Record; rows of record.out from i on are filled; the observables are tracked for
+    their maxima in record.mon (none if it has no rows); record.log is not used.
     scratch: ``segment_work(y.size, guards, quad.size, mon.shape[0])``. Every array
     argument is borrowed (``borrow``) for the step loop.
     Returns (status, t, event index, next output index, proposed next step).
     """
-    m = ev.directions.size
-    y, p, quad, mon, counters, tol, ev, out, scratch = borrowed((y, p, quad, mon, counters, tol, ev, out, scratch))
-    (work, f_a, y_a, y_b, f_b, err, y_ev, y_tmp, y_pert, q_tmp, G, g_tmp, sgn, cand, ignore, rate_a, rate_b, obs,
-     win) = scratch
-    g_b = G[events.GUARD_SUBINTERVALS]
-    n_mon = mon.shape[0]
-    win.s[:] = 0
-    k_sing = ev.singular
-    t = t0
-    if n_mon > 0:
-        _monitor(observe, mode, t, y, p, mon, obs, None, t, win)
-    if t_end == t0:
-        return REACHED_END, t, -1, i, h0
-    rhs(mode, t, y, p, f_a)
-    counters[N_RHS] += 1
-    if not (_eval_guards(guards, mode, t, y, p, G[0]) and _all_finite(y) and _all_finite(f_a)):
-        return NOT_FINITE, t, -1, i, h0
-    events.arm_guards(G[0], ev.gtol, sgn)
-    order = _error_order(method)
-    h_prop = h0
-    if h_prop <= 0.0:
-        h_prop = control.select_initial_step(rhs, mode, t, y, p, f_a, t_end, tol.hmax, order,
-                                             tol.rtol, tol.atol, y_b, f_b)
-        counters[N_RHS] += 1
-    events.guard_rates(guards, mode, t, y, f_a, p, G[0], h_prop, y_tmp, g_tmp, rate_a)
-    rejected = False
-    h_rej, e_rej = 0.0, 0.0  # the last rejected step at t and its error
-    h_acc, e_acc = 0.0, 0.0  # the last accepted step and its error
+    settings, seg, state, record, scratch = borrowed((settings, seg, state, record, scratch))
+    tol, t_end, counters, y, k_sing = settings.tol, settings.t_end, record.counters, state.y, seg.ev.singular
+    work, G, g_b = scratch.work, scratch.G, scratch.G[events.GUARD_SUBINTERVALS]
+    status, h_prop = _start(fns, settings, seg, state, record, scratch)
+    t = state.t
+    if status != _STEPPING:
+        return status, t, -1, i, h_prop
+    order = _error_order(settings.method)
+    ctl = Control(False, 0.0, 0.0, 0.0, 0.0)
     jac_current = False
     status, k = MAX_STEPS, -1
-    for _ in range(max_steps):
-        if method == ROSENBROCK23 and not jac_current:
-            jac(mode, t, y, p, work.J, work.dfdt)
-            counters[N_JAC] += 1
+    for _ in range(settings.max_steps):
+        if settings.method == ROSENBROCK23 and not jac_current:
             jac_current = True
-            if not (_all_finite(work.J) and _all_finite(work.dfdt)):
+            if not _jacobian(fns, seg, t, y, work, counters):
                 status = NOT_FINITE
                 break
         h_want = min(h_prop, tol.hmax)
@@ -441,66 +568,32 @@ def run(method, attempt, rhs, jac, guards, observe, mode, p, t0, t_end, tol, max
         if t_new >= t_end:
             t_new = t_end
             h = t_end - t
-        e, factor = attempt(rhs, mode, t, y, p, h, f_a, work, y_b, f_b, err, tol, counters, True)
+        e, factor = fns.attempt(fns.rhs, seg.mode, t, y, seg.p, h, scratch.f_a, work, scratch.y_b, scratch.f_b,
+                                scratch.err, tol, counters, True)
         too_short = max(tol.hmin, MIN_STEP_ULPS * (np.nextafter(t, np.inf) - t))
         if not e < 1.0:
-            counters[N_REJECTED] += 1
-            if rejected and e_rej > e > 0.0 and h_rej > h:  # rejected again at t: the order the error shows
-                factor = min(factor, control.observed_order_factor(e, np.log(e_rej / e) / np.log(h_rej / h)))
-            rejected = True
-            h_rej, e_rej = h, e
-            h_prop = h * factor
+            ctl, h_prop = _rejected(ctl, h, e, factor, counters)
             if h_prop < too_short:
                 status = STEP_TOO_SMALL
                 break
             continue
-        guards_finite = _eval_guards(guards, mode, t_new, y_b, p, g_b)
-        if k_sing >= 0:  # no step in t may change D by more than a factor 2: it could jump its zero
-            if painleve.too_steep(G[0, k_sing], g_b[k_sing]):
-                counters[N_REJECTED] += 1
-                rejected = True
-                e_rej = 0.0
-                h_prop = 0.5 * h
-                if h_prop < too_short:
-                    status = STEP_TOO_SMALL
-                    break
-                continue
-        counters[N_STEPS] += 1
-        if h_acc > 0.0 and e > 0.0:  # Gustafsson's predictive controller: follow the trend of the steps
-            factor = min(factor, control.predictive_factor(h, e, h_acc, e_acc, order))
-        h_acc, e_acc = h, max(e, control.PREDICTIVE_MIN_ERR)
-        if rejected:
-            factor = min(1.0, factor)
-        # A step clipped to land on t_end says nothing against the step wanted.
-        h_prop = max(h * factor, h_want) if h < h_want else h * factor
+        guards_finite = _eval_guards(fns, seg, t_new, scratch.y_b, g_b)
+        # no step in t may change D by more than a factor 2: it could jump its zero
+        if k_sing >= 0 and painleve.too_steep(G[0, k_sing], g_b[k_sing]):
+            ctl, h_prop = _too_steep(ctl, h, counters)
+            if h_prop < too_short:
+                status = STEP_TOO_SMALL
+                break
+            continue
+        ctl, h_prop = _accepted(ctl, h, h_want, e, factor, order, counters)
         if not guards_finite:
             status = NOT_FINITE
             break
-        y_a[:] = y
-        step = Step(t, y_a, f_a, h, t_new, y_b, work.Q)
-        k, j = -1, 1
-        ignore[:] = False
-        events.guard_rates(guards, mode, t_new, y_b, f_b, p, g_b, h, y_tmp, g_tmp, rate_b)
-        clear = events.clear_of_zero(G[0], g_b, rate_a, rate_b, h, sgn, ev.gtol)
-        for _ in range(0 if clear else m):  # each pass finds an event or ignores one more guard
-            k, t_star, j = events.find_event(guards, mode, p, step, G, ev, tol, sgn, t_new == t_end, cand,
-                                             y_tmp, g_tmp, y_pert, j, ignore)
-            if k < 0:
-                break
-            t_ev, real = _event_state(attempt, rhs, guards, mode, p, step, k, t_star, j, G, ev, tol, work,
-                                      y_ev, y_tmp, g_tmp, counters)
-            if real:
-                t_new = t_ev
-                break
-            ignore[k] = True  # an artefact of the interpolant: look on from sample j
-            k = -1
-        y_hi = y_ev if k >= 0 else y_b
-        i = _write_samples(out, i, step, t_new, y_hi, quad, q_tmp)
-        if quad.size > 0:
-            events.dense_integral(y_a, h, work.Q, (t_new - t) / h, q_tmp)
-            quad += q_tmp
-        if n_mon > 0:
-            _monitor(observe, mode, t_new, y_hi, p, mon, obs, step, t_new, win)
+        scratch.y_a[:] = y
+        step = Step(t, scratch.y_a, scratch.f_a, h, t_new, scratch.y_b, work.Q)
+        k, t_new = _first_event(fns, seg, tol, step, t_end, scratch, counters)
+        y_hi = scratch.y_ev if k >= 0 else scratch.y_b
+        i = _advance(fns, seg, record, i, step, t_new, y_hi, state.quad, scratch)
         t = t_new
         y[:] = y_hi
         if k >= 0:
@@ -510,28 +603,18 @@ def run(method, attempt, rhs, jac, guards, observe, mode, p, t0, t_end, tol, max
             status = APPROACH
             break
         fresh_jac = False  # J at the new point, for the next Rosenbrock step
-        if ev.hold and t < t_end and steady.worth_checking(f_b, h, tol, y):
-            jac(mode, t, y, p, work.J, work.dfdt)
-            counters[N_JAC] += 1
+        if seg.ev.hold and t < t_end and steady.worth_checking(scratch.f_b, h, tol, y):
             fresh_jac = True
-            if steady.at_stable_rest(f_b, work.J, work.dfdt, tol, y, quad):
-                y[0] -= f_b[0] / work.J[0, 0]  # one Newton step onto the equilibrium itself
-                guards(mode, t, y, p, g_b)
-                t_hold, k = steady.hold(guards, mode, t, y, p, t_end, g_b, ev, g_tmp)
-                i = _hold_samples(out, i, t, t_hold, y, quad)
-                if quad.size > 0:
-                    quad += y * (t_hold - t)
-                t = t_hold
+            if _stable_rest(fns, seg, tol, t, y, state.quad, scratch, counters):
+                t, k, i = _hold(fns, seg, t_end, t, state, record, i, scratch)
                 status = EVENT if k >= 0 else REACHED_END
                 break
-        f_a[:] = f_b
-        G[0, :] = g_b
-        rate_a[:] = rate_b
-        rejected = False
+        _next_step(scratch)
+        ctl = Control(False, ctl.h_rej, ctl.e_rej, ctl.h_acc, ctl.e_acc)
         jac_current = fresh_jac
         if t == t_end:
             status = REACHED_END
             break
-    if n_mon > 0:
-        _refine(observe, mode, p, mon, obs, win, y_tmp)
+    if record.mon.shape[0] > 0:
+        _refine(fns, seg, record.mon, scratch)
     return status, t, k, i, h_prop

@@ -60,7 +60,7 @@ WATCHDOG_S = 0.5
 # as simulate.METHODS names the method) at its first run; the kernel check purges all of them.
 GROUPS = {
     "integrate": ("the integration kernels (the hybrid mode machine, output rows)",
-                  [("integration/segment.py", "no_jacobian", False),
+                  [("integration/segment.py", "no_jacobian", True),
                    ("hybrid/machine.py", "integrate_hybrid", True),
                    ("hybrid/entry.py", "integrate_at", True),
                    ("hybrid/rows.py", "fill_rows", True)]),

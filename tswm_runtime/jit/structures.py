@@ -1,9 +1,9 @@
 """The named structures that carry arguments into the numba kernels, with their numba types.
 
 The kernels are compiled eagerly with explicit signatures (so they are cached once for
-every model), which is why each structure has its numba type beside it. The model's
-functions (rhs, jac, guards, observe) travel as separate first-class function arguments:
-numba does not convert dispatchers inside a tuple.
+every model), which is why each structure has its numba type beside it. Inside the kernels
+the functions they call travel as one named tuple too (``segment.Functions``); from Python
+they come as addresses (``addresses``): numba does not convert dispatchers inside a tuple.
 """
 from collections import namedtuple
 
@@ -51,3 +51,31 @@ STEP_WORK = types.NamedTuple((MATRIX, MATRIX, MATRIX, VECTOR, MATRIX, INTS), Ste
 #: An accepted step [t_a, t_b = t_a + h]: its start state and derivative, its end state,
 #: and the dense output y(t_a + theta h) = y_a + h sum_j Q[:, j] theta^(j+1).
 Step = namedtuple("Step", "t_a y_a f_a h t_b y_b Q")
+
+#: The functions a kernel calls: the method's step (``segment.attempt_function``) and the
+#: model's rhs, jac, guards, observe and impact, as numba first-class functions (their numba
+#: type: ``segment.FUNCTIONS``).
+Functions = namedtuple("Functions", "attempt rhs jac guards observe impact")
+
+#: The settings of a run (and of each segment in it): the method's code, the end time, the
+#: Tolerances, and the number of step attempts allowed (a segment gets what is left).
+Settings = namedtuple("Settings", "method t_end tol max_steps")
+SETTINGS = types.NamedTuple((types.int64, types.float64, TOLERANCES, types.int64), Settings)
+
+#: Where a hybrid run starts: the time, the state, its integral (size 0: none), the mode (-1:
+#: chosen from the state) and the parameter vector (the run writes its latches: pass a copy).
+Start = namedtuple("Start", "t y quad mode p")
+START = types.NamedTuple((types.float64, VECTOR, VECTOR, types.int64, VECTOR), Start)
+
+#: What holds through one segment: its mode, the parameter vector (latches included) and the
+#: EventSettings that end it.
+Segment = namedtuple("Segment", "mode p ev")
+
+#: Where a segment starts: the time, the state and its integral (both updated in place to
+#: where it ends), and the first step to try (<= 0: chosen).
+State = namedtuple("State", "t y quad h")
+
+#: Where a run writes: the Outputs, the EventLog, the observables' running maxima (one row per
+#: observable: |value|, value, t), the counters (steps, rejected, rhs calls, jac calls).
+Record = namedtuple("Record", "out log mon counters")
+RECORD = types.NamedTuple((OUTPUTS, EVENT_LOG, MATRIX, INTS), Record)

@@ -41,7 +41,8 @@ L_MIN, L_MAX = 0.5e-3, 50e-3  # m of x2 (see the module docstring)
 FITTED = ("S1m", "S2m")       # the columns the fit compares (see the module docstring)
 STARTS = 4                    # multi-start of least_squares (Sobol, seed SEED)
 SEED = 0
-GRID = 199                    # misfit profile points over the bounds (plus the optimum)
+GRID = 199                    # misfit grid points over the bounds (plus the optimum)
+PROFILE = 41                  # profile points over the bounds (plus the optimum; ends bisected)
 CONFIDENCE = 0.95
 FLAT = 1e-3                   # "flat": the cost within 0.1 % of its minimum
 R2 = 0.080                    # m, d2 / 2 (paper: d2 = 160 mm)
@@ -65,34 +66,29 @@ def measured_csv() -> str:
     return out.getvalue()
 
 
-def profile_interval(res, confidence: float = CONFIDENCE) -> dict:
-    """The likelihood-ratio (profile) interval of L from the fit's misfit grid.
-
-    With m residuals, n = 1 parameter and dof = m - n: {L : SSR(L) <= SSR_min (1 + F_{1,dof,C} / dof)}
-    (Beale's region; F_{1,dof} = t^2). Unlike the linearised interval it needs no derivative,
-    so it stays meaningful where the cost jumps (a case starting or ceasing to stall)."""
-    from scipy import stats
-
-    L = np.asarray(res.misfit["axes"][0], dtype=float)
-    cost = np.asarray(res.misfit["cost"], dtype=float)
-    best = min(float(res.cost), float(cost.min()))
-    F = float(stats.f.ppf(confidence, 1, res.dof))
-    threshold = best * (1.0 + F / res.dof)
-    inside = cost <= threshold
-    k = np.flatnonzero(inside)
-    lo, hi = float(L[k[0]]), float(L[k[-1]])
-    contiguous = bool(inside[k[0]:k[-1] + 1].all())
-    flat = L[cost <= best * (1 + FLAT)]
-    spacing = float((L_MAX - L_MIN) / (GRID - 1))
-    below = float(L[k[0] - 1]) if k[0] > 0 else None
-    above = float(L[k[-1] + 1]) if k[-1] + 1 < L.size else None
-    return {"confidence": confidence, "F_quantile": F, "dof": res.dof, "cost_min": best, "threshold": threshold,
-            "lo": lo, "hi": hi, "contiguous": contiguous, "grid_spacing": spacing,
+def profile_interval(res) -> dict:
+    """The fit's profile of L (``tswm_runtime.fitting.profile``: the cost over L on PROFILE points
+    plus bisection at the ends, threshold = minimum + noise estimated from the residuals, C_min
+    F_{1,dof}(C) / dof, + the numerical floor) in the terms the report reads, with the misfit
+    grid's flat range (cost within FLAT of its minimum) beside it."""
+    p = res.profiles[FREE]
+    L, cost = np.asarray(p["values"], dtype=float), np.asarray(p["cost"], dtype=float)
+    grid_L = np.asarray(res.misfit["axes"][0], dtype=float)
+    grid_cost = np.asarray(res.misfit["cost"], dtype=float)
+    best = min(p["cost_min"], float(grid_cost.min()))
+    flat = grid_L[grid_cost <= best * (1 + FLAT)]
+    lower, upper, edge = p["lower"], p["upper"], p["minimum_on_edge"]
+    k = int(np.argmin(grid_cost))
+    return {"confidence": p["confidence"], "dof": res.dof, "cost_min": p["cost_min"], "noise": p["statistical"],
+            "numerical_floor": p["numerical"]["floor"], "threshold": p["threshold"], "lo": p["lo"], "hi": p["hi"],
+            "verdict": p["verdict"], "contiguous": p["contiguous"], "points": len(L),
+            "minimum_on_edge": edge is not None, "edge_changes": edge["changes"] if edge else [],
+            "below": lower["outside"] if lower else None, "cost_below": lower["cost_outside"] if lower else None,
+            "above": upper["outside"] if upper else None, "cost_above": upper["cost_outside"] if upper else None,
             "flat_within": FLAT, "flat_lo": float(flat.min()), "flat_hi": float(flat.max()),
-            "below": below, "cost_below": None if below is None else float(cost[k[0] - 1]),
-            "above": above, "cost_above": None if above is None else float(cost[k[-1] + 1]),
             "cost_at_L_max": float(cost[-1]), "cost_at_L_min": float(cost[0]),
-            "fit_cost": float(res.cost), "grid_best_cost": float(cost.min()), "grid_best_L": float(L[int(cost.argmin())])}
+            "fit_cost": float(res.cost), "grid_best_cost": float(min(grid_cost[k], cost.min())),
+            "grid_best_L": float(grid_L[k] if grid_cost[k] <= cost.min() else L[int(cost.argmin())])}
 
 
 def jump(res) -> dict:
@@ -130,33 +126,42 @@ def free_runup(masses=(100.0, 200.0)) -> list[dict]:
 
 
 def notes(lost: dict) -> list[str]:
-    """What the fit says about how well Table 3 determines L, with its numbers."""
+    """What the fit says about how well Table 3 determines L, with its numbers: the verdict first."""
     prof, jp, mm = lost["profile"], lost["jump"], 1e3
     lo, hi = lost["ci_linear"]
     out = []
+    level = f"{prof['confidence']:.0%}"
+    interval = f"{prof['lo'] * mm:.2f}-{prof['hi'] * mm:.2f} mm"
+    if prof["minimum_on_edge"]:
+        change = "; ".join(f"{c['case']} goes from {c['inside']} to {c['outside']}" for c in prof["edge_changes"])
+        out.append(f"Verdict: the fitted L = {lost['L_mm']:.3f} mm is an edge, not a minimum: just below it "
+                   f"({prof['below'] * mm:.4f} mm) the mode sequence changes ({change}) and the cost jumps from "
+                   f"{prof['cost_min']:.4g} to {prof['cost_below']:.4g}. Table 3 puts L in the {level} profile "
+                   f"interval {interval}, whose lower end is that edge.")
+    elif prof["verdict"] == "not determined":
+        out.append(f"Verdict: Table 3 does not determine L: its profile stays within the noise over the whole "
+                   f"bounds {lost['bounds'][0] * mm:g}-{lost['bounds'][1] * mm:g} mm.")
+    else:
+        out.append(f"Verdict: L = {lost['L_mm']:.3f} mm, {level} profile interval {interval} ({prof['verdict']}).")
+    out.append(f"Profile interval ({level}): the L whose cost stays below the threshold {prof['threshold']:.4g} = "
+               f"minimum {prof['cost_min']:.4g} + noise {prof['noise']:.4g} (estimated from the residuals: cost_min "
+               f"F(1, {prof['dof']}) / {prof['dof']}) + numerical floor {prof['numerical_floor']:.3g} (the "
+               f"integrator's error at the fit's tolerances), on {prof['points']} profile points with both ends "
+               "bisected" + ("" if prof["contiguous"] else "; not contiguous: the cost comes below the threshold "
+                             "again away from the interval") + "; the profile is shown in lostmotion/profile.png.")
     if jp["dominated"]:
-        out.append(f"The fit's linearised {prof['confidence']:.0%} interval, {lo * mm:.4f}-{hi * mm:.4f} mm "
+        out.append(f"The fit's linearised {level} interval, {lo * mm:.4f}-{hi * mm:.4f} mm "
                    f"(standard error {lost['stderr'] * 1e6:.3g} µm), is no measure of precision here: its Jacobian is "
                    f"dominated by one case, {jp['case']} ({jp['quantity']}: {jp['largest']:.3g} per m of L against "
-                   f"at most {jp['second']:.3g} for the other cases), which jumps across the difference step ({jp['step'] * 1e6:.3g} µm) "
-                   "because L sits where that case stops stalling. Read the profile interval instead.")
+                   f"at most {jp['second']:.3g} for the other cases), which jumps across the difference step "
+                   f"({jp['step'] * 1e6:.3g} µm) because L sits where that case stops stalling.")
     else:
-        out.append(f"The fit's linearised {prof['confidence']:.0%} interval: {lo * mm:.4f}-{hi * mm:.4f} mm "
+        out.append(f"The fit's linearised {level} interval: {lo * mm:.4f}-{hi * mm:.4f} mm "
                    f"(standard error {lost['stderr'] * mm:.3g} mm).")
-    out.append(f"Profile interval ({prof['confidence']:.0%}): the lost motions whose cost stays below cost_min "
-               f"(1 + F(1, {prof['dof']}) / {prof['dof']}) = {prof['cost_min']:.4g} x (1 + {prof['F_quantile']:.3f} / "
-               f"{prof['dof']}) = {prof['threshold']:.4g} on the misfit grid: {prof['lo'] * mm:.2f}-{prof['hi'] * mm:.2f} "
-               f"mm (grid spacing {prof['grid_spacing'] * mm:.3g} mm"
-               + ("" if prof["contiguous"] else "; not contiguous: some grid points inside lie above the threshold")
-               + ").")
-    if prof["cost_below"] is not None and prof["cost_below"] > 2 * prof["cost_min"]:
-        out.append(f"Below {prof['lo'] * mm:.2f} mm the cost jumps to {prof['cost_below']:.4g} (at "
-                   f"{prof['below'] * mm:.2f} mm): a test starts to stall there. The fitted L is the shortest lost "
-                   "motion at which none does; it is fixed by that edge, not by a minimum of a smooth cost.")
     out.append(f"The cost stays within {prof['flat_within']:.1%} of its minimum from {prof['flat_lo'] * mm:.2f} to "
-               f"{prof['flat_hi'] * mm:.2f} mm: there the load is picked up before the motor reaches its breakdown "
-               "speed in every test and the peaks hardly change with L, so Table 3 bounds L to an interval rather "
-               "than determining it.")
+               f"{prof['flat_hi'] * mm:.2f} mm (misfit grid): there the load is picked up before the motor reaches "
+               "its breakdown speed in every test and the peaks hardly change with L, so Table 3 bounds L to an "
+               "interval rather than determining it.")
     out.append(f"At the bounds the cost is {prof['cost_at_L_min']:.4g} (L = {lost['bounds'][0] * mm:g} mm, close to "
                f"reading (a): the load almost from rest) and {prof['cost_at_L_max']:.4g} (L = "
                f"{lost['bounds'][1] * mm:g} mm, past the free run-up: reading (c)).")
@@ -166,7 +171,7 @@ def notes(lost: dict) -> list[str]:
 
 def fit_table3(out_dir: Path, progress: bool = False) -> dict:
     """Fit L to Table 3 with ``tswm fit`` on the batch kernel; write the fit's own report into
-    out_dir/lostmotion (measured table, fit-report.md, fit.json, misfit.png). Returns the fit's
+    out_dir/lostmotion (measured table, fit-report.md, fit.json, misfit.png, profile.png). Returns the fit's
     numbers for the paper report (``fit``: FitResult.to_dict(), every number)."""
     from tswm_runtime.fitting.fit import fit
     from tswm_runtime.fitting.report import write_outputs
@@ -174,18 +179,18 @@ def fit_table3(out_dir: Path, progress: bool = False) -> dict:
     directory = Path(out_dir) / DIRECTORY
     table = write_atomic(directory / "table3-measured.csv", measured_csv())
     res = fit(SCENE, table, {FREE: (L_MIN, L_MAX)}, starts=STARTS, seed=SEED, confidence=CONFIDENCE,
-              grid_points=GRID, progress=progress)
+              grid_points=GRID, profile_points=PROFILE, progress=progress)
     files = write_outputs(res, directory)
     L = float(res.estimate[FREE])
-    png = (directory / "misfit.png").read_bytes() if (directory / "misfit.png").exists() else None
+    png = (directory / "profile.png").read_bytes() if (directory / "profile.png").exists() else None
     out = {
         "scene": SCENE, "free": FREE, "L": L, "L_mm": L * 1e3, "wheel_deg": math.degrees(L / R2),
         "bounds": [L_MIN, L_MAX], "fitted_columns": list(FITTED), "starts": STARTS, "seed": SEED,
-        "ci_linear": list(res.ci[FREE]), "stderr": res.stderr[FREE], "cost": res.cost, "dof": res.dof,
+        "ci_linear": list(res.ci_linear[FREE]), "stderr": res.stderr[FREE], "cost": res.cost, "dof": res.dof,
         "success": res.success, "seconds": res.seconds,
         "profile": profile_interval(res), "jump": jump(res),
         "files": [str(Path(DIRECTORY) / p.name) for p in [table, *files]],
-        "misfit_png": None if png is None else base64.b64encode(png).decode("ascii"),
+        "profile_png": None if png is None else base64.b64encode(png).decode("ascii"),
         "fit": res.to_dict(),
     }
     out["runup"] = free_runup()

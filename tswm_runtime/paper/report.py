@@ -33,6 +33,7 @@ from tswm_runtime.paper import lostmotion
 from tswm_runtime.paper.plan import DOCUMENT, FIGURES, FIT, RUNS, SCENES, WRITE
 from tswm_runtime.common.progress import Stages
 from tswm_runtime.common.provenance import machine, package_versions
+from tswm_runtime.common.words import difference, differences, plural
 from tswm_runtime.results.result import Result
 from tswm_runtime.simulation.simulate import simulate
 
@@ -184,8 +185,8 @@ def _statements(rows: list[dict], checks: dict, cases_printed: int, readings: tu
                         f"{st[0]['rho0_deg']:.2f} deg > gamma = {st[0]['gamma_deg']:.2f} deg the gear is "
                         f"self-locking, and breaking away against the load needs F1 > tan(gamma + rho(0)) |F2| = "
                         f"{brk} (hand statics: N = F1 sin(gamma) - F2 cos(gamma), T = F1 cos(gamma) + F2 "
-                        f"sin(gamma), stick while tan(rho(0)) |N| >= T; the generated module's stick_conditions "
-                        f"give the same cone margin, difference {diff:.1e} N). "
+                        f"sin(gamma), stick while tan(rho(0)) |N| >= T; its cone margin and the generated module's "
+                        f"stick_conditions {difference(diff, 'N')}). "
                         + ("So F1(0) lies inside the static friction cone in every case: "
                            if all_stick else "F1(0) leaves the cone in some cases: ")
                         + f"the runs say {' / '.join(words)}. S1 = F1(0) and S2 = F2 are static values; the "
@@ -262,14 +263,14 @@ def lostmotion_statement(rows: list[dict], checks: dict, lost: dict) -> str:
     prof = lost["profile"]
     if lost.get("stall_below"):
         text += (f"A shorter lost motion picks the load up at a lower speed, where the friction angle is larger: at "
-                 f"L = {prof['below'] * 1e3:.2f} mm (the misfit grid's next point below) "
+                 f"L = {prof['below'] * 1e3:.4f} mm (just below the edge the profile's bisection found) "
                  + ", ".join(lost["stall_below"]) + (" stall and self-lock" if len(lost["stall_below"]) > 1 else
                                                      " stalls and self-locks") + ", and the cost jumps from "
                  f"{prof['cost_min']:.4g} to {prof['cost_below']:.4g}. ")
     text += (f"A longer one picks it up nearer the no-load speed, where F1 is small, and the peaks fall towards "
              f"reading (c)'s (cost {prof['cost_at_L_max']:.4g} at L = {lost['bounds'][1] * 1e3:g} mm). ")
     if stalled:
-        text += f"At the fitted L the drive stalls in the case(s) {'; '.join(stalled)}. "
+        text += f"At the fitted L the drive stalls in {plural(len(stalled), 'case')}: {'; '.join(stalled)}. "
     e = checks["energy"].get("lostmotion")
     if e:
         text += (f"Energy in the Figure 2 case: input work {e['W_in']:.4g} J, kinetic energy change {e['dKE']:.4g} J, "
@@ -321,8 +322,9 @@ def verdict(rows: list[dict], checks: dict, readings: tuple = READINGS, lost: di
     over_p = [abs(r["printed"]["S2m"]) - abs(r["F2"]) for r in printed_rows]
     n = scores[best.key]["cells"]
     fitted = next((r for r in readings if r.key == "lostmotion"), None)
-    headline = (f"No reading reproduces the printed numbers: of the {n} printed cells (S1m, KD1, S2m, KD2 of "
-                f"{len(printed_rows)} tests), " + ", ".join(f"{r.label} {r.scene} matches {scores[r.key]['agree']}"
+    headline = (f"No reading reproduces the printed numbers: of the {plural(n, 'printed cell')} (S1m, KD1, S2m, KD2 "
+                f"of {plural(len(printed_rows), 'test')}), "
+                + ", ".join(f"{r.label} {r.scene} matches {scores[r.key]['agree']}"
                                                            for r in READINGS)
                 + (f", and {fitted.label} {fitted.scene}, whose lost motion L is fitted to this table, "
                    f"{scores[fitted.key]['agree']}" if fitted else "")
@@ -359,7 +361,8 @@ def verdict(rows: list[dict], checks: dict, readings: tuple = READINGS, lost: di
         points.append(
             f"{b.label} `{b.scene}`: S1m is " + ("negative in every case" if max(s1) < 0 else
                                                 f"between {fmt(min(s1))} and {fmt(max(s1))} N")
-            + f" and {inverse} of {len(rows)} runs turn inverse-tractive, where the paper prints S1m > 0 and "
+            + f"; {inverse} of {plural(len(rows), 'run')} {'turns' if inverse == 1 else 'turn'} inverse-tractive, "
+            "where the paper prints S1m > 0 and "
             f"a tractive drive. Its energy balance (m2 = {lit['m2']:g} kg, F2 = {lit['F2']:g} N): input work {lit['W_in']:.0f} J, kinetic "
             f"energy change {lit['dKE']:.0f} J, so friction would dissipate {lit['E_diss']:.0f} J"
             + (": friction would supply energy, the printed equations are not physical." if lit["E_diss"] < 0
@@ -383,8 +386,10 @@ def lostmotion_point(printed_rows: list[dict], score: dict, best_score: dict, be
     text = (f"{fitted.label} `{fitted.scene}`, lost motion fitted to Table 3: L = {lost['L_mm']:.2f} mm of x2 (the "
             f"wheel turns {lost['wheel_deg']:.1f} deg freely before it picks up the load), "
             f"{prof['confidence']:.0%} profile interval {prof['lo'] * 1e3:.2f}-{prof['hi'] * 1e3:.2f} mm, within the "
-            f"bounds {lo * 1e3:g}-{hi * 1e3:g} mm that span the physically plausible lost motions (see below). "
-            f"At that L it matches {score['agree']} of {score['cells']} printed cells within {TOLERANCE:.0%}, mean "
+            f"bounds {lo * 1e3:g}-{hi * 1e3:g} mm that span the physically plausible lost motions (see below)"
+            + ("; the fitted L is an edge, not a minimum: just below it a test stalls and the cost jumps. "
+               if prof["minimum_on_edge"] else ". ")
+            + f"At that L it matches {score['agree']} of {score['cells']} printed cells within {TOLERANCE:.0%}, mean "
             f"deviation {score['mean_deviation']:.0%} (against {best_score['mean_deviation']:.0%} for {best.label}). "
             "A fitted parameter is a fit, not a reproduction: L was chosen to make S1m and S2m come as close to this "
             "table as they can, so the agreement it buys is no evidence that the paper modelled lost motion. ")
@@ -393,10 +398,11 @@ def lostmotion_point(printed_rows: list[dict], score: dict, best_score: dict, be
     else:
         text += ("Even so no plausible L explains the table: the printed values minus the computed ones are "
                  + "; ".join(short) + " of the printed values, and "
-                 + (f"no L in the bounds does better (the misfit grid's lowest cost over {lo * 1e3:g}-{hi * 1e3:g} mm, "
+                 + (f"no L in the bounds does better (the lowest cost of the misfit grid and the profile over "
+                    f"{lo * 1e3:g}-{hi * 1e3:g} mm, "
                     f"{prof['grid_best_cost']:.4g}, is not below the fit's {prof['fit_cost']:.4g})."
                     if prof["grid_best_cost"] >= prof["fit_cost"] * (1 - 1e-6) else
-                    f"the misfit grid finds a lower cost ({prof['grid_best_cost']:.4g} at L = "
+                    f"the misfit grid or the profile finds a lower cost ({prof['grid_best_cost']:.4g} at L = "
                     f"{prof['grid_best_L'] * 1e3:.2f} mm) than the fit's {prof['fit_cost']:.4g}: the starts missed it."))
     return text
 
@@ -419,6 +425,7 @@ def _environment() -> jinja2.Environment:
                              autoescape=jinja2.select_autoescape(["html.j2"]), keep_trailing_newline=True,
                              trim_blocks=True, lstrip_blocks=True, undefined=jinja2.StrictUndefined)
     env.filters["code_html"] = _code_html
+    env.filters["plural"] = plural
     return env
 
 
@@ -459,7 +466,8 @@ def _fit_vs_simulate(rows: list[dict], lost: dict) -> dict:
         for q, entry in c["quantities"].items():
             d = abs(entry["model"] - r["lostmotion"]["values"][q])
             diff[q] = max(diff.get(q, 0.0), d)
-    return {"max_abs_difference": diff, "fit_run": {k: lost["fit"]["settings"][k] for k in ("rtol", "atol")}}
+    return {"max_abs_difference": diff, "text": differences(diff, {q: unit for q, _, unit in QUANTITIES}),
+            "fit_run": {k: lost["fit"]["settings"][k] for k in ("rtol", "atol")}}
 
 
 def build_report(out_dir: str | Path = "tswm-report", cases: list[tuple[float, float]] | None = None, *,
@@ -563,7 +571,7 @@ def build_report(out_dir: str | Path = "tswm-report", cases: list[tuple[float, f
         if first is not None:
             settings[r.scene] = {k: first.settings[k] for k in ("method", "rtol", "atol", "t_end", "points",
                                                                   "max_steps", "max_events")}
-    misfit_png = lost.pop("misfit_png", None)
+    profile_png = lost.pop("profile_png", None)
     lost["fit_vs_simulate"] = _fit_vs_simulate(rows, lost)
     data = {
         "source": SOURCE, "tolerance": TOLERANCE, "figure_case": {"m2": fig_case[0], "F2": fig_case[1]},
@@ -578,7 +586,7 @@ def build_report(out_dir: str | Path = "tswm-report", cases: list[tuple[float, f
     data["statements"] = _statements(rows, checks, cases_printed, readings, lost)
     now = time.perf_counter()   # before rendering (milliseconds); the CLI prints this same figure
     data["timing"] = {"wall_s": now - started, "startup_s": start - started, "work_s": now - start}
-    context = _context(data, figures, readings, misfit_png)
+    context = _context(data, figures, readings, profile_png)
     env = _environment()
     paths = {"json": write_atomic(out_dir / FILES["json"], json.dumps(jsonable(data), indent=2, allow_nan=False) + "\n"),
              "md": write_atomic(out_dir / FILES["md"], env.get_template("paper_report.md.j2").render(context)),
@@ -598,27 +606,26 @@ def residual_text(value: float | None, q: str) -> str:
     return f"{value:+.0f}" if not q.startswith("KD") and abs(value) >= 10 else f"{value:+.3g}"
 
 
-def table3_rows(data: dict, readings: tuple = READINGS) -> tuple[list[str], list[list[str]]]:
-    """Table 3 side by side: header and rows of strings (agreeing cells marked ✓); with the
-    fitted reading (d), its residual per cell (printed - computed) after its column."""
+def table3_tables(data: dict, readings: tuple = READINGS) -> list[dict]:
+    """Table 3 side by side, one table per quantity so that each fits a page: its heading and
+    header and rows of strings (agreeing cells marked ✓); with the fitted reading (d), its
+    residual per cell (printed - computed) in the last column."""
     fitted = any(r.key == "lostmotion" for r in readings)
-    header = ["Test", "m2 [kg]", "F2 [N]"]
+    header = ["Test", "m2 [kg]", "F2 [N]", "paper", *(r.label for r in readings)]
+    header += ["paper − (d)"] if fitted else []
+    tables = []
     for q, _, unit in QUANTITIES:
-        header += [f"{q}{f' [{unit}]' if unit else ''} paper"] + [f"{q} {r.label}" for r in readings]
-        header += [f"{q} paper − (d)"] if fitted else []
-    rows = []
-    for row in data["cases"]:
-        cells = [str(row["test"]) if row["test"] else "–", f"{row['m2']:g}", f"{row['F2']:g}"]
-        for q, _, _ in QUANTITIES:
+        rows = []
+        for row in data["cases"]:
+            cells = [str(row["test"]) if row["test"] else "–", f"{row['m2']:g}", f"{row['F2']:g}"]
             cells.append((f"{row['printed'][q]:.2f}" if q.startswith("KD") else fmt(row["printed"][q]))
                          if row["printed"] else "not printed")
-            for r in readings:
-                cell = row[r.key]
-                cells.append(fmt(cell["values"][q]) + (" ✓" if cell["agree"][q] else ""))
+            cells += [fmt(row[r.key]["values"][q]) + (" ✓" if row[r.key]["agree"][q] else "") for r in readings]
             if fitted:
                 cells.append(residual_text(row["lostmotion"]["residual"][q], q))
-        rows.append(cells)
-    return header, rows
+            rows.append(cells)
+        tables.append({"quantity": q, "heading": f"{q} [{unit}]" if unit else q, "table": (header, rows)})
+    return tables
 
 
 def lostmotion_tables(data: dict) -> dict:
@@ -645,8 +652,7 @@ def lostmotion_tables(data: dict) -> dict:
             "starts": (["start", "from L [mm]", "to L [mm]", "cost", "status", "evaluations", "failed cases"], starts)}
 
 
-def _context(data: dict, figures: list[dict], readings: tuple = READINGS, misfit_png: str | None = None) -> dict:
-    header, rows = table3_rows(data, readings)
+def _context(data: dict, figures: list[dict], readings: tuple = READINGS, profile_png: str | None = None) -> dict:
     regime_header = ["Case (test)", "m2 [kg]", "F2 [N]"] + [f"{r.label} {r.scene}" for r in readings]
     regime_rows = [[str(row["test"]) if row["test"] else "–", f"{row['m2']:g}", f"{row['F2']:g}"]
                    + [f"{row[r.key]['drive']}: {row[r.key]['regimes']}"
@@ -666,8 +672,8 @@ def _context(data: dict, figures: list[dict], readings: tuple = READINGS, misfit
                       str(s["max_steps"])] for scene, s in data["settings"].items()]
     lost = data["lostmotion"]
     return {"data": data, "figures": figures, "readings": readings, "lost": lost,
-            "lost_tables": lostmotion_tables(data), "misfit_png": misfit_png,
-            "table3": (header, rows), "regimes": (regime_header, regime_rows),
+            "lost_tables": lostmotion_tables(data), "profile_png": profile_png,
+            "table3": table3_tables(data, readings), "regimes": (regime_header, regime_rows),
             "statics": (statics_header, statics_rows), "energy": (energy_header, energy_rows),
             "settings": (["scene", "integrator", "rtol", "atol", "t_end", "output points", "max steps"],
                          settings_rows),
@@ -676,11 +682,12 @@ def _context(data: dict, figures: list[dict], readings: tuple = READINGS, misfit
             "pdflatex": shutil.which("pdflatex") is not None}
 
 
-def read_markdown_table(text: str, first_header: str) -> list[list[str]]:
-    """The rows (header first) of the Markdown table whose first header cell is ``first_header``."""
-    lines = text.splitlines()
+def read_markdown_tables(text: str, first_header: str) -> list[list[list[str]]]:
+    """Every Markdown table whose first header cell is ``first_header``: its rows, header first."""
+    tables, lines = [], text.splitlines()
     for i, line in enumerate(lines):
-        if line.startswith("|") and [c.strip() for c in line.strip("|").split("|")][0] == first_header:
+        if line.startswith("|") and (i == 0 or not lines[i - 1].startswith("|")) \
+                and [c.strip() for c in line.strip("|").split("|")][0] == first_header:
             table = []
             for row in lines[i:]:
                 if not row.startswith("|"):
@@ -688,5 +695,13 @@ def read_markdown_table(text: str, first_header: str) -> list[list[str]]:
                 cells = [c.strip() for c in row.strip().strip("|").split("|")]
                 if not all(set(c) <= set("-: ") for c in cells):
                     table.append(cells)
-            return table
-    raise ValueError(f"no table starting with {first_header!r}")
+            tables.append(table)
+    return tables
+
+
+def read_markdown_table(text: str, first_header: str) -> list[list[str]]:
+    """The rows (header first) of the first Markdown table whose first header cell is ``first_header``."""
+    tables = read_markdown_tables(text, first_header)
+    if not tables:
+        raise ValueError(f"no table starting with {first_header!r}")
+    return tables[0]

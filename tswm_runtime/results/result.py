@@ -8,6 +8,7 @@ from types import ModuleType
 
 import numpy as np
 
+from tswm_runtime.common.words import plural
 from tswm_runtime.hybrid import machine as hybrid
 from tswm_runtime.model.modes import event_name
 
@@ -311,7 +312,10 @@ def status_message(module: ModuleType, status: int, t_stop: float, y_stop: np.nd
                    need: int, events: list[Event], p: np.ndarray) -> str:
     """A sentence saying how the run ended, naming what to change when it failed."""
     if status == hybrid.FINISHED:
-        return f"reached t_end = {t_stop:.9g} s with {len(events)} mode changes"
+        changes = sum(1 for e in events if e.to_mode != e.from_mode)
+        others = len(events) - changes
+        return (f"reached t_end = {t_stop:.9g} s with {plural(changes, 'mode change')}"
+                + (f" and {plural(others, 'other event')}" if others else ""))
     declared = [m for m, d in zip(module.MODES, getattr(module, "MODE_DECLARED", [True] * len(module.MODES))) if d]
     at = f"t = {t_stop:.9g} s"
     if status == hybrid.UNDECLARED and need == hybrid.NEED_FLANK:
@@ -335,7 +339,7 @@ def status_message(module: ModuleType, status: int, t_stop: float, y_stop: np.nd
     if status == hybrid.CHATTERING:
         return f"{hybrid.MAX_SAME_TIME} mode changes at {at} without time advancing (chattering); stopped"
     if status == hybrid.TOO_MANY_EVENTS:
-        return f"the event log is full ({len(events)} events) at {at}; raise max_events"
+        return f"the event log is full ({plural(len(events), 'event')}) at {at}; raise max_events"
     if status == hybrid.MAX_STEPS:
         return f"max_steps step attempts used up at {at}; raise max_steps or loosen rtol"
     if status == hybrid.STEP_TOO_SMALL:

@@ -2,12 +2,15 @@
 
 A chunk is a parquet file ``chunks/chunk-NNNNN-HASH.parquet``. Its key, stored inside it
 (schema metadata ``tswm.chunk``) and hashed into its name, holds everything its rows depend
-on: the scene, the model module's body digest (the ``# body-sha256:`` header line of the
-generated file), the runtime's version and a digest of its numerical sources, the run
-settings, and a digest of the chunk's parameter rows. A chunk is reused only when its
-stored key equals the expected one and its parameter columns equal the rows asked for;
-anything else (truncated, foreign, copied over another's name, from another model or
-runtime) is recomputed with a warning. Files in ``chunks/`` that no chunk of this sweep
+on: the scene, a sha256 of the model module's file as it is on disk (never the digest its
+header states: a hand edit of the body changes the key), the runtime's version and a digest
+of its numerical sources, the run settings, and a digest of the chunk's parameter rows.
+Beside the key the file stores a sha256 of every column's values (``tswm.columns``). A
+chunk is reused only when its stored key equals the expected one, its columns match their
+checksum and its parameter columns equal the rows asked for; anything else (truncated,
+foreign, copied over another's name, altered, from another model or runtime) is recomputed
+with a warning. The checksums catch accidents (edits, corruption, stale code), not someone
+who rewrites a chunk and recomputes them. Files in ``chunks/`` that no chunk of this sweep
 expects are stale: reported, and removed on request (``prune``).
 """
 from __future__ import annotations
@@ -26,20 +29,21 @@ from tswm_common.files import write_atomic
 
 KEY_FORMAT = 1
 METADATA_KEY = b"tswm.chunk"
+CHECKSUM_KEY = b"tswm.columns"
 PATTERN = "chunk-*.parquet"
-RUNTIME_SOURCES = ("model/modes.py", "model/checks.py", "simulation/simulate.py", "sweeps/sweep.py", "sweeps/chunks.py")   # besides cache_guard's kernels
+RUNTIME_SOURCES = ("model/modes.py", "model/checks.py", "simulation/simulate.py", "sweeps/rows.py", "sweeps/sweep.py",
+                   "sweeps/chunks.py")   # besides cache_guard's kernels
 
 
 def model_digest(module: ModuleType) -> str:
-    """The module's body digest from its header; without one, a sha256 of its whole file."""
+    """sha256 of the module's file as it is on disk (``file_digest``: header and body, the code that runs)."""
     path = getattr(module, "__file__", None)
-    if not path:
-        return "no-file:" + getattr(module, "SCENE_DIGEST", module.__name__)
-    source = Path(path).read_bytes()
-    for line in source.decode("utf-8", "replace").splitlines()[:8]:
-        if line.startswith("# body-sha256:"):
-            return line.split(":", 1)[1].strip()
-    return "file-sha256:" + hashlib.sha256(source).hexdigest()
+    return file_digest(Path(path)) if path else "no-file:" + getattr(module, "SCENE_DIGEST", module.__name__)
+
+
+def file_digest(path: Path) -> str:
+    """sha256 of a model module's file as it is on disk (never the digest its header states)."""
+    return hashlib.sha256(path.read_bytes()).hexdigest()
 
 
 def runtime_digest() -> str:
@@ -54,6 +58,19 @@ def runtime_digest() -> str:
 def rows_digest(P: np.ndarray) -> str:
     P = np.ascontiguousarray(P, dtype=np.float64)
     return hashlib.sha256(repr(P.shape).encode() + P.tobytes()).hexdigest()
+
+
+def columns_digest(table) -> str:
+    """sha256 over a table's column names, types and values (text columns by their strings)."""
+    h = hashlib.sha256()
+    for name in table.columns:
+        values = table[name].to_numpy()
+        h.update(f"{name}\x1f{values.dtype.str}\x1f".encode())
+        if values.dtype.kind in "biuf":
+            h.update(np.ascontiguousarray(values).tobytes())
+        else:
+            h.update("\x1e".join(map(repr, values)).encode("utf-8", "surrogatepass"))
+    return h.hexdigest()
 
 
 def chunk_key(module: ModuleType, run: dict, P: np.ndarray, index: int, runtime: str | None = None) -> dict:
@@ -77,7 +94,8 @@ def write_chunk(path: Path, table, key: dict) -> Path:
 
     arrow = pa.Table.from_pandas(table, preserve_index=False)
     arrow = arrow.replace_schema_metadata({**(arrow.schema.metadata or {}),
-                                          METADATA_KEY: json.dumps(key, sort_keys=True).encode()})
+                                          METADATA_KEY: json.dumps(key, sort_keys=True).encode(),
+                                          CHECKSUM_KEY: columns_digest(table).encode()})
     buffer = io.BytesIO()
     pq.write_table(arrow, buffer)
     return write_atomic(path, buffer.getvalue())
@@ -89,7 +107,9 @@ def read_chunk(path: Path, key: dict, P: np.ndarray, columns: list[str]):
 
     try:
         arrow = pq.read_table(path)
-        stored = json.loads((arrow.schema.metadata or {}).get(METADATA_KEY, b"null"))
+        metadata = arrow.schema.metadata or {}
+        stored = json.loads(metadata.get(METADATA_KEY, b"null"))
+        checksum = metadata.get(CHECKSUM_KEY, b"").decode("ascii", "replace")
         table = arrow.to_pandas()
     except Exception as error:  # truncated or not parquet at all: any reader error means recompute
         return None, f"unreadable ({type(error).__name__}: {str(error)[:120]})"
@@ -100,6 +120,9 @@ def read_chunk(path: Path, key: dict, P: np.ndarray, columns: list[str]):
         return None, f"its key differs in {', '.join(diff)}"
     if list(table.columns) != columns:
         return None, "its columns differ from this sweep's"
+    if checksum != columns_digest(table):
+        return None, ("its columns do not match their checksum (altered or corrupted since it was written)"
+                      if checksum else "it carries no checksum of its columns (written by an older tswm)")
     names = key["params"]
     held = table[names].to_numpy(dtype=np.float64) if names else np.empty((len(table), 0))
     if held.shape != P.shape or not np.array_equal(held, P):

@@ -2,13 +2,14 @@
 
 The cases are split into chunks; each chunk is one call of the parallel numba batch
 (``batch.run_batch``, prange over cases on all cores) and is written atomically to
-``DIR/chunks/chunk-NNNNN-HASH.parquet`` with its key inside (``chunks.py``: the model's
-body digest, the runtime's version and digest, the settings, the rows). A rerun reuses a
-chunk only when the file proves it holds exactly those rows; a truncated, foreign or
-stale one is recomputed with a warning, and files no chunk expects are reported (and
+``DIR/chunks/chunk-NNNNN-HASH.parquet`` with its key inside (``chunks.py``: a sha256 of the
+model module's file, the runtime's version and digest, the settings, the rows) and a checksum
+of its columns. A rerun reuses a chunk only when the file proves it holds exactly those rows;
+a truncated, altered, foreign or stale one is recomputed with a warning, and files no chunk expects are reported (and
 removed with ``prune``). An interrupted sweep leaves only complete chunks and resumes
 without recomputing them. With a dask.distributed ``Client`` the chunks run as tasks on
-its workers instead.
+its workers instead (``cluster.py``: every worker checked first, the model shipped with the
+work). The rows of a chunk come from ``rows.run_cases``.
 
 One row per case: the free parameters, then
 
@@ -38,6 +39,7 @@ from __future__ import annotations
 
 import io
 import json
+import logging
 import math
 import re
 from dataclasses import dataclass, field
@@ -47,28 +49,16 @@ from types import ModuleType
 import numpy as np
 
 from tswm_runtime.common.provenance import TSWM_VERSION as __version__
-
-from tswm_runtime.sweeps import chunks
+from tswm_runtime.common.words import plural
 from tswm_runtime.jit import coldstart
+from tswm_runtime.model.scenes import load_model
+from tswm_runtime.model.values import ValueInputError, si_value
+from tswm_common.files import write_atomic
+from tswm_runtime.simulation.simulate import settings, unknown_parameter
+from tswm_runtime.sweeps import chunks, cluster
+from tswm_runtime.sweeps.rows import run_cases
 
-coldstart.announce(("integrate", "batch"))  # before the next imports compile the kernels, if not cached
-from tswm_runtime.hybrid import batch  # noqa: E402
-
-from tswm_runtime.model import checks, modes  # noqa: E402
-from tswm_runtime.model.contract import load_module  # noqa: E402
-from tswm_runtime.model.scenes import load_model  # noqa: E402
-from tswm_runtime.model.values import ValueInputError, si_value  # noqa: E402
-from tswm_common.files import write_atomic  # noqa: E402
-from tswm_runtime.results.result import STATUS_NAMES  # noqa: E402
-from tswm_runtime.jit.structures import Tolerances  # noqa: E402
-from tswm_runtime.simulation.simulate import (METHODS, initial_state, method_step, settings, unknown_parameter,  # noqa: E402
-                                        with_latches)
-
-coldstart.done()
-
-REGIME_LETTERS = {"tractive": "T", "inverse-tractive": "I", "stick": "S", "backward on flank a": "A",
-                  "backward on flank b": "B", "sliding along phi = 0": "F", "free flight": "G"}
-SEQ_LEN = 32  # modes kept per case; longer sequences end in '…'
+LOG = logging.getLogger("tswm_runtime.sweep")
 DEFAULT_CHUNK = 512
 # Size bounds (docs/promises.md): above LARGE_SWEEP cases a sweep states its size and needs --large;
 # MAX_SWEEP_CASES is refused outright, and so is a sweep that would write more than MAX_CHUNKS chunk files.
@@ -77,8 +67,8 @@ MAX_SWEEP_CASES = 10**7
 MAX_CHUNK_SIZE = 10**6
 MAX_CHUNKS = 10**5
 MAX_SEED = 2**63 - 1
+DEFAULT_WAIT_FOR_WORKERS = 60.0   # seconds a cluster may have no worker before a sweep gives up
 ROW_BYTES = 220   # bytes per case in chunks + parquet + CSV: 214 measured on a 2000-case paper grid
-INVALID = "invalid-parameter"
 RESULT_COLUMNS = ("status", "problem", "t_stop", "S1m", "tS1m", "S2m", "tS2m", "KD1", "KD2", "x1", "v1",
                   "regimes", "modes", "n_events", "steps", "rejected", "nfev", "njev", "impacts", "impact_energy")
 # Units of the result columns in the written tables ('S1m [N]'); the parameters carry PARAM_UNITS.
@@ -210,8 +200,8 @@ def check_size(cases: int, chunk_size: int, large: bool = False) -> None:
     if not 1 <= chunk_size <= MAX_CHUNK_SIZE:
         raise SweepInputError(f"--chunk-size {chunk_size}: must be in [1, {MAX_CHUNK_SIZE:.0e}]")
     files = -(-cases // chunk_size)
-    size = (f"{cases} cases, about {cases * ROW_BYTES / 1e6:.3g} MB of parquet and CSV output, {files} chunk "
-            f"file{'s' if files != 1 else ''} of {chunk_size}")
+    size = (f"{plural(cases, 'case')}, about {cases * ROW_BYTES / 1e6:.3g} MB of parquet and CSV output, "
+            f"{plural(files, 'chunk file')} of {chunk_size}")
     if cases > MAX_SWEEP_CASES:
         raise SweepInputError(f"sweep of {size}: more than the {MAX_SWEEP_CASES:.0e} cases tswm runs in one "
                               "sweep; split it (several -o directories) or coarsen the grid")
@@ -270,75 +260,6 @@ def sample_cases(module: ModuleType, samples: int, ranges: dict, seed: int) -> n
     return P
 
 
-def sequence_texts(module: ModuleType, seq: np.ndarray, n_modes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Per case, its regimes as letters ("TS") and its mode indices ("0 2"), from its first
-    SEQ_LEN modes (``seq``, padded with -1) and its number of modes (more end in '…'). Each
-    distinct sequence is spelt once: a grid has a few, and spelling 10,000 took 16 ms."""
-    letters = [REGIME_LETTERS.get(r, "?") for r in module.MODE_REGIME]
-    kept = np.where(np.arange(SEQ_LEN) < n_modes[:, None], seq, -1)  # the first n_modes only
-    keys = np.column_stack([kept, n_modes > SEQ_LEN]).astype(np.int64)
-    distinct, which = np.unique(keys.view(np.dtype((np.void, keys.shape[1] * 8))).ravel(), return_inverse=True)
-    regimes, codes = np.empty(distinct.size, object), np.empty(distinct.size, object)
-    for u, key in enumerate(distinct):
-        *modes_of, more = np.frombuffer(key.tobytes(), np.int64).tolist()
-        modes_of = [m for m in modes_of if m >= 0]  # not the padding
-        regimes[u] = "".join(letters[m] for m in modes_of) + ("…" if more else "")
-        codes[u] = " ".join(map(str, modes_of)) + (" …" if more else "")
-    return regimes[which], codes[which]
-
-
-def load_factor_columns(module: ModuleType, S1m, S2m, full: np.ndarray, valid) -> tuple[np.ndarray, np.ndarray]:
-    """(KD1, KD2) of every case (NaN where not run, or without Ft1, Ft2): the generated
-    ``load_factors`` (|S| / Ft, elementwise) evaluated once on the columns as plain Python,
-    with p[k] the k-th parameter of every case; one compiled call per case cost ~1.7 us."""
-    KD1, KD2 = np.full(S1m.size, np.nan), np.full(S1m.size, np.nan)
-    if module.HAS_LOAD_FACTORS and valid.any():
-        python = getattr(module.load_factors, "py_func", module.load_factors)
-        KD1[valid], KD2[valid] = python(S1m[valid], S2m[valid], full[valid].T)
-    return KD1, KD2
-
-
-def run_cases(module: ModuleType, P: np.ndarray, run: dict):
-    """Integrate every row of P (free parameters) in one parallel batch; a DataFrame.
-    Rows that break the scene's parameter rules are not run: status 'invalid-parameter'."""
-    import pandas as pd
-
-    y0, quad = initial_state(module, run)
-    full = with_latches(module, P)
-    cases = P.shape[0]
-    problems = checks.violations(module, P) if cases else []
-    valid = np.array([not reason for reason in problems], dtype=bool)
-    out_f = np.full((cases, batch.N_F), np.nan)
-    out_i = np.zeros((cases, batch.N_I), np.int64)
-    seq = np.full((cases, SEQ_LEN), -1, np.int64)
-    if valid.any():
-        f, i, sq = out_f[valid], out_i[valid], seq[valid]
-        batch.run_batch(batch.INTEGRATE, METHODS[run["method"]], method_step(run["method"]), module.rhs, module.jac, module.guards, module.observe,
-                        module.impact, np.ascontiguousarray(full[valid]), modes.tables(module), y0, quad,
-                        run["t_end"], Tolerances(run["rtol"], np.full(y0.size, run["atol"]), 0.0, run["hmax"]),
-                        run["max_steps"], run["max_events"], len(module.OBSERVABLES), f, i, sq)
-        out_f[valid], out_i[valid], seq[valid] = f, i, sq
-    regimes, mode_codes = sequence_texts(module, seq, out_i[:, batch.I_NMODES])
-    KD1, KD2 = load_factor_columns(module, out_f[:, batch.F_S1M], out_f[:, batch.F_S2M], full, valid)
-    columns = {name: P[:, j] for j, name in enumerate(module.PARAM_NAMES)}
-    columns.update({
-        "status": [STATUS_NAMES[int(s)] if ok else INVALID for s, ok in zip(out_i[:, batch.I_STATUS], valid)],
-        "problem": problems,
-        "t_stop": out_f[:, batch.F_T_STOP], "S1m": out_f[:, batch.F_S1M], "tS1m": out_f[:, batch.F_TS1M],
-        "S2m": out_f[:, batch.F_S2M], "tS2m": out_f[:, batch.F_TS2M], "KD1": KD1, "KD2": KD2,
-        "x1": out_f[:, batch.F_X1], "v1": out_f[:, batch.F_V1], "regimes": regimes, "modes": mode_codes,
-        "n_events": out_i[:, batch.I_EVENTS], "steps": out_i[:, batch.I_STEPS],
-        "rejected": out_i[:, batch.I_REJECTED], "nfev": out_i[:, batch.I_RHS], "njev": out_i[:, batch.I_JAC],
-        "impacts": out_i[:, batch.I_IMPACTS], "impact_energy": out_f[:, batch.F_IMPACT_E],
-    })
-    return pd.DataFrame(columns)
-
-
-def _chunk_task(scene: str, P: np.ndarray, run: dict):
-    """One chunk on a dask worker: load the module there, run the batch."""
-    return run_cases(load_module(scene), P, run)
-
-
 @dataclass
 class SweepOutcome:
     """What a sweep did: the rows, the files written, chunks computed, reused and rejected
@@ -360,6 +281,11 @@ class SweepInterrupted(KeyboardInterrupt):
     """Ctrl-C during a sweep; the message says how many chunks are safe and how to resume."""
 
 
+class SweepClusterLost(RuntimeError):
+    """The dask cluster failed the sweep (scheduler or workers lost, a mismatched worker); the
+    message names the problem, how many chunks are safe and how to resume."""
+
+
 def _parquet_bytes(table) -> bytes:
     buffer = io.BytesIO()
     table.to_parquet(buffer, index=False)
@@ -368,15 +294,16 @@ def _parquet_bytes(table) -> bytes:
 
 def sweep(model: str | ModuleType, P: np.ndarray, overrides: dict | None = None, *,
           output: str | Path | None = None, chunk_size: int = DEFAULT_CHUNK, client=None,
-          progress: bool = False, scene_spec: str | None = None, prune: bool = False) -> SweepOutcome:
+          progress: bool = False, prune: bool = False, wait_for_workers: float = DEFAULT_WAIT_FOR_WORKERS,
+          notice=None) -> SweepOutcome:
     """Run the rows of P (free parameters of the scene, in PARAM_NAMES order).
 
     output: a directory for chunks/ and SCENE-sweep.parquet/.csv (None: in memory only;
-    no resume). client: a dask.distributed Client to run the chunks on (its workers
-    load the module by ``scene_spec``, a shipped name or a module path; by default the
-    model's). prune: delete
-    stale files in chunks/ (else they are only reported). Ctrl-C raises SweepInterrupted
-    after the chunks finished so far are on disk.
+    no resume). client: a dask.distributed Client to run the chunks on (``cluster.py``: the
+    model's source travels with each chunk, every worker is checked first, ``wait_for_workers``
+    seconds without a worker give up, ``notice(text)`` tells of the cluster). prune: delete
+    stale files in chunks/ (else they are only reported). Ctrl-C raises SweepInterrupted, a
+    lost cluster SweepClusterLost, after the chunks finished so far are on disk.
     """
     import time
 
@@ -384,8 +311,6 @@ def sweep(model: str | ModuleType, P: np.ndarray, overrides: dict | None = None,
     if not isinstance(model, ModuleType):
         coldstart.announce((), model)
     module = load_model(model)
-    if scene_spec is None:  # what a dask worker loads: a shipped scene by name, another module by its file
-        scene_spec = module.SCENE if module.__name__.startswith("generated.") else module.__file__
     run = settings(module, overrides or {})
     P = np.ascontiguousarray(P, dtype=np.float64).reshape(-1, len(module.PARAM_NAMES))
     check_size(P.shape[0], chunk_size, large=True)
@@ -420,18 +345,24 @@ def sweep(model: str | ModuleType, P: np.ndarray, overrides: dict | None = None,
         tables[i] = table
         outcome.computed.append(i)
 
+    if outcome.skipped and todo:
+        (notice or LOG.info)(f"resuming: {len(outcome.skipped)} of {len(bounds)} chunks are already complete in "
+                             f"{out / 'chunks'}; computing the other {len(todo)}")
     bar = None
     if progress and todo:
         from tqdm import tqdm
 
         bar = tqdm(total=len(bounds), initial=len(outcome.skipped), unit="chunk", desc=module.SCENE)
     try:
-        _run_chunks(module, P, run, bounds, todo, finish, client, scene_spec, bar)
+        if client is None:
+            _run_here(module, P, run, bounds, todo, finish, bar)
+        else:
+            cluster.run_chunks(client, module, P, run, bounds, todo, finish, wait_for_workers=wait_for_workers,
+                               notice=notice, bar=bar)
     except KeyboardInterrupt:
-        done = len(outcome.skipped) + len(outcome.computed)
-        where = (f"{done} of {len(bounds)} chunks are complete in {out / 'chunks'}; rerun the same command to "
-                 "resume from them" if out is not None else "nothing was saved (no -o DIR)")
-        raise SweepInterrupted(f"interrupted: {where}") from None
+        raise SweepInterrupted(f"interrupted: {_safe(outcome, len(bounds), out)}") from None
+    except cluster.ClusterError as error:
+        raise SweepClusterLost(f"{error}\n{_safe(outcome, len(bounds), out)}") from None
     finally:
         if bar:
             bar.close()
@@ -466,32 +397,24 @@ def _report_stale(outcome: SweepOutcome, directory: Path, expected: set[str], pr
         for path in outcome.stale:
             path.unlink(missing_ok=True)
         outcome.pruned = True
-        outcome.warnings.append(f"pruned {len(outcome.stale)} stale file(s) from {directory}")
+        outcome.warnings.append(f"pruned {plural(len(outcome.stale), 'stale file')} from {directory}")
     else:
-        outcome.warnings.append(f"{len(outcome.stale)} file(s) in {directory} belong to no chunk of this sweep "
+        verb = "belongs" if len(outcome.stale) == 1 else "belong"
+        outcome.warnings.append(f"{plural(len(outcome.stale), 'file')} in {directory} {verb} to no chunk of this sweep "
                                 "(another model, runtime, setting or grid, or left by a crash); --prune removes them")
 
 
-def _run_chunks(module, P, run, bounds, todo, finish, client, scene_spec, bar) -> None:
-    """Compute the chunks ``todo`` in this process or on a dask client; ``finish`` stores each."""
-    if client is None:
-        for i in todo:
-            a, b = bounds[i]
-            finish(i, run_cases(module, P[a:b], run))
-            if bar:
-                bar.update()
-        return
-    if not todo:
-        return
-    from distributed import as_completed
+def _safe(outcome: SweepOutcome, total: int, out: Path | None) -> str:
+    """How many chunks are safe on disk, and how to resume."""
+    done = len(outcome.skipped) + len(outcome.computed)
+    return (f"{done} of {plural(total, 'chunk')} {'is' if total == 1 else 'are'} complete in {out / 'chunks'}; rerun the same command to resume from "
+            "them" if out is not None else "nothing was saved (no -o DIR)")
 
-    futures = {client.submit(_chunk_task, scene_spec, P[bounds[i][0]:bounds[i][1]], run, pure=False): i
-               for i in todo}
-    try:
-        for future in as_completed(futures):
-            finish(futures[future], future.result())
-            if bar:
-                bar.update()
-    except KeyboardInterrupt:
-        client.cancel(list(futures))
-        raise
+
+def _run_here(module, P, run, bounds, todo, finish, bar) -> None:
+    """Compute the chunks ``todo`` in this process on all cores; ``finish`` stores each."""
+    for i in todo:
+        a, b = bounds[i]
+        finish(i, run_cases(module, P[a:b], run))
+        if bar:
+            bar.update()
