@@ -106,3 +106,12 @@ def test_second_process_failure_is_an_error_naming_it(tmp_path):
             background.models()
     finally:
         background.stop()
+
+
+def test_cli_exits_1_naming_the_second_process_when_it_fails(tmp_path, monkeypatch, capsys):
+    from tswm_runtime.cli import main
+
+    monkeypatch.setattr(plan, "SCENES", {**plan.SCENES, "broken": "no-such-scene"})
+    assert main(["paper", "-o", str(tmp_path), "--no-derivation", "--no-progress"]) == 1
+    err = capsys.readouterr().err
+    assert "tswm paper: error: the second process" in err and "no_such_scene" in err

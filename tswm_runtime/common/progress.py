@@ -78,9 +78,9 @@ class Stages:
                 self._advance_to(self._done)
 
     def close(self) -> None:
-        """Stop the clock's thread and finish the bar."""
+        """End the stage that runs, stop the clock's thread, close the bar."""
         self._stop.set()
         if self._thread is not None:
             self._thread.join()
-        self._advance_to(float(self._bar.total))
+        self.end()
         self._bar.close()
