@@ -491,7 +491,7 @@ def guard_latches(model: Model, free: tuple[str, ...]) -> tuple[int, ...]:
 def _parameter_checks(model: Model, free: tuple[str, ...]) -> tuple[tuple, ...]:
     """The scene's rules that involve a free parameter: the runtime applies them to free values."""
     names = set(free)
-    return tuple(c for c in model.scene.checks if names & {c[1], *(c[3:4] if c[0] != "range" else ())})
+    return tuple(c for c in model.scene.checks if names & {c[1], *(c[3:4] if c[0] in ("less", "jam") else ())})
 
 
 MESH_GUARDS = ("mesh_normal", "slip")   # compliant contact: its normal force, the slip

@@ -287,13 +287,14 @@ class _Reader:
         self.bound(param, rule.quantity)
 
     def bound(self, param: Param, quantity: str) -> None:
-        """Record units.LIMITS of the quantity as a range rule (a quantity with a smallest magnitude,
-        mass, is positive: [smallest, largest]; else [-largest, largest])."""
+        """Record units.LIMITS of the quantity as a "bound" rule, [lo, hi] (a quantity with a smallest
+        magnitude, mass, is positive: [smallest, largest]; else [-largest, largest]); not a "range":
+        it says where arithmetic holds, not what the scene allows (a fit's default bounds)."""
         if quantity in units.LIMITS:
             smallest, largest = units.LIMITS[quantity]
             lo = smallest if smallest is not None else -largest
             unit = units.si_unit(quantity)
-            self.checks.append(("range", param.name, param.key, lo, largest, True, True,
+            self.checks.append(("bound", param.name, param.key, lo, largest,
                                 f"in [{lo:g}, {largest:g}] {unit} (where double arithmetic holds)"))
 
     def fail(self, key: str, problem: str, value: str | None = None) -> NoReturn:

@@ -6,6 +6,7 @@ with ``--set``, ``simulate(params=...)`` or a sweep is held to the same rules as
 scene file's, without SymPy or the scene reader. A check is one of
 
     ("range", name, key, lo, hi, lo_inclusive, hi_inclusive, allowed)
+    ("bound", name, key, lo, hi, allowed)         lo <= value(name) <= hi: where arithmetic holds
     ("less", name, key, other, allowed)          value(name) < value(other)
     ("jam", gamma, key, rho_key, law, allowed)   gamma + largest friction angle < 90 deg
 
@@ -39,6 +40,9 @@ def _holds(check: tuple, value) -> np.ndarray:
             if hi is not None:
                 ok &= (x <= hi) if hi_in else (x < hi)
             return ok
+        if kind == "bound":
+            x = value(check[1])
+            return np.isfinite(x) & (x >= check[3]) & (x <= check[4])
         if kind == "less":
             return value(check[1]) < value(check[3])
         if kind == "jam":
@@ -56,6 +60,8 @@ def _message(module: ModuleType, check: tuple, value) -> str:
     kind = check[0]
     if kind == "range":
         return f"parameter {show(check[1])}: must be {check[7]} ({check[2]} in the scene file)"
+    if kind == "bound":
+        return f"parameter {show(check[1])}: must be {check[5]} ({check[2]} in the scene file)"
     if kind == "less":
         return f"parameter {show(check[1])}: must be {check[4]} ({show(check[3])})"
     return f"parameters {show(check[1])} and {show(check[3])}: must keep {check[5]}"
