@@ -1,4 +1,4 @@
-"""The cold-start message (issue 13): before numba compiles the kernels or a model because they
+"""The cold-start message: before numba compiles the kernels or a model because they
 are not in its disk cache, tswm says what it compiles and about how long. Timing is the
 bench's business (``bench.empty_cache``); these tests check that the message appears when
 the cache is empty, is silent when it is warm, and that the detection reads numba's real

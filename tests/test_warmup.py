@@ -1,5 +1,5 @@
 """A cold numba cache: the CLI runs interpreted while a background process compiles
-(startup.warmup, issue 13's "first result within 15 s"). The interpreted kernels are the same
+(startup.warmup: the first result within 15 s). The interpreted kernels are the same
 source run by Python: they must give the compiled kernels' results. The decisions (interpret
 or compile first, one background compile at a time, rerun compiled on Python-only arithmetic
 errors) are checked on their own."""

@@ -23,7 +23,7 @@ def test_table3_as_printed_sticks_in_the_consistent_model(m2, F2):
     """Load from t = 0: the starting force F1(0) = 727.6 N is below the breakaway force
     against every Table 3 load (1445 N for F2 = -5000 N), so the gear never moves: one
     stick phase, S1 = F1(0), S2 = F2 from statics. The paper's dynamic numbers for these
-    scenes cannot come from the consistent model; its report says so (issue 5)."""
+    scenes cannot come from the consistent model; its report says so."""
     assert gear.kloss(0.0) < gear.breakaway_F1(F2)
     r = simulate("paper", {"m2": m2, "F2": F2})
     assert r.status == "finished", r.message

@@ -16,7 +16,7 @@ one untimed warm-up call (numba's cache, imports; its outcome gives the errors),
 by the round), so that load drifts hit every solver alike and no configuration always
 follows the same one: a call finds the caches as another solver left them, and in a fixed
 order the peers would always follow another scipy call and each tswm variant the same
-neighbour. Medians with min and max. The targets of issue 13 are reported with the
+neighbour. Medians with min and max. The cold-start target is reported with the
 measured factor, never asserted.
 
 Run: ``tswm bench [--quick] [-o DIR]`` or ``python tools/bench_work_precision.py``.
@@ -159,7 +159,7 @@ def cold_start() -> list[dict]:
     return out
 
 
-COLD_TARGET_S = 15.0     # issue 13: with an empty cache, the first result within 15 s
+COLD_TARGET_S = 15.0     # with an empty cache, the first result within 15 s
 MESSAGE_TARGET_S = 1.0   # ... and a message within 1 s saying what is compiled and about how long
 EMPTY_CACHE = [  # (name, TSWM_COLD_START, command line after the interpreter, the output line that is the first result)
     ("tswm simulate paper", "background", ["-m", "tswm_runtime.cli", "simulate", "paper"], "status:"),
@@ -337,7 +337,7 @@ def _markdown(info, refs, t_ref, rows, verdicts, thr, flat, cold, empty, tols, r
           "rounding); err_t largest absolute error of the event times [s] (inf: other events than the "
           "reference's; NaN: the sweep reports no event times); err the largest of them.", "",
           report.md_table(refs, list(refs[0]), {"S1_max": "{:.12g}", "v1_end": "{:.12g}", "x1_end": "{:.12g}"}), "",
-          "## Targets (issue 13; reported, not asserted)", "",
+          "## Targets (reported, not asserted)", "",
           f"### simulate() with default output vs the fastest peer at equal error: {n_met} of "
           f"{len(verdicts)} met", "",
           "Time to reach the error: log-log interpolation on each solver's work-precision front "

@@ -2,7 +2,7 @@
 
 numba unboxes a function-typed argument (``signatures.RhsFunction``, ...) by calling back
 into its typing machinery from Python, twice per argument: 1-2 us each, several times that
-right after other code has run (issue 13). The mode machine takes seven such arguments. An
+right after other code has run (measured). The mode machine takes seven such arguments. An
 int64 unboxes in nanoseconds. ``signatures.address`` gives the address of a function's
 compiled C wrapper (what numba calls through a first-class function value made from a
 compile result); ``function_at(fn_type)`` makes an intrinsic that turns such an address back

@@ -3,7 +3,7 @@
 numba counts the references to every array: an atomic increment and decrement, a few ns
 each. Around a call through a function pointer (the model's rhs, the method's step) the
 pairs cannot be pruned, so a step loop that hands its work arrays to such calls spent
-about 40 % of its time counting (perf, issue 13). ``borrowed(x)`` gives ``x`` (an array,
+about 40 % of its time counting (measured with perf). ``borrowed(x)`` gives ``x`` (an array,
 or a tuple or named tuple of arrays and scalars) with every array's owner (meminfo) set
 to NULL: counting it is a null test. The views must not outlive what they borrow from, so
 a function borrows only its own arguments, which its caller keeps alive for the call.

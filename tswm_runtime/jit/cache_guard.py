@@ -96,7 +96,7 @@ def check_kernel_caches() -> None:
 
 
 class _Helper(CPUDispatcher):
-    """A dispatcher for the kernels' helpers (issue 13: each compile of a helper is a full
+    """A dispatcher for the kernels' helpers (measured: each compile of a helper is a full
     compile, repeated in every caller's link).
 
     It types the constants it is called with from compiled code as their plain types (int64,

@@ -1,6 +1,6 @@
 """Say so before numba compiles: which kernels are missing from numba's disk cache, and how long
-compiling them takes (issue 13: "with an empty cache, a message within 1 s that says what is
-being compiled and about how long").
+compiling them takes: with an empty cache, a message within 1 s that says what is being
+compiled and about how long.
 
 The integrators (``integrate_hybrid``, ``integrate_at``, ``fill_rows``; for sweeps
 ``run_batch``) and a generated model's entry functions (``rhs``, ``jac``, ``guards``,

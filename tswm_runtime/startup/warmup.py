@@ -1,4 +1,4 @@
-"""A cold numba cache costs no wait (issue 13: "the first result within 15 s"): the command
+"""A cold numba cache costs no wait (the promise: the first result within 15 s): the command
 runs interpreted while a background process compiles the kernels into the cache.
 
 Compiling the integration kernels takes about 40 s on 2 cores; the same kernels run by the
