@@ -31,6 +31,7 @@ def _client(address: str):
     """(dask Client, LocalCluster or None) for --scheduler ADDRESS ('local': a cluster in this process)."""
     from distributed import Client, LocalCluster
 
+    _quiet_dask()
     if address == "local":
         cluster = LocalCluster(n_workers=1, threads_per_worker=1, processes=False, dashboard_address=None)
         return Client(cluster), cluster
@@ -44,8 +45,8 @@ def _client(address: str):
 
 
 def _quiet_dask() -> None:
-    """Silence distributed's loggers: closing a client that lost its scheduler logs reconnect
-    tracebacks that say no more than our message."""
+    """Silence distributed's loggers: a client that lost its scheduler logs reconnect tracebacks
+    that say no more than the command's own message about the cluster."""
     for name in [n for n in logging.root.manager.loggerDict if n.split(".")[0] == "distributed"]:
         logging.getLogger(name).setLevel(logging.CRITICAL + 1)
 
@@ -92,7 +93,6 @@ def _run(args: argparse.Namespace) -> int:
             print(f"tswm sweep: {stop}", file=sys.stderr)
             return 1
         except SweepClusterLost as lost:
-            _quiet_dask()
             print(f"tswm sweep: cluster problem: {lost}\n  resume with: tswm {shlex.join(args.argv)}",
                   file=sys.stderr)
             return 1

@@ -2,7 +2,7 @@
 
 * The model travels with the work: each chunk task carries the generated module's source
   (``ModelPackage``), verified by its sha256 on the worker and loaded there from a temporary
-  file (or from the worker's own ``generated/`` module when its body digest is the same), so
+  file (or from the worker's own ``generated/`` module when it is the same file), so
   scene files and ``.py`` modules need no shared file system.
 * Before any work, every worker answers a handshake (``handshake``): tswm's version, the
   runtime digest, the model digest it loads, numba, its threads and what it would compile. A
@@ -65,7 +65,7 @@ def package(module: ModuleType) -> ModelPackage:
 
 def _model_file(pack: ModelPackage) -> tuple[Path, str]:
     """(file, module name) this worker loads ``pack`` from: its own generated module when that
-    has the same body digest (its numba cache stays in use), else the shipped source written to
+    is the same file (its numba cache stays in use), else the shipped source written to
     a temporary file named by the source's digest."""
     if hashlib.sha256(pack.source).hexdigest() != pack.sha256:
         raise ClusterError(f"the model source of scene {pack.scene!r} arrived damaged (sha256 differs)")
@@ -106,7 +106,7 @@ def _runtime() -> tuple[str, str]:
 
 def expected(pack: ModelPackage) -> dict:
     """What a chunk's rows depend on besides its rows and settings, as this process has it:
-    tswm's version, the runtime digest, the model's body digest."""
+    tswm's version, the runtime digest, the model file's sha256."""
     version, runtime = _runtime()
     return {"tswm": version, "runtime digest": runtime, "model digest": pack.model_digest}
 
