@@ -545,7 +545,8 @@ def _guards(em: _Emitter) -> Function:
             lines.append(f"    g[{names.index('gap_a')}], g[{names.index('gap_b')}] = {gaps[0]}, {gaps[1]}")
         elif mode.mesh:
             targets = ("mesh_normal", "slip") if mode.direction else ("mesh_normal", *STICK_GUARDS[:2])
-            lines.append(f"    {', '.join(f'g[{names.index(n)}]' for n in targets)} = {em.calls[mode.name]('contact', 't, y, p')}")
+            contact = em.calls[mode.name]("contact", "t, y, p")
+            lines.append(f"    {', '.join(f'g[{names.index(n)}]' for n in targets)} = {contact}")
         elif mode.slide is not None:
             lines.append(f"    g[{names.index('v1')}] = y[{len(model.states) - 1}]")
             lines.append(f"    g[{names.index(SLIDE_GUARDS[0])}], g[{names.index(SLIDE_GUARDS[1])}] = "
@@ -678,7 +679,8 @@ def generate_module(model: Model, free: tuple[str, ...] | None = None) -> str:
     env.filters["comment"] = _comment
     body = env.get_template("module.py.j2").render(
         scene=scene, model=model, functions=functions, calls=em.calls,
-        sources={p.name: source_form(p.value, scene.written.get(p.key), p.name) for p in fixed}, free=free_params, latches=model.latches, fixed=fixed,
+        sources={p.name: source_form(p.value, scene.written.get(p.key), p.name) for p in fixed},
+        free=free_params, latches=model.latches, fixed=fixed,
         pieces=model.pieces, derived=em.derived_constants(), guards_function=guards_function, impact=impact,
         rates=_rate_sources(model), accelerations=_further_accelerations(model),
         load_factors=load_factors,
