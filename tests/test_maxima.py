@@ -30,3 +30,25 @@ def test_a_held_tail_holds_the_true_peak(method):
     and |S2| rises towards it from below: the peak is the held tail's, 15000 N."""
     r = simulate("paper-runup", method=method, points=2001)
     assert abs(r.S2_max) == pytest.approx(abs(r.params["F2_after"]), rel=1e-10)
+
+
+def test_a_stop_at_an_event_reports_the_finite_peaks_before_it():
+    """paper-runup with m2 = 8000 kg and F2_after = +60000 N: at the load step the state needs
+    flank b, whose D is negative there; the run stops (inconsistent) at t_step. The forces up to
+    it were finite: the maxima are the largest |S| reached before the stop, not +-inf."""
+    r = simulate("paper-runup", {"m2": 8000.0, "F2_after": 60000.0, "t_step": 0.04}, points=20001)
+    assert r.status == "inconsistent" and r.t_stop == pytest.approx(0.04)
+    assert "finite peaks" in r.message
+    for name, peak in (("S1", r.S1_max), ("S2", r.S2_max)):
+        rows = np.abs(getattr(r, name))
+        assert np.isfinite(peak) and abs(peak) >= rows.max() * (1.0 - 1e-14)
+        assert abs(peak) == pytest.approx(rows.max(), rel=1e-6)
+
+
+def test_a_painleve_end_keeps_its_unbounded_maxima():
+    """m2 = 5000 kg, F2_after = +60000 N at 0.04 s: D falls to 0 in finite time on flank b (the
+    reference's square-root approach, tests/hard_cases/test_quadrature.py): the forces grow
+    without bound, so the maxima are +-inf and the message says so."""
+    r = simulate("paper-runup", {"m2": 5000.0, "F2_after": 60000.0, "t_step": 0.04})
+    assert r.status == "inconsistent" and r.events[-1].guard == "D"
+    assert np.isinf(r.S1_max) and np.isinf(r.S2_max) and "grow without bound" in r.message
