@@ -5,6 +5,7 @@ import pytest
 
 from tswm_runtime.model.contract import load_module
 from tswm_runtime.simulation.simulate import simulate
+from tswm_runtime.sweeps.sweep import grid_cases, parse_grid, sweep
 
 SHIPPED = ("asymmetric", "backlash", "load-schedule", "lost-motion", "mesh", "one-sided", "paper",
            "paper-literal", "paper-lostmotion", "paper-runup", "seating", "stiff-drive", "valve-travel")
@@ -52,3 +53,16 @@ def test_a_painleve_end_keeps_its_unbounded_maxima():
     r = simulate("paper-runup", {"m2": 5000.0, "F2_after": 60000.0, "t_step": 0.04})
     assert r.status == "inconsistent" and r.events[-1].guard == "D"
     assert np.isinf(r.S1_max) and np.isinf(r.S2_max) and "grow without bound" in r.message
+
+
+def test_the_sweep_batch_maxima_cover_the_rows_and_the_held_tail():
+    """hybrid/batch.py reports S1m, S2m per case: never below a row of the same case run with
+    dense rows, and over paper-runup's held tails |S2m| = |F2_after| (a1 = 0 there)."""
+    module = load_module("paper-runup")
+    P = grid_cases(module, parse_grid(["m2=100:300:2", "F2_after=-15000:-5000:2"], module))
+    table = sweep("paper-runup", P, {}, chunk_size=4).table
+    for row in table.to_dict("records"):
+        r = simulate("paper-runup", {"m2": row["m2"], "F2_after": row["F2_after"]}, points=2001)
+        assert abs(row["S1m"]) >= np.abs(r.S1).max() * (1.0 - 1e-14)
+        assert abs(row["S2m"]) >= np.abs(r.S2).max() * (1.0 - 1e-14)
+        assert abs(row["S2m"]) == pytest.approx(abs(row["F2_after"]), rel=1e-10)
