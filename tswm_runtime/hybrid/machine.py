@@ -587,15 +587,11 @@ def _segment(fns, tables, settings, mode, p, state, record, i, scratch, singular
 
 @njit(cache=True, error_model="numpy")
 def _latch(kind, k, t, y, p, tables, guards, g):
-    """The laws' latches in p after guard k (of ``kind``) fired at (t, y); returns p as it was
-    before the event (its left limit): a copy if the event changes it."""
-    latching = kind == G_TRIP or kind == G_LAW or kind == G_STEM_GAP or kind == G_STEM_N
-    p_left = p.copy() if latching else p  # the laws up to the event: its left limit
+    """The laws' latches in p after guard k (of ``kind``) fired at (t, y)."""
     if kind == G_TRIP:
         p[tables.guard_latch[k]] = t
     elif kind == G_LAW:
         _latch_pieces(guards, t, y, p, tables, g)
-    return p_left
 
 
 @njit(cache=True, error_model="numpy")
@@ -622,9 +618,10 @@ def _jump(fns, tables, tol, mode, kind, k, t, y, p, w):
 
 
 @njit(cache=True, error_model="numpy")
-def _checked(fns, tables, tol, mode, new, status, need, t, y, p, p_left, mon, w):
+def _checked(fns, tables, tol, mode, new, status, need, t, y, p, w):
     """(mode, status, need) after a jump: a carried stem the new mode pulls off is released; a
-    new mode without a consistent contact force stops the run (INCONSISTENT, maxima unbounded)."""
+    new mode without a consistent contact force stops the run (INCONSISTENT; the maxima keep the
+    finite peaks reached up to the event: no force grew without bound before it)."""
     rhs = fns.rhs
     guards = fns.guards
     g = w.g
@@ -632,7 +629,6 @@ def _checked(fns, tables, tol, mode, new, status, need, t, y, p, p_left, mon, w)
         new, status, need = _outcome(*_moving_on(0, rhs, guards, t, y, p, tol, tables, g, w.y_tmp, w.f))
     if status == FINISHED and not _consistent(new, guards, t, y, p, tables, g):
         status = INCONSISTENT
-        _unbounded(fns.observe, guards, mode, t, y, p_left, -1, mon, w.obs, g)
     return new, status, need
 
 
@@ -667,8 +663,9 @@ def integrate_hybrid(fns, tables, start, settings, record):
 
     A sequence of named steps: ``_first_mode``, then per segment ``_segment`` (the step
     loop, and the Painleve approach where D heads for 0: it locates D = 0, status
-    INCONSISTENT, event guard D; the maxima in mon are then +-inf, no finite reaction
-    exists) and at its event ``_latch``, ``_jump``, ``_checked``, ``_log``.
+    INCONSISTENT, event guard D; the maxima in mon are then +-inf: the reactions grow without
+    bound there) and at its event ``_latch``, ``_jump``, ``_checked`` (a mode or impact without
+    a consistent force stops the run with the finite maxima reached before it), ``_log``.
 
     Returns (status, t_stop, number of events, last mode (for INCONSISTENT the mode
     found inconsistent), need, initial mode).
@@ -728,11 +725,11 @@ def integrate_hybrid(fns, tables, start, settings, record):
             n_ev = _log(log, n_ev, t, k, mode, -1, y, q, jump)
             status = INCONSISTENT
             break
-        p_left = _latch(kind, k, t, y, p, tables, guards, g)
+        _latch(kind, k, t, y, p, tables, guards, g)
         new, status, need = _jump(fns, tables, settings.tol, mode, kind, k, t, y, p, w)
         if w.frame[0] < np.inf:  # a first step inside the bounce, so that the gap's guard is armed again
             h = 0.25 * w.frame[0] if h <= 0.0 else min(h, 0.25 * w.frame[0])
-        new, status, need = _checked(fns, tables, settings.tol, mode, new, status, need, t, y, p, p_left, mon, w)
+        new, status, need = _checked(fns, tables, settings.tol, mode, new, status, need, t, y, p, w)
         if status == FINISHED and new == mode and kind == G_PHI:
             continue  # phi crossed within its noise (the probe keeps the flank): no event
         n_ev = _log(log, n_ev, t, k, mode, new if status == FINISHED else -1, y, q, jump)

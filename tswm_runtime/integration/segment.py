@@ -510,9 +510,13 @@ def _stable_rest(fns, seg, tol, t, y, quad, s, counters):
 @njit(cache=True, error_model="numpy")
 def _hold(fns, seg, t_end, t, state, record, i, s):
     """Hold the state at its equilibrium (one Newton step onto it) up to the next guard crossing
-    or t_end. Returns (t, guard or -1, next output row)."""
+    or t_end, its observables in the maxima (the rows carry the held state, so must the maxima).
+    Returns (t, guard or -1, next output row)."""
     y, quad, g_b = state.y, state.quad, s.G[events.GUARD_SUBINTERVALS]
     y[0] -= s.f_b[0] / s.work.J[0, 0]  # one Newton step onto the equilibrium itself
+    if record.mon.shape[0] > 0:
+        _refine(fns, seg, record.mon, s)  # the steps before the hold, then the held state itself
+        _monitor(fns, seg, t, y, record.mon, None, t, s)
     fns.guards(seg.mode, t, y, seg.p, g_b)
     t_hold, k = steady.hold(fns.guards, seg.mode, t, y, seg.p, t_end, g_b, seg.ev, s.g_tmp)
     i = _hold_samples(record.out, i, t, t_hold, y, quad)

@@ -118,7 +118,8 @@ class Result:
     events: list[Event]
     phases: list[Phase]
     S1_max: float                 # the value of S1 where |S1| is largest, and its time (+-inf: unbounded,
-                                  # status inconsistent: no finite reaction exists there)
+                                  # status inconsistent where D reached 0 or at the start; a stop at an
+                                  # event or impact keeps the finite peaks reached before it)
     t_S1_max: float
     S2_max: float
     t_S2_max: float
@@ -297,15 +298,18 @@ def _inconsistent(module: ModuleType, t_stop: float, y_stop: np.ndarray, last: i
         return (f"inconsistent at t = {t_stop:.9g} s: the impact on flank {flank} jams: with the friction angle "
                 f"there, the sliding impulse (friction against the slip) cannot stop the flanks' approach "
                 f"(W_nn - mu sigma W_nt <= 0 in the flank's frame: the impact counterpart of D <= 0), so no "
-                f"impulse satisfies Coulomb's law; lower the friction or change the masses")
+                f"impulse satisfies Coulomb's law; the maxima of S1 and S2 are the finite peaks "
+                f"reached before the impact; lower the friction or change the masses")
     name = module.MODES[last]
     g = np.empty(len(module.GUARDS))
     module.guards(last, t_stop, np.ascontiguousarray(y_stop, dtype=np.float64), p, g)
     value = {k: g[module.GUARDS.index(k)] for k in ("D", "jam") if k in module.GUARDS}
     formula = module.MODE_D[last] or "(none: the mode has no contact denominator)"
     reached = events and events[-1].guard in ("D", "jam") and events[-1].to_mode is None
-    how = ("D fell to 0 in finite time (a1 -> -inf like the square root of the time left)" if reached
-           else "the mode the state needs has D <= 0")
+    how = ("D fell to 0 in finite time (a1 -> -inf like the square root of the time left); the contact "
+           "forces grow without bound there, so their maxima are +-inf" if reached
+           else "the mode the state needs has D <= 0" + ("; the maxima of S1 and S2 are the finite peaks "
+                                                         "reached before the stop" if events else ""))
     jam = f" and the jam factor cos(gamma + f s rho) = {value['jam']:.6g}" if "jam" in value else ""
     masses = ", ".join(f"{k} = {_value(module, p, k):.6g}" for k in ("m1", "m2", "gamma"))
     return (f"inconsistent at t = {t_stop:.9g} s in mode {name}: {how}; D = {formula} = "
