@@ -516,7 +516,7 @@ def _hold(fns, seg, t_end, t, state, record, i, s):
     y[0] -= s.f_b[0] / s.work.J[0, 0]  # one Newton step onto the equilibrium itself
     if record.mon.shape[0] > 0:
         _refine(fns, seg, record.mon, s)  # the steps before the hold, then the held state itself
-        _monitor(fns, seg, t, y, record.mon, None, t, s)
+        _monitor(fns, seg, t, y, record.mon, None, t, s.obs, s.win)
     fns.guards(seg.mode, t, y, seg.p, g_b)
     t_hold, k = steady.hold(fns.guards, seg.mode, t, y, seg.p, t_end, g_b, seg.ev, s.g_tmp)
     i = _hold_samples(record.out, i, t, t_hold, y, quad)
