@@ -128,14 +128,14 @@ def test_misfit_plot_shades_the_confidence_band_and_says_when_it_is_too_narrow_t
     fig.canvas.draw()
     ax = fig.axes[0]
     entries = [t.get_text() for t in fig.legends[0].get_texts()]
-    band = [p for p in ax.patches if "confidence interval" in p.get_label()]
+    band = [p for p in ax.patches if "profile interval" in p.get_label()]
     assert len(band) == 1 and 0 < band[0].get_alpha() < 1
     x0, x1 = band[0].get_extents().x0, band[0].get_extents().x1
     assert x1 - x0 >= 0 and ax.transData.inverted().transform((x0, 0))[0] == pytest.approx(ci[0], abs=1e-6)
-    label = next(e for e in entries if "confidence interval" in e)
+    label = next(e for e in entries if "profile interval" in e)
     assert ("narrower than the optimum's line" in label) == narrow, label
-    assert label.startswith("95% confidence interval [0.008, 0.012]" if not narrow else
-                            "95% confidence interval [0.0099999, 0.0100001]"), label   # the ends differ
+    assert label.startswith("95% profile interval [0.008, 0.012]" if not narrow else
+                            "95% profile interval [0.0099999, 0.0100001]"), label   # the ends differ
     _titles_fit(fig)
     _legends_clear_of_data(fig)
 
@@ -153,7 +153,7 @@ def test_misfit_plot_shades_further_bands():
 def test_misfit_plot_without_a_finite_interval_says_so():
     fig = misfit_figure(_fit_result((-math.inf, math.inf)))
     entries = [t.get_text() for t in fig.legends[0].get_texts()]
-    assert "no finite 95% confidence interval" in entries
+    assert "no finite 95% profile interval" in entries
 
 
 def test_two_parameter_misfit_plot_shades_the_confidence_region():
