@@ -15,6 +15,8 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
+from tswm_runtime.sweeps import DEFAULT_CHUNK, DEFAULT_WAIT_FOR_WORKERS
+
 
 def _settings(t_end, rtol, atol, method, max_steps, max_events, points=None) -> dict:
     """The run settings given (None: the scene's); t_end may carry a time unit ("500 ms")."""
@@ -65,7 +67,8 @@ def simulate(scene, params: dict | None = None, *, t_end=None, rtol=None, atol=N
 
 
 def sweep(scene, grid=None, *, samples: int | None = None, ranges=None, seed: int = 0, output=None,
-          chunk_size: int = 512, client=None, wait_for_workers: float = 60.0, large: bool = False,
+          chunk_size: int = DEFAULT_CHUNK, client=None, wait_for_workers: float = DEFAULT_WAIT_FOR_WORKERS,
+          large: bool = False,
           prune: bool = False, progress: bool = False, t_end=None, rtol=None, atol=None, method=None, max_steps=None, max_events=None):
     """``scene`` over a ``grid`` ({name: "START:STOP:COUNT" or a value}) or ``samples`` seeded
     random cases in ``ranges`` ({name: "LO:HI" or (lo, hi)}) (``tswm sweep``). ``output``: a

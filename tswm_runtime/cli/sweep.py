@@ -10,6 +10,7 @@ import sys
 
 from tswm_common.text import printable
 from tswm_runtime.common.words import plural
+from tswm_runtime.sweeps import DEFAULT_CHUNK, DEFAULT_WAIT_FOR_WORKERS
 from tswm_runtime.cli.common import (MAX_MESSAGE, UsageError, add_setting_options, output_directory, prepare_kernels, run_method,
                                      setting_error, setting_overrides)
 
@@ -150,13 +151,14 @@ def add_parser(sub) -> None:
     sweep.add_argument("--seed", type=int, default=0, help="random seed for --samples (default 0)")
     sweep.add_argument("-o", "--output", metavar="DIR", help="write DIR/chunks/, DIR/SCENE-sweep.parquet, "
                        ".csv and .json (without -o: print the summary only, no resume)")
-    sweep.add_argument("--chunk-size", type=int, default=512, metavar="N", help="cases per chunk (default 512)")
+    sweep.add_argument("--chunk-size", type=int, default=DEFAULT_CHUNK, metavar="N",
+                       help=f"cases per chunk (default {DEFAULT_CHUNK})")
     sweep.add_argument("--scheduler", metavar="ADDRESS",
                        help="run the chunks on a dask.distributed scheduler at ADDRESS; 'local' starts a "
                             "LocalCluster in this process")
-    sweep.add_argument("--wait-for-workers", type=_wait_seconds, default=60.0, metavar="SECONDS",
+    sweep.add_argument("--wait-for-workers", type=_wait_seconds, default=DEFAULT_WAIT_FOR_WORKERS, metavar="SECONDS",
                        help="with --scheduler: give up (exit 1) when the cluster has had no worker for SECONDS "
-                            "(default 60; inf waits for ever); a status line says so every 10 s")
+                            f"(default {DEFAULT_WAIT_FOR_WORKERS:g}; inf waits for ever); a status line says so every 10 s")
     add_setting_options(sweep, SWEEP_SETTINGS)
     sweep.add_argument("--large", action="store_true",
                        help="allow a sweep of more than 10^6 cases (its size is stated when refused)")

@@ -50,6 +50,7 @@ from types import ModuleType
 import numpy as np
 
 from tswm_runtime.common.provenance import TSWM_VERSION as __version__
+from tswm_runtime.sweeps import DEFAULT_CHUNK, DEFAULT_WAIT_FOR_WORKERS
 from tswm_runtime.common.words import plural
 from tswm_runtime.jit import coldstart
 from tswm_runtime.model.scenes import load_model
@@ -60,7 +61,6 @@ from tswm_runtime.sweeps import chunks, cluster
 from tswm_runtime.sweeps.rows import run_cases
 
 LOG = logging.getLogger("tswm_runtime.sweep")
-DEFAULT_CHUNK = 512
 # Size bounds (docs/promises.md): above LARGE_SWEEP cases a sweep states its size and needs --large;
 # MAX_SWEEP_CASES is refused outright, and so is a sweep that would write more than MAX_CHUNKS chunk files.
 LARGE_SWEEP = 10**6
@@ -68,7 +68,6 @@ MAX_SWEEP_CASES = 10**7
 MAX_CHUNK_SIZE = 10**6
 MAX_CHUNKS = 10**5
 MAX_SEED = 2**63 - 1
-DEFAULT_WAIT_FOR_WORKERS = 60.0   # seconds a cluster may have no worker before a sweep gives up
 ROW_BYTES = 220   # bytes per case in chunks + parquet + CSV: 214 measured on a 2000-case paper grid
 RESULT_COLUMNS = ("status", "problem", "t_stop", "S1m", "tS1m", "S2m", "tS2m", "KD1", "KD2", "x1", "v1",
                   "regimes", "modes", "n_events", "steps", "rejected", "nfev", "njev", "impacts", "impact_energy")
