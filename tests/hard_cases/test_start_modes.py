@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 from tswm_runtime.simulation.simulate import simulate
+from tswm_runtime.sweeps.sweep import sweep, sweep_cases
 
 DEG = math.pi / 180.0
 CLEARANCE = 5e-4
@@ -203,3 +204,21 @@ def test_light_worm_on_heavy_wheel_drives_flank_a_from_the_start(scene_module, m
     assert r.S2[0] == pytest.approx(S2, rel=1e-12)
     assert S2 == pytest.approx(-31263.5, abs=0.1)
     assert min(e.t for e in r.events) > 0.01
+
+
+def test_a_random_sweep_of_the_issue_scene_starts_every_case_by_hand(scene_module):
+    """3000 random cases of the issue's scene (F0, V0, m1, m2) through the sweep: before, 2106 of
+    them (a heavy wheel) started in free flight and bounced until the event log was full; now
+    every case finishes and starts where the hand solution does (fwd_a, or free flight where the
+    load runs the light wheel ahead of a heavy worm)."""
+    module = scene_module(ISSUE.replace("start-light-worm", "start-light-worm-sweep")
+                          .replace("MODES", '"forward", "backward", "stick"'))
+    P = sweep_cases(module, samples=3000, seed=1,
+                    ranges={"F0": "1000:10000", "V0": "0.5:3", "m1": "0.5:20", "m2": "10:3000"})
+    table = sweep(module, P, {}).table
+    assert set(table["status"]) == {"finished"}
+    names = module.PARAM_NAMES
+    for row, modes in zip(P, table["modes"]):
+        case = dict(zip(names, row))
+        [(mode, *_)] = hand_start(8.0 * DEG, 6.0 * DEG, case["m1"], case["m2"], case["F0"], 2000.0, [1])
+        assert module.MODES[int(modes.split()[0])] == mode, case
