@@ -141,8 +141,8 @@ def _rest(values: ChainValues) -> tuple[tuple[Intervals, ...], str]:
         if i == stages - 1:
             last = -values.force[-1]
             if not any(lo <= last <= hi for lo, hi in w_set):
-                return (), (f"the load on body {stages} ({last:.6g}) is outside what the stages can hold "
-                            f"with the drive ({_show(w_set)})")
+                return (), (f"holding body {stages}'s load needs stage {stages} to exert {last:.6g} on it, outside "
+                            f"what the stages can hold against the other forces: {_show(w_set)}")
             break
         forward.append(w_set)
         # body i + 1: stage i + 2 pushes it with -F_{i+1} - X_{i+1}; its lever turns that into p

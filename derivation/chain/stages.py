@@ -43,6 +43,7 @@ class Kind:
     lever_out: sp.Expr
     motion_in: str
     motion_out: str
+    keys: dict[str, sp.Symbol]  # the scene keys of the kind and the symbols they give values
 
 
 def kinds() -> dict[str, Kind]:
@@ -52,10 +53,14 @@ def kinds() -> dict[str, Kind]:
     axial_profile = sp.Matrix([0, sp.sin(alpha_ax), sp.cos(alpha_ax)])   # axial section: x2 and radial
     screw_normal = tangent.cross(axial_profile)                          # the flank holds both lines
     return {
-        "wedge": Kind("wedge", sp.tan(mech.gamma), normal, sp.Integer(1), sp.Integer(1), TRANSLATION, TRANSLATION),
-        "worm_gear": Kind("worm_gear", sp.tan(mech.gamma), worm_normal, r_worm, r_wheel, ROTATION, ROTATION),
+        "wedge": Kind("wedge", sp.tan(mech.gamma), normal, sp.Integer(1), sp.Integer(1), TRANSLATION, TRANSLATION,
+                      {"gamma": mech.gamma, "mu": mu}),
+        "worm_gear": Kind("worm_gear", sp.tan(mech.gamma), worm_normal, r_worm, r_wheel, ROTATION, ROTATION,
+                          {"lead_angle": mech.gamma, "pressure_angle": alpha_n, "worm_radius": r_worm,
+                           "wheel_radius": r_wheel, "mu": mu}),
         "power_screw": Kind("power_screw", lead / (sp.pi * d_m), screw_normal, d_m / 2, sp.Integer(1),
-                            ROTATION, TRANSLATION),
+                            ROTATION, TRANSLATION, {"lead": lead, "flank_angle": alpha_ax, "mean_diameter": d_m,
+                                                    "mu": mu}),
     }
 
 
