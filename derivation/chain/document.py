@@ -57,8 +57,10 @@ def _modes(n_st: int, reachable: list) -> list[Section]:
               [[dyn.sliding(*r).name, ", ".join(f"${_l(p)}$" for p in dyn.sliding(*r).psi),
                 f"${_l(dyn.sliding(*r).denominator)}$"] for r in reachable])
     first = dyn.sliding(*reachable[0])
-    eom.text(f"Normal forces of the mode {first.name} (each must be $\\ge 0$ for the mode to be consistent):")
-    eom.math(*(f"N_{{{k + 1}}} = {_l(n)}" for k, n in enumerate(first.normal)))
+    eom.text(f"Switching functions of the mode {first.name}: stage $k$'s normal force is "
+             "$N_k = \\varphi_k \\cos\\rho_k / (D \\cos(\\gamma_k + f_k s \\rho_k))$, so the mode is consistent "
+             "while every $\\varphi_k / D \\ge 0$ (each $\\varphi_k$ depends on the other stages' FTFs):")
+    eom.math(*(f"\\varphi_{{{k + 1}}} = {_l(p)}" for k, p in enumerate(first.switching)))
     return [kin, eom]
 
 
