@@ -39,7 +39,7 @@ class Section:
         self.blocks.append(("table", spec, header, rows))
 
 
-_SHORT_NAME = re.compile(r"([A-Za-z]|alpha|beta|gamma|delta|epsilon|mu|phi|psi|rho|tau|omega)(\d*)")
+_SHORT_NAME = re.compile(r"([A-Za-z]|alpha|beta|gamma|delta|epsilon|mu|phi|psi|Psi|rho|tau|omega)(\d*)")
 
 
 STATE_LATEX = {"gap": "g", "gap_rate": "\\dot g"}   # the clearance's states, as the text names them
@@ -454,12 +454,16 @@ def render(doc: dict, target: str) -> str:
 def write_documents(model: Model, *, latex=None, markdown=None, pdf=None) -> list[Path]:
     """Write the document of ``model`` as Markdown, LaTeX and a PDF (``pdf``: a path, or True for
     the LaTeX file's name, else SCENE-derivation.pdf; needs pdflatex); the paths written."""
+    if not (latex or markdown or pdf):
+        return []
+    return write_built(build_document(model), model.scene.name, latex=latex, markdown=markdown, pdf=pdf)
+
+
+def write_built(doc: dict, name: str, *, latex=None, markdown=None, pdf=None) -> list[Path]:
+    """Write a built document (``build_document``'s shape) for scene ``name``; see write_documents."""
     from derivation.latex import build_pdf
     from tswm_common.files import write_atomic
 
-    if not (latex or markdown or pdf):
-        return []
-    doc = build_document(model)
     written = []
     if markdown:
         written.append(write_atomic(markdown, render(doc, "markdown")))
@@ -468,6 +472,6 @@ def write_documents(model: Model, *, latex=None, markdown=None, pdf=None) -> lis
         if latex:
             written.append(write_atomic(latex, tex))
         if pdf:
-            target = Path(pdf if not isinstance(pdf, bool) else (latex or f"{model.scene.name}-derivation.tex"))
+            target = Path(pdf if not isinstance(pdf, bool) else (latex or f"{name}-derivation.tex"))
             written.append(build_pdf(tex, target.with_suffix(".pdf")))
     return written

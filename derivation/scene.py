@@ -34,6 +34,10 @@ class SceneError(ValueError):
     """A scene that cannot be used; the message names file, dotted key, value and allowed range."""
 
 
+class ChainSceneGiven(SceneError):
+    """A chain scene ([[stage]] tables) given to the one-stage reader: derivation.chain.scene reads it."""
+
+
 @dataclass(frozen=True)
 class Param:
     """One model parameter, in SI; free ones are read from a parameter vector at run time."""
@@ -628,8 +632,9 @@ class _Reader:
 
     def scene(self, doc: dict, digest: str) -> Scene:
         if "stage" in doc:
-            self.fail("stage", "a chain of stages ([[stage]] tables, docs/scene-format.md, \"Chains\") is "
-                      "derivation only, not yet simulated: derivation.chain.scene reads it")
+            raise ChainSceneGiven(f"{printable(self.source)}: stage: a chain of stages ([[stage]] tables, "
+                                  "docs/scene-format.md, \"Chains\") is derivation only, not yet simulated: "
+                                  "derivation.chain.scene reads it")
         self.keys(doc, "", TOP_KEYS)
         name = self.text(doc, "name", "", pattern=NAME)
         description = self.text(doc, "description", "", default="")

@@ -63,6 +63,8 @@ def test_one_stage_chain_reproduces_mechanics(regime, direction):
     assert zero(mode.accel.subs(unit) - ref.accel.subs(names))
     normal = ref.normal.subs(M.phi, ref.switching).subs(names)
     assert zero(mode.normal[0].subs(unit) - normal)
+    flank_sign = M.FLANK_SIGN[mode.flanks[0]]
+    assert zero(mode.switching[0].subs(unit) - flank_sign * (M.m1 * M.m2 * ref.switching).subs(names))
 
 
 def test_one_stage_with_levers_is_the_wedge_in_reduced_units():
@@ -108,14 +110,16 @@ def random_chain(n_st: int) -> ChainValues:
 
 @pytest.mark.parametrize("n_st", (1, 2, 3))
 def test_every_mode_agrees_with_newton_written_by_hand(n_st):
-    for _ in range(4):
-        values = random_chain(n_st)
-        for direction, regimes in dyn.reachable(values.flanks):
-            mode = dyn.sliding(direction, regimes)
-            derived = sp.lambdify(_symbols(n_st), (mode.accel, *mode.normal))(*values.args())
+    chains = [random_chain(n_st) for _ in range(4)]
+    for direction, regimes in dyn.reachable((BOTH,) * n_st):
+        mode = dyn.sliding(direction, regimes)
+        numbers = sp.lambdify(_symbols(n_st), (mode.accel, mode.normal, mode.switching, mode.denominator))
+        for values in chains:
             accel, normal = newton_by_hand(values, direction, mode.flanks)
-            assert derived[0] == pytest.approx(accel, rel=1e-9, abs=1e-9)
-            assert list(derived[1:]) == pytest.approx(list(normal), rel=1e-9, abs=1e-7)
+            derived_accel, derived_normal, phi, D = numbers(*values.args())
+            assert derived_accel == pytest.approx(accel, rel=1e-9, abs=1e-9)
+            assert list(derived_normal) == pytest.approx(list(normal), rel=1e-9, abs=1e-7)
+            assert [p / D >= 0 for p in phi] == [n >= 0 for n in normal]
 
 
 def _symbols(n_st):

@@ -130,3 +130,29 @@ def test_at_most_four_stages():
     body = '[[body]]\nmass = "1 kg"\n'
     with pytest.raises(SceneError, match=r"stage: expected 1 to 4 \[\[stage\]\] tables \(5 given\)"):
         parse_chain('name = "long"\n' + stage * 5 + body * 6, "v.toml")
+
+
+def test_cli_derive_of_a_chain_writes_its_document(tmp_path, capsys):
+    from tswm_runtime.cli import main
+
+    path = tmp_path / "valve.toml"
+    path.write_text(VALVE.replace('name = "valve-chain"', 'name = "valve-chain"\ndescription = "\\\\input{x} $y$ 50%"'))
+    assert main(["derive", str(path), "--markdown", str(tmp_path / "v.md"), "--latex", str(tmp_path / "v.tex")]) == 0
+    out = capsys.readouterr().out
+    assert "2 stages, derivation only (not yet simulated)" in out
+    assert "stage 2: power_screw, gamma 4.04611 deg, rho' 8.82559 deg, self-locking" in out
+    assert "8 sliding modes" in out and "unique: forward: tractive (a), tractive (a)" in out
+    md, tex = (tmp_path / "v.md").read_text(), (tmp_path / "v.tex").read_text()
+    for text in (md, tex):
+        assert "Resting chain" in text and "statically undetermined" in text and "agrees exactly" in text
+    assert "\\textbackslash{}input\\{x\\} \\$y\\$ 50\\%" in tex and "\\input{x}" not in tex
+    assert "\\Psi_{1}" in md
+
+
+def test_cli_derive_of_a_bad_chain_names_the_key(tmp_path, capsys):
+    from tswm_runtime.cli import main
+
+    path = tmp_path / "bad.toml"
+    path.write_text(VALVE.replace("mu = 0.05", "mu = -1"))
+    assert main(["derive", str(path)]) == 2
+    assert "stage[1].mu = -1: must be in [0, 10)" in capsys.readouterr().err

@@ -92,6 +92,7 @@ class SlidingMode:
     accel: sp.Expr                      # reduced EOM: a_0 = numerator / D
     denominator: sp.Expr                # D: the reduced inertia on q_0, times a positive factor
     normal: tuple[sp.Expr, ...]         # N_i, each stage's normal contact force: must be >= 0
+    switching: tuple[sp.Expr, ...]      # phi_i with N_i = phi_i cos(rho_i) / (D cos(gamma_i + f s rho_i))
     on_input: tuple[sp.Expr, ...]       # generalized force of stage i on body i-1 (lever_in R1)
     on_output: tuple[sp.Expr, ...]      # generalized force of stage i on body i (lever_out R2)
     friction_power: tuple[sp.Expr, ...]  # power stage i absorbs, -(R1 v1 + R2 v2), from the forces
@@ -116,7 +117,7 @@ def sliding(direction: int, regimes: tuple[str, ...]) -> SlidingMode:
     accel_in_psi = sp.factor(solved[a0])
     denominator = sp.fraction(sp.together(accel_in_psi))[1].subs(at_psi)
     c = speed_factors(sym)
-    normal, on_in, on_out, power, coulomb = [], [], [], [], []
+    normal, switching, on_in, on_out, power, coulomb = [], [], [], [], [], []
     for i, m in enumerate(modes):
         ren = _stage(sym, i)
         n_i = sp.together(solved[W[i]].subs(at_psi) / sp.diff(m.R2, mech.N).subs(ren))   # R2 is N times a factor
@@ -124,12 +125,14 @@ def sliding(direction: int, regimes: tuple[str, ...]) -> SlidingMode:
         v1 = sym.lever_in[i] * c[i] * v0
         v2 = mech.kinematics().ratio.subs(ren) * v1
         normal.append(n_i)
+        jam = sp.expand_trig(m.jam_factor.subs(ren))      # > 0 unless the stage jams
+        switching.append(sp.cancel(sp.expand_trig(n_i * denominator * jam / sp.cos(sym.rho[i]))))
         on_in.append(sym.lever_in[i] * r1)
         on_out.append(sym.lever_out[i] * r2)
         power.append(-(r1 * v1 + r2 * v2))
         coulomb.append(m.friction_power_coulomb.subs(ren).subs({mech.N: n_i, mech.v1: v1}))
     return SlidingMode(direction, regimes, flanks, psi, accel_in_psi, sp.together(accel_in_psi.subs(at_psi)),
-                       denominator, tuple(normal), tuple(on_in), tuple(on_out), tuple(power), tuple(coulomb))
+                       denominator, tuple(normal), tuple(switching), tuple(on_in), tuple(on_out), tuple(power), tuple(coulomb))
 
 
 def reachable(flanks: tuple[tuple[str, ...], ...], directions: tuple[int, ...] = (1, -1)) -> list[tuple[int, tuple]]:
