@@ -458,18 +458,47 @@ def _consistent(mode, guards, t, y, p, tables, g):
 
 
 @njit(cache=True, error_model="numpy")
-def _latch_pieces(guards, t, y, p, tables, g):
-    """Set every piecewise law's latched piece in p: the number of its breakpoint guards
-    that are >= 0 at (t, y). A located event lies strictly past its breakpoint, so the
-    piece is the one the state has entered (the right limit)."""
-    guard_kind, guard_latch = tables.guard_kind, tables.guard_latch
-    for k in range(guard_kind.size):
-        if guard_kind[k] == G_LAW:
-            p[guard_latch[k]] = 0.0
+def _inside(k, piece, guards, t, y, p, tables, g):
+    """Whether (t, y) lies in ``piece`` of the law whose event is guard k (its guard is >= 0
+    there); leaves that piece latched in p."""
+    p[tables.guard_latch[k]] = piece
     guards(0, t, y, p, g)
-    for k in range(guard_kind.size):
-        if guard_kind[k] == G_LAW and g[k] >= 0.0:
-            p[guard_latch[k]] += 1.0
+    return g[k] >= 0.0
+
+
+@njit(cache=True, error_model="numpy")
+def _locate_piece(k, guards, t, y, p, tables, g):
+    """Latch in p the piece of guard k's law that (t, y) lies in, searched outward from the
+    piece in force: an event passes one breakpoint, so this costs a few guard calls however
+    many pieces the law has. On a breakpoint the later piece is taken (the right limit; a
+    located event lies strictly past its breakpoint anyway). Returns the breakpoint passed,
+    counted from 1 (the higher of the two pieces' numbers), 0 if the piece is unchanged."""
+    last = tables.guard_pieces[k] - 1
+    old = int(p[tables.guard_latch[k]])
+    found = -1
+    for d in range(last + 1):
+        if old + d <= last and _inside(k, old + d, guards, t, y, p, tables, g):
+            found = old + d
+            break
+        if 0 < d <= old and _inside(k, old - d, guards, t, y, p, tables, g):
+            found = old - d
+            break
+    if found < 0:  # in no piece (a state that is not finite): keep the piece in force
+        p[tables.guard_latch[k]] = old
+        return 0
+    while found < last and _inside(k, found + 1, guards, t, y, p, tables, g):
+        found += 1
+    p[tables.guard_latch[k]] = found
+    return max(old, found) if found != old else 0
+
+
+@njit(cache=True, error_model="numpy")
+def _latch_pieces(guards, t, y, p, tables, g):
+    """Set every piecewise law's latched piece in p at the start: the piece (t, y) lies in."""
+    for k in range(tables.guard_kind.size):
+        if tables.guard_kind[k] == G_LAW:
+            p[tables.guard_latch[k]] = 0.0
+            _locate_piece(k, guards, t, y, p, tables, g)
 
 
 @njit(cache=True, error_model="numpy")
@@ -496,12 +525,12 @@ def _observe_max(observe, mode, t, y, p, mon, obs):
 
 
 @njit(cache=True, error_model="numpy")
-def _log(log, n_ev, t, k, mode_from, mode_to, y, quad, jump):
-    """Append an event (time, guard, from, to, state, impact jump) to the EventLog."""
+def _log(log, n_ev, t, k, mode_from, mode_to, breakpoint, y, quad, jump):
+    """Append an event (time, guard, from, to, breakpoint passed, state, impact jump) to the EventLog."""
     n = y.size
     log.jump[n_ev, :] = jump
     log.t[n_ev] = t
-    log.index[n_ev, 0], log.index[n_ev, 1], log.index[n_ev, 2] = k, mode_from, mode_to
+    log.index[n_ev, 0], log.index[n_ev, 1], log.index[n_ev, 2], log.index[n_ev, 3] = k, mode_from, mode_to, breakpoint
     log.state[n_ev, :n] = y
     log.state[n_ev, n:] = quad
     return n_ev + 1
@@ -696,11 +725,13 @@ def _segment(fns, tables, settings, mode, p, state, record, i, scratch, singular
 
 @njit(cache=True, error_model="numpy")
 def _latch(kind, k, t, y, p, tables, guards, g):
-    """The laws' latches in p after guard k (of ``kind``) fired at (t, y)."""
+    """The laws' latches in p after guard k (of ``kind``) fired at (t, y); returns the breakpoint
+    of a piecewise law passed there (``_locate_piece``), else 0."""
     if kind == G_TRIP:
         p[tables.guard_latch[k]] = t
     elif kind == G_LAW:
-        _latch_pieces(guards, t, y, p, tables, g)
+        return _locate_piece(k, guards, t, y, p, tables, g)
+    return 0
 
 
 @njit(cache=True, error_model="numpy")
@@ -831,17 +862,17 @@ def integrate_hybrid(fns, tables, start, settings, record):
         if kind == G_D or kind == G_JAM:  # D or the jam factor of this mode reached 0
             if mon.shape[0] > 0 and mon[0, 0] != np.inf:  # (the approach marked them already)
                 _unbounded(observe, guards, mode, t, y, p, k_d, mon, w.obs, g)
-            n_ev = _log(log, n_ev, t, k, mode, -1, y, q, jump)
+            n_ev = _log(log, n_ev, t, k, mode, -1, 0, y, q, jump)
             status = INCONSISTENT
             break
-        _latch(kind, k, t, y, p, tables, guards, g)
+        breakpoint = _latch(kind, k, t, y, p, tables, guards, g)
         new, status, need = _jump(fns, tables, settings.tol, mode, kind, k, t, y, p, w)
         if w.frame[0] < np.inf:  # a first step inside the bounce, so that the gap's guard is armed again
             h = 0.25 * w.frame[0] if h <= 0.0 else min(h, 0.25 * w.frame[0])
         new, status, need = _checked(fns, tables, settings.tol, mode, new, status, need, t, y, p, w)
         if status == FINISHED and new == mode and kind == G_PHI:
             continue  # phi crossed within its noise (the probe keeps the flank): no event
-        n_ev = _log(log, n_ev, t, k, mode, new if status == FINISHED else -1, y, q, jump)
+        n_ev = _log(log, n_ev, t, k, mode, new if status == FINISHED else -1, breakpoint, y, q, jump)
         if status != FINISHED:
             mode = new if status == INCONSISTENT else mode
             break
