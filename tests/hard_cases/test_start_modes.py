@@ -140,7 +140,9 @@ GRID = list(itertools.product(STARTS, FRICTION, MASSES, DRIVES, LOADS))
 @pytest.fixture(scope="module")
 def models(scene_module):
     return {"backlash": scene_module(SCENE.format(name="start-backlash", clearance=BACKLASH)),
-            "rigid": scene_module(SCENE.format(name="start-rigid", clearance=""))}
+            "rigid": scene_module(SCENE.format(name="start-rigid", clearance="")),
+            "one-sided": scene_module(SCENE.format(name="start-one-sided", clearance="").replace(
+                'flanks = ["a", "b"]', 'flanks = ["a"]'))}
 
 
 @pytest.mark.parametrize("start, friction, masses, F1, F2", GRID)
@@ -165,6 +167,25 @@ def test_start_at_rest_by_the_contact_conditions(models, start, friction, masses
     a1, S2 = found[0][1:3]
     assert r.a1[0] == pytest.approx(a1, rel=1e-12, abs=1e-12)
     assert r.S2[0] == pytest.approx(S2, rel=1e-12, abs=1e-9)
+
+
+@pytest.mark.parametrize("friction, masses, F1, F2", list(itertools.product(FRICTION, MASSES, DRIVES, LOADS)))
+def test_one_sided_start_at_rest_by_the_contact_conditions(models, friction, masses, F1, F2):
+    """Flank a only, no clearance: as with a clearance on flank a, except that parting is a lift-off
+    the scene cannot model (undeclared-mode, naming the other flank)."""
+    (gamma, rho), (m1, m2) = friction, masses
+    found = hand_start(gamma * DEG, rho * DEG, m1, m2, F1, F2, [1])
+    status, mode = expected(found)
+    params = {"gamma": gamma * DEG, "friction_rho": rho * DEG, "m1": m1, "m2": m2, "F1": F1, "F2": F2}
+    r = simulate(models["one-sided"], params, t_end=1e-6, points=3)
+    if mode == "free":
+        assert r.status == "undeclared-mode" and "add the other flank" in r.message, (found, r.message)
+        return
+    assert r.status == status, (found, r.message)
+    if status == "finished":
+        assert r.phases[0].mode == mode, (found, r.phases)
+        assert r.a1[0] == pytest.approx(found[0][1], rel=1e-12, abs=1e-12)
+        assert r.S2[0] == pytest.approx(found[0][2], rel=1e-12, abs=1e-9)
 
 
 def test_the_grid_covers_every_kind_of_start():
