@@ -61,3 +61,20 @@ def test_equal_accuracy_is_the_loosest_tolerance_matching_all_three_errors_and_x
     assert [(lv["rtol"], why) for lv, why in chosen] == [(1e-10, "S1 max, v1(T), x1(T)"), (1e-6, "x1(T) only")]
     never = sweeps._levels(levels, {**tswm, "err_S1": 1e-13})
     assert [(lv["rtol"], why) for lv, why in never] == [(1e-11, "none (the tightest tried)"), (1e-6, "x1(T) only")]
+
+
+def test_the_report_shows_the_processes_and_the_diffrax_timings_beside_their_targets():
+    process = {"command": "tswm sweep paper-runup ...", "cases": 10_000, "wall_s_median": 2.0, "wall_s_min": 1.9,
+               "wall_s_max": 2.2, "cpu_s_median": 3.5, "load_1min": "1.0", "cases_per_s": 5000.0,
+               "verdict": "missed: 5000 cases/s, 2x below the target 10000"}
+    timing = {"diffrax_rtol": 1e-7, "matches_tswm_on": "x1(T) only", "diffrax_s_median": 4.0,
+              "diffrax_cpu_s_median": 4.0, "diffrax_cases_per_s": 2500.0, "tswm_over_diffrax": 2.0,
+              "verdict": "missed: 2 x, 1.5x below the target 3"}
+    errors = {"err_S1": 1e-12, "err_v1": 1e-12, "err_x1": 1e-6}
+    dx = {"scene": "paper-runup", "tswm_rtol": 1e-6, "tswm_errors": errors, "diffrax": "in python",
+          "versions": {"jax": "0", "diffrax": "0"}, "diffrax_levels": [{"rtol": 1e-7, **errors}], "cases": 10_000,
+          "tswm_s_median": 1.0, "tswm_cpu_s_median": 2.0, "tswm_cases_per_s": 10_000.0, "tswm_threads": 2,
+          "timings": [timing], "load_1min": [1.0, 1.5]}
+    md = "\n".join(bench._end_to_end_markdown({"processes": [process], "diffrax": dx}))
+    assert process["verdict"] in md and timing["verdict"] in md and "10000 cases >= 10000 cases/s" in md
+    assert "x1(T) only" in md and "jax 0" in md

@@ -103,19 +103,26 @@ def processes(sizes=tuple(PROCESS_TARGETS), repeats: int = 3, log=print) -> list
     return rows
 
 
-def tswm_sweep(m2, F2, rtol: float = TSWM_RTOL) -> tuple[dict, float]:
-    """tswm's ``sweep()`` over the cases: ({"S1", "v_end", "x_end", "ok"} lists, seconds of the call)."""
+def tswm_sweep(m2, F2, rtol: float = TSWM_RTOL) -> tuple[dict, float, float]:
+    """tswm's ``sweep()`` over the cases: ({"S1", "v_end", "x_end", "ok"} lists, wall and CPU
+    seconds of the call, all threads)."""
     from tswm_runtime.model.contract import load_module
     from tswm_runtime.sweeps.sweep import sweep
 
     module = load_module(SCENE)
     P = np.tile(np.array(module.PARAM_DEFAULTS, np.float64), (len(m2), 1))
     P[:, module.PARAM_NAMES.index("m2")], P[:, module.PARAM_NAMES.index("F2_after")] = m2, F2
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     table = sweep(SCENE, P, {"rtol": rtol, "atol": rtol * ATOL_PER_RTOL}).table
-    seconds = time.perf_counter() - t0
+    seconds, cpu = time.perf_counter() - t0, time.process_time() - c0
     return {"S1": table["S1m"].tolist(), "v_end": table["v1"].tolist(), "x_end": table["x1"].tolist(),
-            "ok": (table["status"] == "finished").tolist()}, seconds
+            "ok": (table["status"] == "finished").tolist()}, seconds, cpu
+
+
+def _threads() -> int:
+    import numba
+
+    return numba.get_num_threads()
 
 
 def diffrax_runs(jobs: list[dict]) -> tuple[dict | None, str]:
@@ -193,30 +200,34 @@ def versus_diffrax(cases: int = 10_000, repeats: int = 5, log=print) -> dict:
     m2, F2 = grid(cases)
     jobs = [{"m2": m2.tolist(), "F2": F2.tolist(), "rtol": lv["rtol"], "atol": lv["rtol"] * ATOL_PER_RTOL}
             for lv, _ in chosen]
-    tswm_s, diffrax_s, loads = [], [[] for _ in jobs], []
+    tswm_s, diffrax_runs_of, loads = [], [[] for _ in jobs], []
     tswm_sweep(m2[:1000], F2[:1000])   # warm-up
     if diffrax_peer.available():
         diffrax_peer.run([{**job, "repeats": 0} for job in jobs])
         for _ in range(repeats):
             loads.append(os.getloadavg()[0])
-            tswm_s.append(tswm_sweep(m2, F2)[1])
+            tswm_s.append(tswm_sweep(m2, F2)[1:])
             for k, job in enumerate(jobs):
-                diffrax_s[k] += diffrax_peer.run([{**job, "repeats": 1}])[0]["seconds"]
+                diffrax_runs_of[k].append(diffrax_peer.run([{**job, "repeats": 1}])[0])
     else:
-        tswm_s = [tswm_sweep(m2, F2)[1] for _ in range(repeats // 2 + 1)]
+        tswm_s = [tswm_sweep(m2, F2)[1:] for _ in range(repeats // 2 + 1)]
         loads.append(os.getloadavg()[0])
-        diffrax_s = [run["seconds"] for run in diffrax_runs([{**job, "repeats": repeats} for job in jobs])[0]["runs"]]
+        diffrax_runs_of = [[run] for run in diffrax_runs([{**job, "repeats": repeats} for job in jobs])[0]["runs"]]
         loads.append(os.getloadavg()[0])
-        tswm_s += [tswm_sweep(m2, F2)[1] for _ in range(repeats - len(tswm_s))]
-    rate = len(m2) / statistics.median(tswm_s)
+        tswm_s += [tswm_sweep(m2, F2)[1:] for _ in range(repeats - len(tswm_s))]
+    rate = len(m2) / statistics.median(s for s, _ in tswm_s)
     timings = []
-    for (lv, matches), seconds in zip(chosen, diffrax_s):
+    for (lv, matches), runs in zip(chosen, diffrax_runs_of):
+        seconds = [s for run in runs for s in run["seconds"]]
         rate_d = len(m2) / statistics.median(seconds)
         timings.append({"diffrax_rtol": lv["rtol"], "matches_tswm_on": matches, "diffrax_s_median": statistics.median(seconds),
+                        "diffrax_cpu_s_median": statistics.median(c for run in runs for c in run["cpu_seconds"]),
                         "diffrax_cases_per_s": rate_d, "tswm_over_diffrax": rate / rate_d,
                         "verdict": report.threshold_text(rate / rate_d, DIFFRAX_TARGET, "x")})
         log(f"tswm sweep() {rate:.0f} cases/s, diffrax at rtol {lv['rtol']:g} ({matches}) {rate_d:.0f} cases/s "
             f"({timings[-1]['verdict']})")
     return out | {"versions": accuracy["versions"], "diffrax_levels": levels, "cases": len(m2),
-                  "tswm_s_median": statistics.median(tswm_s), "tswm_cases_per_s": rate, "timings": timings,
+                  "tswm_s_median": statistics.median(s for s, _ in tswm_s),
+                  "tswm_cpu_s_median": statistics.median(c for _, c in tswm_s), "tswm_cases_per_s": rate,
+                  "tswm_threads": _threads(), "timings": timings,
                   "load_1min": loads}
