@@ -2,6 +2,7 @@
 and the choice of equal accuracy, the optional diffrax peer (against the quadrature reference
 where jax is installed; a clear message where it is not). No times asserted."""
 import math
+import os
 
 import numpy as np
 import pytest
@@ -78,3 +79,17 @@ def test_the_report_shows_the_processes_and_the_diffrax_timings_beside_their_tar
     md = "\n".join(bench._end_to_end_markdown({"processes": [process], "diffrax": dx}))
     assert process["verdict"] in md and timing["verdict"] in md and "10000 cases >= 10000 cases/s" in md
     assert "x1(T) only" in md and "jax 0" in md
+
+
+def test_every_timed_sweep_process_starts_from_an_empty_output_directory(monkeypatch):
+    """A process that found the chunks of the run before it would time reading them, not a sweep."""
+    seen = []
+
+    def fake(argv):
+        out = argv[argv.index("-o") + 1]
+        seen.append(sorted(os.listdir(out)))
+        open(os.path.join(out, "chunk-00000-x.parquet"), "w").close()
+        return {"wall_s": 1.0, "cpu_s": 1.0, "load": 0.0}
+    monkeypatch.setattr(sweeps, "_process", fake)
+    rows = sweeps.processes(sizes=(1000,), repeats=2, log=lambda *a: None)
+    assert seen == [[]] * 6 and [r["cases"] for r in rows] == [1, 1000]

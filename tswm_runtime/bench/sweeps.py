@@ -71,6 +71,12 @@ def _process(argv: list[str]) -> dict:
     return {"wall_s": wall, "cpu_s": cpu, "load": load}
 
 
+def _sweep_process(options: list[str]) -> dict:
+    """``tswm sweep`` with ``options`` into a new directory (no chunk to reuse), timed by ``_process``."""
+    with tempfile.TemporaryDirectory() as out:
+        return _process(["sweep", SCENE, *options, "--no-progress", "-o", out])
+
+
 def processes(sizes=tuple(PROCESS_TARGETS), repeats: int = 3, log=print) -> list[dict]:
     """``tswm sweep`` as the user calls it: one warm-up, then ``repeats`` whole processes per size
     (and a one-case sweep for the start-up), interleaved; medians against the targets."""
@@ -79,15 +85,11 @@ def processes(sizes=tuple(PROCESS_TARGETS), repeats: int = 3, log=print) -> list
     runs = {"start-up (1 case)": ["--grid", "m2=200", "--grid", "F2_after=-15000"]}
     runs |= {f"{n} cases": _grid_options(n) for n in sizes}
     times: dict[str, list[dict]] = {name: [] for name in runs}
-    with tempfile.TemporaryDirectory() as tmp:
-        def once(name, options):
-            out = os.path.join(tmp, name.replace(" ", "-"))
-            return _process(["sweep", SCENE, *options, "--no-progress", "-o", out, "--prune"])
+    for options in runs.values():
+        _sweep_process(options)   # numba's cache, the OS's file cache
+    for _ in range(repeats):
         for name, options in runs.items():
-            once(name, options)   # numba's cache, the OS's file cache
-        for _ in range(repeats):
-            for name, options in runs.items():
-                times[name].append(once(name, options))
+            times[name].append(_sweep_process(options))
     rows = []
     for name, runs_of in times.items():
         wall = statistics.median(r["wall_s"] for r in runs_of)
