@@ -261,11 +261,12 @@ def _print(*args):
 
 def main(quick: bool = False, output: str | os.PathLike = "tswm-report/bench", cases: int | None = None,
          case_names=None, peers=None, tols=None, repeats: int | None = None, sweep_n: int | None = None,
-         log=_print, cold: bool | None = None) -> int:
+         log=_print, cold: bool | None = None, end_to_end: bool | None = None) -> int:
     """Run the benchmark and write DIR/work-precision.md, runs.csv, verdicts.csv, bench.json
     and work-precision.png. cases: size of the throughput grid; cold: measure the first run
     with an empty numba cache (``empty_cache``, about 2.5 min on 2 cores; default: not with
-    ``quick``); the other keywords narrow the run (tests)."""
+    ``quick``); end_to_end: ``tswm sweep`` as whole processes and against a vmapped diffrax batch
+    (``sweeps``, a few minutes; default: not with ``quick``); the other keywords narrow the run (tests)."""
     import pandas as pd
 
     from tswm_common.files import write_atomic
@@ -292,6 +293,7 @@ def main(quick: bool = False, output: str | os.PathLike = "tswm-report/bench", c
     flat = flat_cost(rows)
     first_calls = cold_start()
     empty = empty_cache(log) if (not quick if cold is None else cold) else []
+    ends = _end_to_end(log) if (not quick if end_to_end is None else end_to_end) else None
     info = machine(load_before, os.getloadavg())
     write_atomic(out / "runs.csv", pd.DataFrame(rows).to_csv(index=False))
     write_atomic(out / "verdicts.csv", pd.DataFrame(verdicts).to_csv(index=False))
@@ -300,18 +302,60 @@ def main(quick: bool = False, output: str | os.PathLike = "tswm-report/bench", c
              "m1": c.m1, "S1_max": reference(c).S1, "v1_end": reference(c).v_end, "x1_end": reference(c).x_end,
              "events": ", ".join(f"{k} {t:.12g}" for k, t in reference(c).events) or "none"} for c in chosen]
     md = _markdown(info, refs, t_ref, rows, verdicts, thr, flat, first_calls, empty, tols, repeats, sweep_n,
-                   time.perf_counter() - start)
+                   time.perf_counter() - start, ends)
     write_atomic(out / "work-precision.md", md)
     write_atomic(out / "bench.json", json.dumps({"machine": info, "references": refs, "verdicts": verdicts,
                                                  "throughput": thr, "flat_cost": flat, "cold_start": first_calls,
-                                                 "empty_cache": empty},
+                                                 "empty_cache": empty, "sweeps_end_to_end": ends},
                                                 indent=2, default=str))
     log(md[md.index("## Targets"):md.index("## All runs")])
     log(f"wrote {out / 'work-precision.md'}, runs.csv, verdicts.csv, bench.json, work-precision.png")
     return 0
 
 
-def _markdown(info, refs, t_ref, rows, verdicts, thr, flat, cold, empty, tols, repeats, sweep_n, total) -> str:
+def _end_to_end(log) -> dict:
+    """``sweeps``: the whole ``tswm sweep`` processes and the diffrax comparison."""
+    from tswm_runtime.bench import sweeps
+
+    return {"processes": sweeps.processes(log=log), "diffrax": sweeps.versus_diffrax(log=log)}
+
+
+def _end_to_end_markdown(ends) -> list[str]:
+    from tswm_runtime.bench import sweeps
+
+    head = "### Sweeps end to end: `tswm sweep` as whole processes, and against a vmapped diffrax batch"
+    if ends is None:
+        return [head, "", "not measured (--quick; the full bench measures it)", ""]
+    dx = ends["diffrax"]
+    md = [head, "", f"Whole processes (warm numba cache, tables written with -o; targets: "
+          f"{', '.join(f'{n} cases >= {t:g} cases/s' for n, t in sweeps.PROCESS_TARGETS.items())}, start-up "
+          f"<= {sweeps.STARTUP_TARGET_S:g} s); wall from the parent, cpu of the process, the 1-minute load before "
+          "each run:", "",
+          report.md_table(ends["processes"], list(ends["processes"][0]),
+                          {k: "{:.3f}" for k in ("wall_s_median", "wall_s_min", "wall_s_max", "cpu_s_median")}
+                          | {"cases_per_s": "{:.0f}"}), ""]
+    md += [f"tswm `sweep()` against the vmapped diffrax Dopri5 batch (`tswm_runtime/bench/diffrax_peer.py`; "
+           f"target >= {sweeps.DIFFRAX_TARGET:g}x at equal accuracy; diffrax run {dx['diffrax']}). Largest errors "
+           f"on {len(sweeps.ACCURACY_CASES)} cases against the quadrature reference: tswm at rtol "
+           f"{dx['tswm_rtol']:g}: " + ", ".join(f"{k} {v:.2e}" for k, v in dx["tswm_errors"].items()), ""]
+    if "diffrax_levels" not in dx:
+        return md + [f"diffrax not measured: {dx['diffrax']}", ""]
+    md += [report.md_table(dx["diffrax_levels"], ["rtol", "err_S1", "err_v1", "err_x1"],
+                           {k: "{:.2e}" for k in ("err_S1", "err_v1", "err_x1")} | {"rtol": "{:.0e}"}), "",
+           f"{dx['cases']} cases: tswm `sweep()` {dx['tswm_s_median']:.3f} s wall, {dx['tswm_cpu_s_median']:.3f} s CPU "
+           f"on {dx['tswm_threads']} threads ({dx['tswm_cases_per_s']:.0f} cases/s), medians; diffrax (as jax runs "
+           "it: the vmapped loop on one thread; CPU seconds to compare work):", "",
+           report.md_table(dx["timings"], list(dx["timings"][0]),
+                           {"diffrax_rtol": "{:.0e}", "diffrax_s_median": "{:.3f}", "diffrax_cpu_s_median": "{:.3f}",
+                            "diffrax_cases_per_s": "{:.0f}",
+                            "tswm_over_diffrax": "{:.2f}"}), "",
+           "Versions: " + ", ".join(f"{k} {v}" for k, v in dx["versions"].items()) + "; load "
+           + ", ".join(f"{x:.1f}" for x in dx["load_1min"]) + ".", ""]
+    return md
+
+
+def _markdown(info, refs, t_ref, rows, verdicts, thr, flat, cold, empty, tols, repeats, sweep_n, total,
+              ends=None) -> str:
     fmt = {"rtol": "{:.0e}", "atol": "{:.0e}"} | {k: "{:.2e}" for k in ("err_S1", "err_v1", "err_x1", "err_t", "err")} \
         | {k: "{:.3e}" for k in ("t_med", "t_min", "t_max")}
     vfmt = {"error": "{:.0e}", "tswm_s": "{:.3e}", "peer_s": "{:.3e}", "target_allows_s": "{:.3e}",
@@ -355,6 +399,7 @@ def _markdown(info, refs, t_ref, rows, verdicts, thr, flat, cold, empty, tols, r
           "", f"### Sweep throughput at rtol {THROUGHPUT_RTOL:g} (target {report.SWEEP_TARGET:g} cases/s)", "",
           report.md_table([thr], list(thr), {"cases_per_s": "{:.0f}", "s_median": "{:.3f}", "s_min": "{:.3f}",
                                             "s_max": "{:.3f}"}), "",
+          *_end_to_end_markdown(ends),
           f"### Cost on an equilibrium tail: T = 100 s over T = 1 s (target ratio <= {report.FLAT_TARGET:g})", "",
           report.md_table(flat, list(flat[0])) if flat else "not measured (needs both run-up cases at rtol 1e-6)", "",
           "### First call in a fresh process (imports, numba cache, first result)", "",

@@ -11,7 +11,9 @@ def add_parser(sub) -> None:
         "bench", help="work-precision benchmark against scipy and SUNDIALS, and sweep throughput",
         description="Error against an independent quadrature reference versus median wall time per whole "
                     "call for tswm (simulate(), sweep()) and careful-user peers (scipy solve_ivp, CVODE via "
-                    "scikit-sundae) on five cases, configurations interleaved; sweep throughput; the issue-13 "
+                    "scikit-sundae) on five cases, configurations interleaved; sweep throughput; `tswm sweep` as "
+                    "whole processes (10,000 and 100,000 cases, start-up) and against a vmapped diffrax batch "
+                    "(optional: jax, or an interpreter in TSWM_BENCH_JAX_PYTHON) at equal accuracy; the "
                     "targets reported with the measured factor. Writes DIR/work-precision.md, runs.csv, "
                     "verdicts.csv, bench.json and work-precision.png.")
     bench.add_argument("--quick", action="store_true",

@@ -18,6 +18,8 @@ from pathlib import Path
 import numba
 from numba import types
 from numba.core import caching
+from numba.core.cpu import CPUContext
+from numba.core.runtime import rtsys
 from numba.core.registry import CPUDispatcher
 
 from tswm_common.files import write_atomic
@@ -44,6 +46,27 @@ def _tolerate_cache_io_errors(self):
 
 
 caching.Cache._guard_against_spurious_io_errors = _tolerate_cache_io_errors   # load and save both go through it
+
+
+_refreshing_load = caching.Cache.load_overload
+
+
+def _load_without_refresh(self, sig, target_context):
+    """numba's ``Cache.load_overload`` without its ``target_context.refresh()``, on the CPU target.
+
+    The refresh imports and installs every lowering registry numba has (its numpy, random,
+    typed containers, and through ``numba.np.linalg`` scipy.linalg): about as much CPU as
+    importing numba itself, spent by every process that only loads cached machine code. Loading
+    needs only the runtime's symbols (``rtsys.initialize``); a compile still refreshes (numba's
+    compiler does it first), and other targets keep numba's own load."""
+    if not isinstance(target_context, CPUContext):
+        return _refreshing_load(self, sig, target_context)
+    rtsys.initialize(target_context)
+    with self._guard_against_spurious_io_errors():
+        return self._load_overload(sig, target_context)
+
+
+caching.Cache.load_overload = _load_without_refresh
 
 
 def kernel_digest() -> str:

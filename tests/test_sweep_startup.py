@@ -1,0 +1,37 @@
+"""A warm ``tswm sweep`` process loads only what the command needs."""
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).parents[1]
+# What a warm sweep never needs: numba's lowering registries (loaded by its cache's refresh, with
+# scipy.linalg), the plots, code generation, the cluster, the CAS.
+NOT_NEEDED = ("scipy.linalg", "numba.np.linalg", "matplotlib", "jinja2", "dask", "distributed", "sympy", "derivation")
+SWEEP = """
+import json, sys
+{before}
+from tswm_runtime.cli import main
+assert main(['sweep', 'paper-runup', '--grid', 'm2=100:400:3', '--grid', 'F2_after=-20000:5000:4', '--no-progress',
+             '-o', sys.argv[1]]) == 0
+print(json.dumps(sorted(name for name in {not_needed!r} if name in sys.modules)))
+"""
+NUMBA_OWN_LOAD = ("import tswm_runtime.jit.cache_guard as guard\nfrom numba.core import caching\n"
+                  "caching.Cache.load_overload = guard._refreshing_load")
+
+
+def _sweep(tmp: Path, before: str = "") -> tuple[list[str], bytes]:
+    done = subprocess.run([sys.executable, "-c", SWEEP.format(before=before, not_needed=NOT_NEEDED), str(tmp)],
+                          capture_output=True, text=True, cwd=ROOT)
+    assert done.returncode == 0, done.stderr
+    return json.loads(done.stdout.splitlines()[-1]), (tmp / "paper-runup-sweep.csv").read_bytes()
+
+
+def test_a_warm_sweep_imports_no_registry_plot_cluster_or_cas_and_computes_the_same(tmp_path):
+    """The second of two sweep processes (the first fills numba's cache if it is cold) loads its
+    kernels without numba's registries and writes the same table as numba's own cache load."""
+    _sweep(tmp_path / "first")
+    loaded, ours = _sweep(tmp_path / "warm")
+    assert loaded == []
+    _, numbas = _sweep(tmp_path / "numba-load", NUMBA_OWN_LOAD)
+    assert ours == numbas
