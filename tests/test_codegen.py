@@ -168,7 +168,9 @@ def parameters(m, t=0.2, y=(0.0,), t_trip=math.inf):
                                                  ("asymmetric", [[-1.0], [2.0]], ()),
                                                  ("paper_literal", [[1.0], [5.0]], ()),
                                                  ("seating", [[0.5, 3.0], [1.16, 7.0], [1.16, -0.5]], ()),
-                                                 ("seating", [[1.16, 7.0], [1.2, 0.5]], (0.1,))])
+                                                 ("seating", [[1.16, 7.0], [1.2, 0.5]], (0.1,)),
+                                                 # x2 = 8, 25, 58 mm: before, on and past the schedule's ramp (20 to 50 mm)
+                                                 ("valve_travel", [[0.1, 1.0], [0.3, 2.0], [0.7, 0.5]], ())])
 def test_jacobian_matches_finite_differences(name, states, latches):
     m = load_module(name)
     for y in map(np.array, states):
