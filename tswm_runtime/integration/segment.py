@@ -108,7 +108,8 @@ def _step_tolerance(method, rtol):
     its 5th-order solution; less for ROSENBROCK23 at tight rtol: ``control.proportional_tolerance``)."""
     if method == DOPRI5:
         return 1.0
-    return control.proportional_tolerance(rtol, rosenbrock.ERROR_ORDER, rosenbrock.PROPORTIONAL_RTOL)
+    return control.proportional_tolerance(rtol, rosenbrock.ERROR_ORDER, rosenbrock.PROPORTIONAL_RTOL,
+                                          rosenbrock.STEP_RTOL_FLOOR)
 
 
 @njit(cache=True, error_model="numpy")
