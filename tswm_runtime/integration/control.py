@@ -88,6 +88,20 @@ def select_initial_step(rhs, mode, t0, y0, p, f0, t_end, hmax, error_order, rtol
     return min(H0_GROWTH * h0, h1, interval, hmax)
 
 
+@njit(cache=True, error_model="numpy")
+def proportional_tolerance(rtol, order, corner, floor):
+    """The fraction of the tolerance a step's error is held to, so that the global error of a
+    method of this order that is advanced without local extrapolation stays about proportional
+    to rtol (tolerance proportionality): (rtol / corner)^(1/order) below ``corner``, else 1;
+    never below floor / rtol (a step's relative error is not held below ``floor``).
+
+    Held to tau per step, such a method takes ~tau^(-1/(order+1)) steps and its global error
+    grows like tau^(order/(order+1)): relative to rtol, like rtol^(-1/(order+1)). With tau =
+    rtol (rtol / corner)^(1/order) it is about what it is at rtol = corner, at every rtol.
+    """
+    return min(1.0, max((rtol / corner) ** (1.0 / order), floor / rtol))
+
+
 OBSERVED_SAFETY = 0.8  # after a repeated rejection, aim at err = 0.8 ...
 OBSERVED_MIN_FACTOR = 0.05  # ... cutting the step by at most 20x
 PREDICTIVE_SAFETY = 0.9

@@ -12,6 +12,13 @@ Dense output: the 4th-order continuous extension of Hairer, Norsett & Wanner,
 Shampine, "Some practical Runge-Kutta formulas", Math. Comp. 46 (1986) 135-150,
 optimum c6): y(t + theta h) = y + h * sum_j Q[:, j] theta^(j+1) with Q = K^T P.
 
+The dense output is 4th order, and its error can be much larger than the step's estimate
+(which measures the 4th-order embedded solution and can nearly vanish for the trajectory at
+hand: 22 rtol on the paper gear near v1 = 7 m/s at rtol 1e-8, where the step ends were within
+1 rtol). ``dense_error`` therefore also estimates the interpolant's error from its defect
+p' - f(t, p) at two interior points, and the step is judged by the larger of the two error
+norms (where the step's is the larger, the controller is scipy's RK45's).
+
 Step-size control, shared with the Rosenbrock method, is in ``control``; the
 constants below are this method's (scipy's ``_ivp/rk.py``).
 """
@@ -89,3 +96,32 @@ def dense_coeffs(K, Q):
             for s in range(N_STAGES + 1):
                 acc += K[s, i] * P[s, j]
             Q[i, j] = acc
+
+
+DEFECT_THETAS = (1.0 / 3.0, 2.0 / 3.0)  # where the dense output's defect is sampled
+# The interpolant's error is about DEFECT_WEIGHT h max |defect| (e' = h (defect + J e), e(0) = 0):
+# 1.4 to 1.9 times the true largest error with 0.5 on the harmonic oscillator and the paper gear
+# (steps of 1e-3 to 4e-3 s, where the step's estimate was up to 9 times too small for it).
+DEFECT_WEIGHT = 0.35
+
+
+@njit(cache=True, error_model="numpy")
+def dense_error(rhs, mode, t, y, p, h, K, Q, est):
+    """est = the estimated error of the dense output Q, per component.
+
+    At theta in DEFECT_THETAS: defect = p'(theta) - f(t + theta h, p(theta)) of the interpolant
+    p (it vanishes at both ends); est = DEFECT_WEIGHT h max |defect|. After ``dense_coeffs``:
+    uses K[1] and K[2] as scratch; 2 rhs calls.
+    """
+    y_theta, f_theta = K[1], K[2]
+    est[:] = 0.0
+    for theta in DEFECT_THETAS:
+        for i in range(y.size):
+            poly = Q[i, 3]
+            for j in range(2, -1, -1):
+                poly = poly * theta + Q[i, j]
+            y_theta[i] = y[i] + h * theta * poly
+        rhs(mode, t + theta * h, y_theta, p, f_theta)
+        for i in range(y.size):
+            slope = Q[i, 0] + theta * (2.0 * Q[i, 1] + theta * (3.0 * Q[i, 2] + theta * 4.0 * Q[i, 3]))
+            est[i] = max(est[i], DEFECT_WEIGHT * h * abs(slope - f_theta[i]))

@@ -103,9 +103,18 @@ def _error_order(method):
 
 
 @njit(cache=True, error_model="numpy")
-def _judged(err, y, y_new, tol, order, safety, lo, hi):
-    """(scaled error norm of err, step factor): inf and the smallest factor if anything is not finite."""
-    e = control.error_norm(err, y, y_new, tol.atol, tol.rtol)
+def _step_tolerance(method, rtol):
+    """The fraction of the tolerance a step's error is held to (1 for DOPRI5, which advances with
+    its 5th-order solution; less for ROSENBROCK23 at tight rtol: ``control.proportional_tolerance``)."""
+    if method == DOPRI5:
+        return 1.0
+    return control.proportional_tolerance(rtol, rosenbrock.ERROR_ORDER, rosenbrock.PROPORTIONAL_RTOL,
+                                          rosenbrock.STEP_RTOL_FLOOR)
+
+
+@njit(cache=True, error_model="numpy")
+def _judged(e, y_new, order, safety, lo, hi):
+    """(scaled error norm e, step factor): inf and the smallest factor if anything is not finite."""
     if not (np.isfinite(e) and _all_finite(y_new)):
         e = np.inf
     return e, control.step_factor(e, order, safety, lo, hi)
@@ -126,7 +135,14 @@ def dopri5_attempt(rhs, mode, t, y, p, h, f0, work, y_new, f_new, err, tol, coun
     work.K[dopri5.N_STAGES, :] = f_new
     dopri5.error_estimate(h, work.K, err)
     dopri5.dense_coeffs(work.K, work.Q)
-    return _judged(err, y, y_new, tol, dopri5.ERROR_ORDER, dopri5.SAFETY, dopri5.MIN_FACTOR, dopri5.MAX_FACTOR)
+    e = control.error_norm(err, y, y_new, tol.atol, tol.rtol)
+    dense = work.K[3]  # the dense output's error (the stages are spent)
+    dopri5.dense_error(rhs, mode, t, y, p, h, work.K, work.Q, dense)
+    counters[N_RHS] += 2
+    e_dense = control.error_norm(dense, y, y_new, tol.atol, tol.rtol)
+    if e_dense > e or not np.isfinite(e_dense):
+        e = e_dense
+    return _judged(e, y_new, dopri5.ERROR_ORDER, dopri5.SAFETY, dopri5.MIN_FACTOR, dopri5.MAX_FACTOR)
 
 
 @njit(cache=True, error_model="numpy", no_cfunc_wrapper=False)  # a first-class function value
@@ -139,8 +155,9 @@ def rosenbrock23_attempt(rhs, mode, t, y, p, h, f0, work, y_new, f_new, err, tol
     rhs(mode, t + h, y_new, p, f_new)
     counters[N_RHS] += 1
     rosenbrock.error_estimate(h, f0, f_new, work.dfdt, work.LU, work.piv, work.K, err)
+    err /= _step_tolerance(ROSENBROCK23, tol.rtol)
     rosenbrock.dense_coeffs(work.K, work.Q)
-    return _judged(err, y, y_new, tol, rosenbrock.ERROR_ORDER, rosenbrock.SAFETY, rosenbrock.MIN_FACTOR,
+    return _judged(control.error_norm(err, y, y_new, tol.atol, tol.rtol), y_new, rosenbrock.ERROR_ORDER, rosenbrock.SAFETY, rosenbrock.MIN_FACTOR,
                    rosenbrock.MAX_FACTOR)
 
 
@@ -417,6 +434,7 @@ def _start(fns, settings, seg, state, record, s):
         tol = settings.tol
         h = control.select_initial_step(fns.rhs, seg.mode, t, y, seg.p, s.f_a, settings.t_end, tol.hmax,
                                         _error_order(settings.method), tol.rtol, tol.atol, s.y_b, s.f_b)
+        h *= _step_tolerance(settings.method, tol.rtol) ** (1.0 / (_error_order(settings.method) + 1))
         counters[N_RHS] += 1
     events.guard_rates(fns.guards, seg.mode, t, y, s.f_a, seg.p, s.G[0], h, s.y_tmp, s.g_tmp, s.rate_a)
     return _STEPPING, h
