@@ -161,3 +161,14 @@ def test_a_run_beyond_the_step_logs_limit_writes_its_rows_as_it_goes(monkeypatch
         np.testing.assert_array_equal(getattr(r, name), getattr(full, name))
     with pytest.raises(ValueError, match="kept for sol"):
         r.sol(0.5)
+
+
+def test_a_result_pickles_with_its_rows_and_sol():
+    import pickle
+
+    r = simulate("backlash")
+    back = pickle.loads(pickle.dumps(r))
+    for name in ("t", "x1", "v1", "gap", "S1", "mode", "event_a1"):
+        np.testing.assert_array_equal(getattr(back, name), getattr(r, name))
+    np.testing.assert_array_equal(back.sol([0.1, 0.2], side="right"), r.sol([0.1, 0.2], side="right"))
+    assert back.to_dict() == r.to_dict()

@@ -10,6 +10,8 @@ MAX_LOGGED_STEPS steps keeps only its last one and writes its rows at the output
 """
 from __future__ import annotations
 
+import importlib
+import sys
 from types import ModuleType
 
 import numpy as np
@@ -69,6 +71,15 @@ class Rows:
         y = (self.written.y[self.written.mode >= 0] if self.written is not None
              else self.steps.y_hi[:min(int(self.steps.count[0]), self.steps.f.shape[0])])
         return np.abs(y).max(axis=0, keepdims=True) if y.shape[0] else y
+
+    def __getstate__(self) -> dict:
+        """For pickling (a Result that travels): the rows evaluated, the module by its import name."""
+        self.values()
+        return {**self.__dict__, "module": self.module.__name__}
+
+    def __setstate__(self, state: dict) -> None:
+        state["module"] = sys.modules.get(state["module"]) or importlib.import_module(state["module"])
+        self.__dict__.update(state)
 
     def values(self) -> dict:
         """t, the states (and x1), a1, S1, S2, F1, F2, x2, v2, mode and the parameter rows ("p") by
