@@ -32,6 +32,7 @@ from numba import prange, types
 from tswm_runtime.hybrid import entry
 from tswm_runtime.hybrid.machine import HYBRID_SIG
 from tswm_runtime.integration import segment
+from tswm_runtime.integration.steplog import no_steps
 from tswm_runtime.jit import cache_guard
 from tswm_runtime.jit.addresses import function_at
 from tswm_runtime.jit.cache_guard import njit
@@ -62,11 +63,11 @@ BATCH_SIG = types.none(
 @njit(cache=True, error_model="numpy")
 def _case_record(t_end, width, n_params, max_events, n_obs):
     """A case's Record: one output point (the state at t_end), an event log of max_events, the
-    maxima of n_obs observables, the counters."""
+    maxima of n_obs observables, the counters, no step log."""
     out = Outputs(np.full(1, t_end), np.full((1, width), np.nan), np.empty(1, np.int64), np.empty((1, n_params)))
     log = EventLog(np.empty(max_events), np.empty((max_events, INDEX_WIDTH), np.int64), np.empty((max_events, width)),
                    np.zeros((max_events, JUMP_WIDTH)))
-    return Record(out, log, np.zeros((n_obs, 3)), np.zeros(segment.N_COUNTERS, np.int64))
+    return Record(out, log, np.zeros((n_obs, 3)), np.zeros(segment.N_COUNTERS, np.int64), no_steps(width, n_params))
 
 
 @njit(cache=True, error_model="numpy")

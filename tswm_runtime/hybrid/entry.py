@@ -19,7 +19,7 @@ from tswm_runtime.jit.addresses import function_at, guards_at, jac_at, rhs_at
 from tswm_runtime.jit.cache_guard import njit
 from tswm_runtime.jit.signatures import GUARDS_SIG, JAC_SIG, RHS_SIG, address, jit_address
 from tswm_runtime.jit.structures import (INDEX_WIDTH, JUMP_WIDTH, EventLog, Functions, Outputs, Record, Settings,
-                                         Start, Tolerances)
+                                         Start, StepLog, Tolerances)
 
 _machine_at = function_at(types.FunctionType(HYBRID_SIG), raises=True)
 _attempt_at = function_at(segment.AttemptFunction)
@@ -72,13 +72,22 @@ def _call(kernel, args, counters):
     return kernel(*args)
 
 
+def step_log(steps: int, segments: int, width: int, n_params: int) -> StepLog:
+    """An empty StepLog (``integration.steplog``) for ``steps`` steps and ``segments`` segments of a
+    run with ``width`` states and integrals and ``n_params`` parameters (latches included)."""
+    return StepLog(np.empty((steps, 4)), np.empty((steps, 2), np.int64), np.empty((steps, width)),
+                   np.empty((steps, width)), np.empty((steps, width + 1, 4)), np.empty(segments, np.int64),
+                   np.empty((segments, n_params)), np.zeros(2, np.int64))
+
+
 def integrate(method, model, p, tables, y0, t_end, *, rtol, atol, t_out, max_events, quad=None, t0=0.0,
-              mode0=-1, hmin=0.0, hmax=np.inf, max_steps=100_000, call=_call):
+              mode0=-1, hmin=0.0, hmax=np.inf, max_steps=100_000, steps=(0, 0), call=_call):
     """integrate_hybrid with keyword arguments: builds the structures and work arrays from
     plain values and returns (status, t_stop, n_events, last mode, need, first mode,
-    Outputs, EventLog, mon, counters). model: the generated module; p is written (latches).
-    atol: a number or one per state. call(kernel, args, counters) runs the kernel (e.g. in a
-    thread, watching counters)."""
+    Outputs, EventLog, mon, counters, StepLog). model: the generated module; p is written
+    (latches). atol: a number or one per state. steps: the StepLog's capacity (steps, segments);
+    its count says how many there were (more than the capacity: the log is incomplete).
+    call(kernel, args, counters) runs the kernel (e.g. in a thread, watching counters)."""
     y0 = np.ascontiguousarray(y0, dtype=np.float64)
     quad = np.empty(0) if quad is None else np.ascontiguousarray(quad, dtype=np.float64)
     width = y0.size + quad.size
@@ -91,7 +100,8 @@ def integrate(method, model, p, tables, y0, t_end, *, rtol, atol, t_out, max_eve
     atol = (np.full(y0.size, atol, dtype=np.float64) if np.ndim(atol) == 0
             else np.array(np.broadcast_to(np.asarray(atol, np.float64), y0.shape)))
     settings = Settings(method, float(t_end), Tolerances(float(rtol), atol, float(hmin), float(hmax)), int(max_steps))
+    step_record = step_log(*steps, width, p.size)
     args = (functions(method, model), tables, Start(float(t0), y0, quad, int(mode0), p), settings,
-            Record(out, log, mon, counters))
+            Record(out, log, mon, counters, step_record))
     result = call(integrate_at, args, counters)
-    return (*result, out, log, mon, counters)
+    return (*result, out, log, mon, counters, step_record)

@@ -39,6 +39,7 @@ from tswm_runtime.hybrid import impact as collision
 from tswm_runtime.jit import cache_guard
 from tswm_runtime.integration import painleve
 from tswm_runtime.integration import segment
+from tswm_runtime.integration import steplog
 from tswm_runtime.jit.borrow import borrowed
 from tswm_runtime.jit.cache_guard import njit
 from tswm_runtime.jit.structures import (JUMP_WIDTH, MODE_TABLES, RECORD, SETTINGS, START, EventSettings, Segment,
@@ -551,11 +552,18 @@ def _work(n, n_guards, n_quad, n_obs):
 @njit(cache=True, error_model="numpy")
 def _valid(tables, start, settings, record):
     """The sizes agree and the settings make sense (the array accesses below are unchecked)."""
-    n, n_quad, out, log = start.y.size, start.quad.size, record.out, record.log
+    n, n_quad, out, log, steps = start.y.size, start.quad.size, record.out, record.log, record.steps
+    cap = steps.f.shape[0]
     return (n >= 1 and settings.t_end > start.t and settings.tol.rtol > 0.0 and (n_quad == 0 or n_quad == n)
             and out.y.shape[1] == n + n_quad and out.mode.size == out.t.size
             and out.p.shape[0] == out.t.size and out.p.shape[1] == start.p.size
-            and log.state.shape[1] == n + n_quad and tables.guard_direction.shape[0] == tables.kind.size)
+            and log.state.shape[1] == n + n_quad and tables.guard_direction.shape[0] == tables.kind.size
+            and steps.f.shape[1] == 4 and steps.index.shape[0] == cap and steps.index.shape[1] == 2
+            and steps.y_a.shape[0] == cap and steps.y_a.shape[1] == n + n_quad
+            and steps.y_hi.shape[0] == cap and steps.y_hi.shape[1] == n + n_quad
+            and steps.Q.shape[0] == cap and steps.Q.shape[1] == n + n_quad + 1 and steps.Q.shape[2] == 4
+            and steps.seg_p.shape[0] == steps.seg_mode.size and steps.seg_p.shape[1] == start.p.size
+            and steps.count.size == 2)
 
 
 @njit(cache=True, error_model="numpy")
@@ -792,7 +800,9 @@ def integrate_hybrid(fns, tables, start, settings, record):
         start.y (at v1 = 0 from the friction cones).
     settings: Settings (method, t_end, Tolerances: rtol, atol per state, hmin, hmax;
         max_steps bounds step attempts).
-    record: Record. out: Outputs: times (sorted, >= t0) and the rows filled there:
+    record: Record. steps: the StepLog (``steplog``), the accepted steps and the segments' modes
+        and parameter vectors, for rows evaluated after the run. out: Outputs: times (sorted,
+        >= t0) and the rows filled there:
         state, mode and the parameter vector with the latches in force (a row at an
         event time belongs to the segment that ends there: its left limit); rows after
         a stop keep their contents, mode -1. log: the EventLog (time; guard, from-mode,
@@ -822,6 +832,7 @@ def integrate_hybrid(fns, tables, start, settings, record):
     w = _work(n, tables.guard_direction.shape[1], q.size, mon.shape[0])
     g, jump = w.g, w.jump
     out.mode[:] = -1
+    record.steps.count[:] = 0
     k_d = _guard(G_D, tables.guard_kind)
     _latch_pieces(guards, t0, y, p, tables, g)
     _carry_at_start(fns.impact, guards, t0, y, p, tables, g, w.frame)
@@ -840,6 +851,7 @@ def integrate_hybrid(fns, tables, start, settings, record):
                                                         w.segment, singular)
         out.mode[i0:i] = mode
         out.p[i0:i] = p
+        steplog.end_segment(record.steps, mode, p)
         if seg_status == segment.APPROACH:  # back from the approach, on in t
             t = t_new
             continue

@@ -21,7 +21,8 @@ where the segment loop saw D heading for zero, until
   present rate (CLEAR): the caller goes on in t.
 
 Output rows inside the approach are filled by solving t(sigma) = t_out on
-re-taken steps; the observables' running maxima are updated at step ends.
+re-taken steps; each step's dense output in sigma goes into the step log (``steplog``);
+the observables' running maxima are updated at step ends.
 """
 from collections import namedtuple
 
@@ -32,6 +33,7 @@ from tswm_runtime.jit.cache_guard import njit
 from tswm_runtime.integration import control
 from tswm_runtime.integration import dopri5
 from tswm_runtime.integration import events
+from tswm_runtime.integration import steplog
 
 ZERO, END, OTHER, CLEAR = 0, 1, 2, 3  # outcomes besides the integrator's failure codes
 TRIGGER_STEPS = 4.0  # The segment loop hands over when D would reach 0 within this many steps,
@@ -184,14 +186,15 @@ def _unbounded(fns, seg, mon, w):
 
 @njit(cache=True, error_model="numpy")
 def _land(fns, seg, stop, t_end, h, d, tol_t, w):
-    """w.z_new on D = 0 (ZERO) or on t = t_end (END), located in the step of size h.
-    END: the far side (t >= t_end, then set to t_end); ZERO: the near side, where D > 0
-    still: the state's formulas there are the limits at the Painleve point."""
+    """w.z_new on D = 0 (ZERO) or on t = t_end (END), located in the step of size h; returns the
+    sigma of it. END: the far side (t >= t_end, then set to t_end); ZERO: the near side, where
+    D > 0 still: the state's formulas there are the limits at the Painleve point."""
     which, target = (-1, 0.0) if stop == ZERO else (0, t_end)
-    _root(fns, seg, h, w.z_new, w, which, target, tol_t / max(d, 1e-300) if stop == END else 1e-15 * h,
-          stop == END)
+    sigma = _root(fns, seg, h, w.z_new, w, which, target, tol_t / max(d, 1e-300) if stop == END else 1e-15 * h,
+                  stop == END)
     if stop == END:
         w.z_new[0] = t_end
+    return sigma
 
 
 @njit(cache=True, error_model="numpy")
@@ -236,6 +239,7 @@ def approach(fns, settings, seg, state, record, i):
     n = state.y.size
     w = _work(n, state.quad.size, seg.ev.directions.size, mon.shape[0])
     z, z_new, K = w.z, w.z_new, w.K
+    Qz = np.empty((z.size, 4))  # a step's dense output in sigma, for the step log
     d = _begin(fns, settings, seg, state, w)
     counters[2] += 1
     if not d > 0.0:
@@ -261,14 +265,17 @@ def approach(fns, settings, seg, state, record, i):
             continue
         counters[0] += 1
         stop = _stop_inside(fns, seg, t_end, d_new, w)
-        if stop == ZERO:
-            _unbounded(fns, seg, mon, w)
-        if stop == ZERO or stop == END:
-            _land(fns, seg, stop, t_end, h, d, tol_t, w)
         if stop == OTHER:
             outcome = OTHER
             break
+        dopri5.dense_coeffs(K, Qz)  # before _land re-takes steps over K
+        if stop == ZERO:
+            _unbounded(fns, seg, mon, w)
+        theta_hi = 1.0
+        if stop == ZERO or stop == END:
+            theta_hi = _land(fns, seg, stop, t_end, h, d, tol_t, w) / h
         i = _write_rows(fns, seg, record.out, i, h, d, tol_t, w)
+        steplog.log_sundman(record.steps, z, h, z_new, Qz, theta_hi)
         z[:] = z_new
         if stop == ZERO:
             for k in range(mon.shape[0]):

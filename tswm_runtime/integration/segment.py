@@ -43,6 +43,7 @@ from tswm_runtime.integration import events
 from tswm_runtime.integration import painleve
 from tswm_runtime.integration import rosenbrock
 from tswm_runtime.integration import steady
+from tswm_runtime.integration import steplog
 from tswm_runtime.jit.borrow import borrowed
 from tswm_runtime.jit.cache_guard import njit
 from tswm_runtime.jit.signatures import JAC_SIG, VECTOR, GuardsFunction, JacFunction, RhsFunction, compiled
@@ -504,9 +505,10 @@ def _first_event(fns, seg, tol, step, t_end, s, counters):
 
 @njit(cache=True, error_model="numpy", inline="always")  # a step of its caller, at no call
 def _advance(fns, seg, record, i, step, t_new, y_hi, quad, s):
-    """The rows, the integral and the maxima up to t_new (state y_hi) in ``step``; returns the
-    next output row."""
+    """The rows, the step log, the integral and the maxima up to t_new (state y_hi) in ``step``;
+    returns the next output row."""
     i = _write_samples(record.out, i, step, t_new, y_hi, quad, s.q_tmp)
+    steplog.log_step(record.steps, step.t_a, step.h, t_new, step.y_a, quad, y_hi, step.Q)
     if quad.size > 0:
         events.dense_integral(step.y_a, step.h, step.Q, (t_new - step.t_a) / step.h, s.q_tmp)
         quad += s.q_tmp
@@ -538,6 +540,7 @@ def _hold(fns, seg, t_end, t, state, record, i, s):
     fns.guards(seg.mode, t, y, seg.p, g_b)
     t_hold, k = steady.hold(fns.guards, seg.mode, t, y, seg.p, t_end, g_b, seg.ev, s.g_tmp)
     i = _hold_samples(record.out, i, t, t_hold, y, quad)
+    steplog.log_held(record.steps, t, t_hold, y, quad)
     if quad.size > 0:
         quad += y * (t_hold - t)
     return t_hold, k, i
@@ -560,7 +563,8 @@ def run(fns, settings, seg, state, record, i, scratch):
     seg: Segment; seg.ev.singular: a guard (D) whose zero the model cannot be integrated to
     in t, the loop stops with APPROACH after a step that takes it towards 0 fast (-1: none).
     state: State; state.quad, the integral of y, is carried along if its size is y's.
-    record: Record; rows of record.out from i on are filled; the observables are tracked for
+    record: Record; rows of record.out from i on are filled, the accepted steps logged in
+    record.steps (``steplog``); the observables are tracked for
     their maxima in record.mon (none if it has no rows); record.log is not used.
     scratch: ``segment_work(y.size, guards, quad.size, mon.shape[0])``. Every array
     argument is borrowed (``borrow``) for the step loop.

@@ -9,6 +9,7 @@ from numba import types
 
 from tswm_runtime.jit import cache_guard
 from tswm_runtime.jit.cache_guard import njit
+from tswm_runtime.integration.steplog import no_steps
 from tswm_runtime.integration.segment import (DOPRI5, INVALID_INPUT, N_COUNTERS, ROSENBROCK23, AttemptFunction, run,
                                               segment_work)
 from tswm_runtime.jit.signatures import MATRIX, VECTOR, GuardsFunction, JacFunction, RhsFunction
@@ -87,7 +88,7 @@ def integrate_segment(method, attempt, rhs, jac, guards, mode, p, t0, y0, t_end,
     log = EventLog(np.empty(0), np.empty((0, INDEX_WIDTH), np.int64), np.empty((0, 0)), np.empty((0, JUMP_WIDTH)))
     status, t, k, i, h_next = run(Functions(attempt, rhs, jac, guards, guards, guards),
                                   Settings(method, t_end, tol, max_steps), Segment(mode, p, ev),
-                                  State(t0, y_stop, np.empty(0), h0), Record(out, log, np.empty((0, 3)), counters), i,
-                                  scratch)
+                                  State(t0, y_stop, np.empty(0), h0),
+                                  Record(out, log, np.empty((0, 3)), counters, no_steps(y0.size, p.size)), i, scratch)
     return status, t, k, i - i_out, h_next
 

@@ -26,7 +26,7 @@ from tswm_common.files import write_atomic
 
 KERNEL_SOURCES = ("jit/borrow.py", "jit/structures.py", "integration/control.py",
                   "integration/dopri5.py", "integration/rosenbrock.py", "integration/events.py", "integration/segment.py",
-                  "integration/single.py", "integration/painleve.py", "integration/steady.py", "hybrid/machine.py",
+                  "integration/single.py", "integration/painleve.py", "integration/steplog.py", "integration/steady.py", "hybrid/machine.py",
                   "hybrid/impact.py", "hybrid/batch.py", "hybrid/rows.py", "hybrid/entry.py", "jit/addresses.py")
 
 

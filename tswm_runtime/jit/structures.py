@@ -79,7 +79,16 @@ Segment = namedtuple("Segment", "mode p ev")
 #: where it ends), and the first step to try (<= 0: chosen).
 State = namedtuple("State", "t y quad h")
 
+#: The accepted steps of a run, kept so that its rows and ``Result.sol`` are evaluated after it
+#: (``integration.steps``): per step f = (t_a, h, t_hi, theta_hi) (it is used on [t_a, t_hi], up to
+#: theta_hi of its length h), index = (kind, segment), its start y_a and end y_hi (states and their
+#: integral), its dense-output coefficients Q; per segment its mode and parameter vector (latches in
+#: force); count = (steps, segments) met, which may exceed the capacity (then nothing past it is kept).
+StepLog = namedtuple("StepLog", "f index y_a y_hi Q seg_mode seg_p count")
+STEP_LOG = types.NamedTuple((MATRIX, types.int64[:, ::1], MATRIX, MATRIX, types.float64[:, :, ::1], INTS, MATRIX,
+                             INTS), StepLog)
+
 #: Where a run writes: the Outputs, the EventLog, the observables' running maxima (one row per
-#: observable: |value|, value, t), the counters (steps, rejected, rhs calls, jac calls).
-Record = namedtuple("Record", "out log mon counters")
-RECORD = types.NamedTuple((OUTPUTS, EVENT_LOG, MATRIX, INTS), Record)
+#: observable: |value|, value, t), the counters (steps, rejected, rhs calls, jac calls), the StepLog.
+Record = namedtuple("Record", "out log mon counters steps")
+RECORD = types.NamedTuple((OUTPUTS, EVENT_LOG, MATRIX, INTS, STEP_LOG), Record)

@@ -28,26 +28,26 @@ def _largest_friction_angle(law: str, value):
 
 
 def _holds(check: tuple, value) -> np.ndarray:
-    """Where ``check`` holds, for arrays of parameter values (``value(name)``)."""
+    """Where ``check`` holds, for arrays (or numbers) of parameter values (``value(name)``); called
+    under np.errstate(all="ignore")."""
     kind = check[0]
-    with np.errstate(all="ignore"):
-        if kind == "range":
-            _, name, _, lo, hi, lo_in, hi_in, _ = check
-            x = value(name)
-            ok = np.isfinite(x)
-            if lo is not None:
-                ok &= (x >= lo) if lo_in else (x > lo)
-            if hi is not None:
-                ok &= (x <= hi) if hi_in else (x < hi)
-            return ok
-        if kind == "bound":
-            x = value(check[1])
-            return np.isfinite(x) & (x >= check[3]) & (x <= check[4])
-        if kind == "less":
-            return value(check[1]) < value(check[3])
-        if kind == "jam":
-            _, gamma, _, rho_key, law, _ = check
-            return value(gamma) + _largest_friction_angle(law, value(rho_key)) < 90 * DEG
+    if kind == "range":
+        _, name, _, lo, hi, lo_in, hi_in, _ = check
+        x = value(name)
+        ok = np.isfinite(x)
+        if lo is not None:
+            ok &= (x >= lo) if lo_in else (x > lo)
+        if hi is not None:
+            ok &= (x <= hi) if hi_in else (x < hi)
+        return ok
+    if kind == "bound":
+        x = value(check[1])
+        return np.isfinite(x) & (x >= check[3]) & (x <= check[4])
+    if kind == "less":
+        return value(check[1]) < value(check[3])
+    if kind == "jam":
+        _, gamma, _, rho_key, law, _ = check
+        return value(gamma) + _largest_friction_angle(law, value(rho_key)) < 90 * DEG
     raise ValueError(f"unknown parameter check {kind!r}")
 
 
@@ -70,14 +70,19 @@ def _message(module: ModuleType, check: tuple, value) -> str:
 def violations(module: ModuleType, P: np.ndarray) -> list[str]:
     """Per row of free parameters P (PARAM_NAMES order), '' or why the row breaks a rule."""
     P = np.atleast_2d(np.asarray(P, dtype=np.float64))
-    free = {name: P[:, j] for j, name in enumerate(module.PARAM_NAMES)}
+    # one row (simulate's every call): numbers, not arrays of one (numpy's per-call cost was ~25 us a row)
+    free = {name: P[0, j] if P.shape[0] == 1 else P[:, j] for j, name in enumerate(module.PARAM_NAMES)}
 
     def value(name: str):
         return free[name] if name in free else module.FIXED[name]
 
     reasons = [""] * P.shape[0]
-    for check in getattr(module, "PARAM_CHECKS", ()):
-        bad = ~np.broadcast_to(_holds(check, value), (P.shape[0],))
+    with np.errstate(all="ignore"):
+        held = [(check, _holds(check, value)) for check in getattr(module, "PARAM_CHECKS", ())]
+    for check, ok in held:
+        if ok is True or (np.ndim(ok) == 0 and ok):
+            continue
+        bad = ~np.broadcast_to(ok, (P.shape[0],))
         for row in np.flatnonzero(bad):
             if not reasons[row]:
                 reasons[row] = _message(module, check, lambda n: np.broadcast_to(value(n), (P.shape[0],))[row])

@@ -11,6 +11,7 @@ import numpy as np
 from tswm_runtime.common.words import plural
 from tswm_runtime.hybrid import machine as hybrid
 from tswm_runtime.model.modes import event_name
+from tswm_runtime.results.rows import MAX_LOGGED_STEPS, Rows, state_names, states
 
 class Status(IntEnum):
     """The mode machine's status codes (hybrid.FINISHED, ...), for Python."""
@@ -97,24 +98,27 @@ class Phase:
     t_end: float
 
 
+def _series(name: str, doc: str) -> property:
+    """A per-point series of the Result, evaluated from the run's steps on first access of any of
+    them (``results.rows``) and kept; empty if the scene has no such state."""
+    return property(lambda self: self.rows.values().get(name, _EMPTY), doc=doc)
+
+
+_EMPTY = np.empty(0)
+_EMPTY.setflags(write=False)
+
+
 @dataclass
 class Result:
-    """t, x1, v1, a1, x2, v2, S1, S2, F1, F2 and mode per output point; events, maxima, KD."""
+    """Events, maxima, KD, the status and the final state, computed by the run; t, x1, v1, a1, x2,
+    v2, S1, S2, F1, F2 and mode per output point and ``sol(t)``, evaluated from the run's steps
+    when first read."""
 
     scene: str
     params: dict
     settings: dict
-    t: np.ndarray
-    x1: np.ndarray
-    v1: np.ndarray
-    a1: np.ndarray
-    x2: np.ndarray
-    v2: np.ndarray
-    S1: np.ndarray
-    S2: np.ndarray
-    F1: np.ndarray
-    F2: np.ndarray
-    mode: np.ndarray              # mode index per output point
+    rows: Rows = field(repr=False, compare=False)   # the per-point series, evaluated on first access
+    final_state: dict                               # the states (and x1) at t_stop, their left limit at an event
     mode_names: tuple[str, ...]
     events: list[Event]
     phases: list[Phase]
@@ -133,19 +137,46 @@ class Result:
     n_rejected: int
     nfev: int
     njev: int
-    model: dict = field(default_factory=dict)    # equations, param_units, fixed_params, mode_regime
-    event_a1: np.ndarray = field(default_factory=lambda: np.empty(0))  # a1 just after each event (NaN: stop)
+    model: dict = field(default_factory=dict)    # equations, states, param_units, fixed_params, mode_regime
     extras: dict = field(default_factory=dict)
-    gap: np.ndarray = field(default_factory=lambda: np.empty(0))       # normal gap from flank a (with a clearance)
-    gap_rate: np.ndarray = field(default_factory=lambda: np.empty(0))
-    x3: np.ndarray = field(default_factory=lambda: np.empty(0))        # the stem's travel from rest (lost motion)
-    v3: np.ndarray = field(default_factory=lambda: np.empty(0))
+
+    t = _series("t", "output times [s] up to t_stop")
+    x1 = _series("x1", "x1 [m] per output point")
+    v1 = _series("v1", "v1 [m/s] per output point")
+    a1 = _series("a1", "a1 [m/s^2] per output point, in the mode in force there")
+    x2 = _series("x2", "x2 [m] per output point")
+    v2 = _series("v2", "v2 [m/s] per output point")
+    S1 = _series("S1", "S1 [N] per output point")
+    S2 = _series("S2", "S2 [N] per output point")
+    F1 = _series("F1", "F1 [N] per output point")
+    F2 = _series("F2", "F2 [N] per output point")
+    mode = _series("mode", "mode index per output point")
+    gap = _series("gap", "normal gap from flank a [m] per output point (with a clearance)")
+    gap_rate = _series("gap_rate", "the gap's rate [m/s] per output point (with a clearance)")
+    x3 = _series("x3", "the stem's travel from rest [m] per output point (lost motion)")
+    v3 = _series("v3", "the stem's speed [m/s] per output point (lost motion)")
 
     @property
     def series(self) -> tuple[tuple[str, str], ...]:
         """(name, SI unit) of this result's per-point series: SERIES, the gap's with a clearance, the
         stem's with lost motion."""
-        return SERIES + (GAP_SERIES if self.gap.size else ()) + (STEM_SERIES if self.x3.size else ())
+        states = self.model.get("states", ())
+        return SERIES + (GAP_SERIES if "gap" in states else ()) + (STEM_SERIES if "x3" in states else ())
+
+    @property
+    def event_a1(self) -> np.ndarray:
+        """a1 just after each event, in the mode entered and with the latches in force after it (NaN
+        where the run stopped)."""
+        values, module = self.rows.values(), self.rows.module
+        t, p_rows, p = values["t"], values["p"], self.rows.p
+        out = np.full(len(self.events), np.nan)
+        for e, event in enumerate(self.events):
+            if event.to_mode is not None:
+                after = np.searchsorted(t, event.t, side="right")
+                ye = np.array([event.state[name] for name in module.STATES], dtype=np.float64)
+                out[e] = module.accel(module.MODES.index(event.to_mode), event.t, ye,
+                                      p_rows[after] if after < t.size else p)
+        return out
 
     @property
     def impacts(self) -> list[Event]:
@@ -181,7 +212,7 @@ class Result:
                        for ph in self.phases],
             "events": [e.to_dict() for e in self.events],
             "counts": {"n_steps": self.n_steps, "n_rejected": self.n_rejected, "nfev": self.nfev,
-                       "njev": self.njev, "n_events": len(self.events), "n_points": int(self.t.size)},
+                       "njev": self.njev, "n_events": len(self.events), "n_points": self.rows.size},
             "extras": dict(self.extras), "units": dict(self.series),
         }
 
@@ -197,63 +228,43 @@ class Result:
         df.attrs.update(self.to_dict())
         return df
 
-    def sol(self, t) -> np.ndarray:
-        """(x1, v1) at times t (shape (2, len(t)), like solve_ivp's ``sol``): piecewise cubic
-        Hermite interpolation of the output points with their derivatives (v1, a1), split at
-        every event, so no piece spans a kink or a jump of a1. Accurate to O(dt^4) in the
-        spacing dt of the output points (more points, better ``sol``); NaN outside [0, t_stop]."""
-        from scipy.interpolate import CubicHermiteSpline
+    @property
+    def sol_names(self) -> tuple[str, ...]:
+        """The states ``sol`` gives, in its order: x1, v1, then the scene's others (gap, gap_rate, x3, v3)."""
+        names = state_names(self.rows.module, self.rows.steps.y_a.shape[1])
+        return ("x1", "v1", *(name for name in names if name not in ("x1", "v1")))
 
-        t = np.atleast_1d(np.asarray(t, dtype=np.float64))
-        out = np.full((2, t.size), np.nan)
-        cuts = [0.0, *sorted({e.t for e in self.events}), self.t_stop]
-        starts = {e.t: (e.x1, e.v1, a) for e, a in zip(self.events, self.event_a1) if np.isfinite(a)}
-        for lo, hi in zip(cuts[:-1], cuts[1:]):
-            rows = (self.t >= lo) & (self.t <= hi)
-            if lo > 0.0:
-                rows &= self.t > lo          # a row at an event time belongs to the piece before
-            want = (t >= lo) & (t <= hi)
-            knots = [(tr, x, v, a) for tr, x, v, a in zip(self.t[rows], self.x1[rows], self.v1[rows], self.a1[rows])]
-            if lo in starts:                 # the event's state with a1 of the mode entered there
-                knots.insert(0, (lo, *starts[lo]))
-            if not want.any() or not knots:
-                continue
-            tk, xk, vk, ak = (np.array(c) for c in zip(*knots))
-            if tk.size == 1:
-                out[:, want] = [[xk[0]], [vk[0]]]
-                continue
-            out[0, want] = CubicHermiteSpline(tk, xk, vk)(t[want])
-            out[1, want] = CubicHermiteSpline(tk, vk, ak)(t[want])
-        return out
+    def sol(self, t, side: str = "left") -> np.ndarray:
+        """Every state at times t, one row each in the order of ``sol_names`` (x1, v1 first; shape
+        (len(sol_names), len(t)), like solve_ivp's ``sol``): from the interpolant of the step that
+        covers each time (the integrator's own dense output, the held equilibrium, the Painleve
+        approach's in Sundman time), so as accurate as the run's steps at any t, whatever the output
+        points. NaN outside [0, t_stop]. At an event's time its left limit (side "left", as the
+        rows), or its right one ("right": after an impact's jump). ValueError for a run of more than
+        MAX_LOGGED_STEPS steps (``results.rows``), which keeps no steps."""
+        if side not in ("left", "right"):
+            raise ValueError(f"side = {side!r}: must be 'left' or 'right'")
+        if self.rows.written is not None:
+            raise ValueError(f"sol: this run took {self.n_steps:,} steps, more than the {MAX_LOGGED_STEPS:,} "
+                             f"kept for sol; its rows were written at the output points instead (raise points, "
+                             f"or run shorter spans)")
+        module = self.rows.module
+        y, _ = states(self.rows.steps, len(module.STATES), np.atleast_1d(np.asarray(t, dtype=np.float64)).ravel(),
+                      0 if side == "left" else 1)
+        order = dict(zip(state_names(module, y.shape[1]), range(y.shape[1])))
+        return y[:, [order[name] for name in self.sol_names]].T.copy()
 
     @classmethod
-    def build(cls, module: ModuleType, p: np.ndarray, p_rows: np.ndarray, run: dict, t, y, mode, rows,
-              events, event_states, mon, counters, *, hybrid_status: int, t_stop: float, first_mode: int,
-              message: str) -> Result:
-        """Assemble the result; ``y``: states (and their integral) at each output point; ``rows``:
-        a1, S1, S2, F1, F2 there (one row each), each evaluated with the mode and the latched laws in force
-        there (``p_rows``); ``event_states``: the states at each event (before an impact)."""
-        states = {name: np.ascontiguousarray(y[:, k]) for k, name in enumerate(module.STATES)}
-        x1 = states.get("x1", y[:, len(module.STATES)] if y.shape[1] > len(module.STATES) else np.empty(0))
-        v1 = states["v1"]
-        gap, gap_rate = states.get("gap", np.empty(0)), states.get("gap_rate", np.empty(0))
-        a1, S1, S2, F1, F2 = rows[:5]
-        event_a1 = np.full(len(events), np.nan)
-        for e, event in enumerate(events):
-            if event.to_mode is not None:
-                after = np.searchsorted(t, event.t, side="right")
-                pr = p_rows[after] if after < t.size else p
-                ye = np.ascontiguousarray(event_states[e], dtype=np.float64)
-                event_a1[e] = module.accel(module.MODES.index(event.to_mode), event.t, ye, pr)
-        x2, v2 = module.body2(x1, v1, gap if gap.size else 0.0, gap_rate if gap_rate.size else 0.0, p)
+    def build(cls, module: ModuleType, p: np.ndarray, run: dict, rows: Rows, final_state: dict, events, mon,
+              counters, *, hybrid_status: int, t_stop: float, first_mode: int, message: str) -> Result:
+        """Assemble the result; ``rows``: the series at the output points, evaluated when first read;
+        ``final_state``: the states (and x1) at t_stop."""
         KD1 = KD2 = None
         if module.HAS_LOAD_FACTORS:
             KD1, KD2 = module.load_factors(mon[0, 1], mon[1, 1], p)
         return cls(
             scene=module.SCENE, params=dict(zip(module.PARAM_NAMES, p.tolist())), settings=dict(run),
-            t=t, x1=x1, v1=v1, a1=a1, x2=x2, v2=v2, S1=S1, S2=S2,
-            F1=F1, F2=F2, gap=gap, gap_rate=gap_rate, x3=states.get("x3", np.empty(0)), v3=states.get("v3", np.empty(0)),
-            mode=mode, mode_names=tuple(module.MODES), events=events,
+            rows=rows, final_state=final_state, mode_names=tuple(module.MODES), events=events,
             phases=_phases(module, first_mode, events, t_stop),
             S1_max=float(mon[0, 1]), t_S1_max=float(mon[0, 2]), S2_max=float(mon[1, 1]),
             t_S2_max=float(mon[1, 2]), KD1=KD1, KD2=KD2, status=STATUS_NAMES[hybrid_status],
@@ -262,7 +273,6 @@ class Result:
             model={"equations": module.EQUATIONS, "states": tuple(module.STATES),
                    "param_units": dict(zip(module.PARAM_NAMES, module.PARAM_UNITS)),
                    "fixed_params": dict(module.FIXED), "mode_regime": tuple(module.MODE_REGIME)},
-            event_a1=event_a1,
             extras={name: float(v) for name, v in zip(getattr(module, "LATCH_NAMES", ()),
                                                       p[len(module.PARAM_NAMES):]) if not name.endswith("_piece")})
 

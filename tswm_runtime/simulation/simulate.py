@@ -2,7 +2,8 @@
 
 ``simulate("paper", {"F2": -5000.0})`` loads the generated module of a shipped scene
 (or takes a module), validates every input with a message that names it, runs
-the mode machine (``entry.integrate``) and evaluates a1, S1, S2, F1, F2 at the output times.
+the mode machine (``entry.integrate``), which keeps its steps, and returns a Result that
+evaluates the states and a1, S1, S2, F1, F2 at the output times from them when first read.
 """
 from __future__ import annotations
 
@@ -18,8 +19,6 @@ from tswm_runtime.jit import coldstart
 
 coldstart.announce(("integrate",))  # before the next imports compile the kernels, if not cached
 from tswm_runtime.hybrid import entry  # noqa: E402
-from tswm_runtime.hybrid.rows import fill_rows  # noqa: E402
-from tswm_runtime.jit.signatures import GUARDS_SIG, address  # noqa: E402
 
 from tswm_runtime.integration import segment  # noqa: E402
 
@@ -28,6 +27,7 @@ from tswm_runtime.model.scenes import load_model  # noqa: E402
 from tswm_runtime.model.values import ValueInputError, si_value  # noqa: E402
 from tswm_runtime.hybrid.machine import INCONSISTENT, NOT_FINITE  # noqa: E402
 from tswm_runtime.results.result import Event, Jump, Result, first_non_finite, status_message  # noqa: E402
+from tswm_runtime.results.rows import MAX_LOGGED_STEPS, Rows, last_state  # noqa: E402
 
 coldstart.done()
 
@@ -305,18 +305,53 @@ def _direct_in_a_thread(kernel, args: tuple, counters: np.ndarray):
     return _in_a_thread(_entry_point(kernel), args, counters)
 
 
-def _values(module: ModuleType, y: np.ndarray, rows: np.ndarray) -> dict:
-    """The run's series by name: states, x1 (their integral, when it is no state), outputs."""
-    values = dict(zip((*module.STATES, "x1")[:y.shape[1]], y.T))
-    values.update(zip(module.OUTPUTS, rows))
-    return values
-
-
 def _first_non_finite(module: ModuleType, t: np.ndarray, values: dict, mon: np.ndarray):
     """(name, time, value) of the run's first inf or NaN in its series, else in the maxima of S1
     and S2 (found between output points); None if all are finite."""
     maxima = [(f"{name} max", float(mon[k, 2]), float(mon[k, 1])) for k, name in enumerate(module.OBSERVABLES)]
     return first_non_finite(t, values) or next((m for m in maxima if not math.isfinite(m[2])), None)
+
+
+def _plan(module: ModuleType, run: dict, needed: tuple[int, int] | None = None) -> tuple[tuple, np.ndarray]:
+    """(the step log's capacity (steps, segments), the output times the kernel writes rows at) for a
+    run that needs ``needed`` (None: guess twice what the module's last run with this method needed,
+    at least MIN_STEP_CAPACITY): all steps kept and no rows, or, beyond MAX_LOGGED_STEPS, the rows
+    written as the run goes and the last step kept."""
+    if needed is None:
+        last = _STEPS_NEEDED.get((module, run["method"]), (0, 0))
+        needed = tuple(max(MIN_STEP_CAPACITY, 2 * k) for k in last) if max(last) <= MAX_LOGGED_STEPS else last
+    if max(needed) <= MAX_LOGGED_STEPS:
+        return needed, _NO_TIMES
+    return (1, 1), _output_times(run["t_end"], run["points"])
+
+
+MIN_STEP_CAPACITY = 256
+_STEPS_NEEDED: dict = {}  # (module, method): (steps, segments) of its last run
+
+
+def _integrate(module: ModuleType, p: np.ndarray, run: dict, y0: np.ndarray, quad: np.ndarray,
+               interruptible: bool) -> tuple:
+    """entry.integrate for ``simulate``: every step kept and no output rows (run again with a
+    larger step log if it filled up), or, for a run of more than MAX_LOGGED_STEPS steps, run again
+    writing its rows at the output times, its log keeping the last step only. ``p`` is not written.
+    Returns entry.integrate's outcome, the run's p (latches set) and the rows written (or None)."""
+    capacity, t_out = _plan(module, run)
+    while True:
+        p_run = p.copy()
+        outcome = entry.integrate(
+            METHODS[run["method"]], module, p_run, modes.tables(module), y0, run["t_end"], rtol=run["rtol"],
+            atol=run["atol"], t_out=t_out, max_events=run["max_events"], quad=quad, hmax=run["hmax"],
+            max_steps=run["max_steps"], steps=capacity, call=_direct_in_a_thread if interruptible else _direct)
+        needed = tuple(int(c) for c in outcome[-1].count)
+        if len(_STEPS_NEEDED) >= 256:
+            _STEPS_NEEDED.clear()
+        _STEPS_NEEDED[(module, run["method"])] = needed
+        if t_out.size or (needed[0] <= capacity[0] and needed[1] <= capacity[1]):
+            return (*outcome, p_run, outcome[6] if t_out.size else None)
+        capacity, t_out = _plan(module, run, needed)
+
+
+_NO_TIMES = np.empty(0)
 
 
 def simulate(model: str | ModuleType, params: dict | None = None, *, interruptible: bool = False,
@@ -325,33 +360,28 @@ def simulate(model: str | ModuleType, params: dict | None = None, *, interruptib
     module, or the module; ``params``: free parameters by name, numbers in SI or strings with a
     unit ("-5 kN"); ``overrides``: run settings (t_end,
     x1, v1, rtol, atol, method, max_steps, points, max_events, hmax). ``interruptible``:
-    run the kernel in a thread so that Ctrl-C stops a long run at once (the CLI does)."""
+    run the kernel in a thread so that Ctrl-C stops a long run at once (the CLI does).
+    The status, events, maxima, load factors and final state come from the run; the per-point
+    series (``Result.t``, ``S1``, ...) are evaluated from its steps when first read."""
     module = model if isinstance(model, ModuleType) else _load(model)
-    p = parameter_vector(module, params)
+    p0 = parameter_vector(module, params)
     run = settings(module, overrides)
     n = len(module.STATES)
     y0, quad = initial_state(module, run)
-    t_out = _output_times(run["t_end"], run["points"])
     method_step(run["method"])
-    status, t_stop, n_ev, last, need, first, out, log, mon, counters = entry.integrate(
-        METHODS[run["method"]], module, p, modes.tables(module), y0, run["t_end"], rtol=run["rtol"],
-        atol=run["atol"], t_out=t_out, max_events=run["max_events"], quad=quad, hmax=run["hmax"],
-        max_steps=run["max_steps"], call=_direct_in_a_thread if interruptible else _direct)
-    if out.mode[-1] >= 0:  # rows fill in time order: every row is filled (every array C-contiguous already)
-        t_kept, y_kept, p_rows, modes_kept = t_out, out.y, out.p, out.mode
-    else:
-        keep = out.mode >= 0
-        t_kept, y_kept, p_rows, modes_kept = (np.ascontiguousarray(a[keep])
-                                              for a in (t_out, out.y, out.p, out.mode))
-    rows = np.empty((len(module.OUTPUTS), t_kept.size))
-    _entry_point(fill_rows)(address(module.outputs, GUARDS_SIG), t_kept, y_kept, modes_kept, p_rows, n, rows)
-    values = _values(module, y_kept, rows)
-    found = None if status == INCONSISTENT else _first_non_finite(module, t_kept, values, mon)
+    status, t_stop, n_ev, last, need, first, _, log, mon, counters, steps, p, written = _integrate(
+        module, p0, run, y0, quad, interruptible)
+    rows = Rows(module, steps, _output_times(run["t_end"], run["points"]), p, written)
+    found = last_point = None
+    if status != INCONSISTENT and (status == NOT_FINITE or not np.isfinite(mon[:, 1]).all()):
+        values = {k: v for k, v in rows.values().items() if k not in ("mode", "p", "y", "x2", "v2")}
+        t_kept = values.pop("t")
+        found = _first_non_finite(module, t_kept, values, mon)
+        last_point = (float(t_kept[-1]), {k: float(v[-1]) for k, v in values.items()}) if t_kept.size else None
     if found is not None:
         status = NOT_FINITE
     else:
-        check_atol_scale(module, run["atol"], y_kept)
-    last_point = (float(t_kept[-1]), {k: float(v[-1]) for k, v in values.items()}) if t_kept.size else None
+        check_atol_scale(module, run["atol"], rows.largest_states())
     y_stop = log.state[n_ev - 1, :n].copy() if n_ev else y0
     at = x1_column(module)
     events = [Event(float(log.t[e]), modes.event_guard(module.GUARDS[log.index[e, 0]], int(log.index[e, 3])),
@@ -361,7 +391,7 @@ def simulate(model: str | ModuleType, params: dict | None = None, *, interruptib
                     None if math.isnan(log.jump[e, 0]) else Jump(*map(float, log.jump[e])),
                     dict(zip(module.STATES, map(float, log.state[e, :n]))))
               for e in range(n_ev)]
-    return Result.build(module, p, p_rows, run, t_kept, y_kept, modes_kept, rows, events, log.state[:n_ev, :n],
-                        mon, counters, hybrid_status=status, t_stop=t_stop,
-                        first_mode=first, message=status_message(module, status, t_stop, y_stop, last,
-                                                                 need, events, p, found=found, last_values=last_point))
+    return Result.build(module, p, run, rows, last_state(module, steps, np.concatenate([y0, quad])), events, mon,
+                        counters, hybrid_status=status, t_stop=t_stop, first_mode=first,
+                        message=status_message(module, status, t_stop, y_stop, last, need, events, p, found=found,
+                                               last_values=last_point))

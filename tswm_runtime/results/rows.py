@@ -1,0 +1,108 @@
+"""A run's per-point series, evaluated from its step log on first access and kept.
+
+``simulate`` keeps the run's accepted steps (``integration.steplog``) instead of writing rows as
+it goes; ``Rows`` evaluates them when a row quantity is first read: the states at the output
+times with each step's own interpolant, then a1, S1, S2, F1, F2 there in one compiled pass
+(``hybrid.rows.fill_rows``), each with the mode and the latched laws of the segment the time
+lies in. ``states`` evaluates the states at any times the same way (``Result.sol``). A run of more than
+MAX_LOGGED_STEPS steps keeps only its last one and writes its rows at the output times as it goes
+(``written``): memory bounded by the output points, as before the step log, and no ``sol``.
+"""
+from __future__ import annotations
+
+import importlib
+import sys
+from types import ModuleType
+
+import numpy as np
+
+from tswm_runtime.hybrid.rows import fill_rows
+from tswm_runtime.integration.steplog import states_at
+from tswm_runtime.jit.signatures import GUARDS_SIG, address
+from tswm_runtime.jit.structures import Outputs, StepLog
+
+MAX_LOGGED_STEPS = 10**6  # about 200-300 MB of step log at the limit
+
+
+def state_names(module: ModuleType, width: int) -> tuple[str, ...]:
+    """The names of a row of states and their integral: the states, then x1 when it is their integral."""
+    return (*module.STATES, "x1")[:width]
+
+
+def last_state(module: ModuleType, steps: StepLog, y0: np.ndarray) -> dict:
+    """The states (and x1) where the run stopped, its left limit at an event: the end of the last
+    step, or y0 if it took none."""
+    n_steps = min(int(steps.count[0]), steps.f.shape[0])
+    y = steps.y_hi[n_steps - 1] if n_steps else y0
+    return dict(zip(state_names(module, y.size), map(float, y)))
+
+
+def states(steps: StepLog, n_states: int, t, side: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """(y, segment): the states and their integral at the times t (any order; one row each, NaN
+    outside the run) and the segment each lies in (-1 outside). side 0: at an event, its left
+    limit (the step that ends there); 1: its right limit."""
+    t = np.ascontiguousarray(t, dtype=np.float64)
+    y, segment = np.empty((t.size, steps.y_a.shape[1])), np.empty(t.size, np.int64)
+    states_at(steps, n_states, t, side, y, segment)
+    return y, segment
+
+
+class Rows:
+    """The series of a run at its output times, computed on first ``values()`` and kept. ``written``:
+    the rows the kernel wrote at t_out as it went, for a run too long to keep its steps (None: the
+    steps are kept)."""
+
+    def __init__(self, module: ModuleType, steps: StepLog, t_out: np.ndarray, p: np.ndarray,
+                 written: Outputs | None = None):
+        self.module, self.steps, self.t_out, self.p, self.written = module, steps, t_out, p, written
+        self._values: dict | None = None
+
+    @property
+    def size(self) -> int:
+        """How many output points the run reached (without evaluating them)."""
+        if self.written is not None:
+            return int(np.count_nonzero(self.written.mode >= 0))
+        n_steps = min(int(self.steps.count[0]), self.steps.f.shape[0])
+        return int(np.searchsorted(self.t_out, self.steps.f[n_steps - 1, 2], side="right")) if n_steps else 0
+
+    def largest_states(self) -> np.ndarray:
+        """max |state| (and |integral|) over the ends of the steps (or the rows written): one row,
+        none for a run without steps."""
+        y = (self.written.y[self.written.mode >= 0] if self.written is not None
+             else self.steps.y_hi[:min(int(self.steps.count[0]), self.steps.f.shape[0])])
+        return np.abs(y).max(axis=0, keepdims=True) if y.shape[0] else y
+
+    def __getstate__(self) -> dict:
+        """For pickling (a Result that travels): the rows evaluated, the module by its import name."""
+        self.values()
+        return {**self.__dict__, "module": self.module.__name__}
+
+    def __setstate__(self, state: dict) -> None:
+        state["module"] = sys.modules.get(state["module"]) or importlib.import_module(state["module"])
+        self.__dict__.update(state)
+
+    def values(self) -> dict:
+        """t, the states (and x1), a1, S1, S2, F1, F2, x2, v2, mode and the parameter rows ("p") by
+        name, at the output points the run reached."""
+        if self._values is None:
+            self._values = self._evaluate()
+        return self._values
+
+    def _evaluate(self) -> dict:
+        module, steps = self.module, self.steps
+        n = len(module.STATES)
+        if self.written is None:
+            t = np.ascontiguousarray(self.t_out[:self.size])
+            y, segment = states(steps, n, t)
+            mode, p_rows = steps.seg_mode[segment], steps.seg_p[segment]
+        else:
+            kept = self.written.mode >= 0
+            t, y, mode, p_rows = (np.ascontiguousarray(a[kept]) for a in self.written[:4])
+        outputs = np.empty((len(module.OUTPUTS), t.size))
+        fill_rows(address(module.outputs, GUARDS_SIG), t, y, mode, p_rows, n, outputs)
+        values = {"t": t, **{name: np.ascontiguousarray(y[:, k]) for k, name in enumerate(state_names(module, y.shape[1]))}}
+        values.update(zip(module.OUTPUTS, outputs))
+        values["x2"], values["v2"] = module.body2(values["x1"], values["v1"], values.get("gap", 0.0),
+                                                  values.get("gap_rate", 0.0), self.p)
+        values["mode"], values["p"], values["y"] = mode, p_rows, y
+        return values
