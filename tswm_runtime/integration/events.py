@@ -68,6 +68,16 @@ def dense_eval(y_a, h, Q, theta, out):
 
 
 @njit(cache=True, error_model="numpy")
+def dense_slope(Q, theta, out):
+    """out = dy/dt of the dense output at t_a + theta h: sum_j (j+1) Q[:, j] theta^j."""
+    for i in range(out.size):
+        slope = 4.0 * Q[i, 3]
+        for j in range(2, -1, -1):
+            slope = slope * theta + (j + 1.0) * Q[i, j]
+        out[i] = slope
+
+
+@njit(cache=True, error_model="numpy")
 def time_tolerance(t, ttol):
     """Width to which event times are located: (4 eps + ttol) * max(1, |t|)."""
     return (ROOT_EPS_FACTOR * _EPS + ttol) * max(1.0, abs(t))

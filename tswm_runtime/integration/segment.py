@@ -18,6 +18,11 @@ step differ by about the local error), the same Illinois iteration is continued
 on the re-taken steps, so the returned state is on the far side of (or on) the
 switching surface: a restart cannot fire the same crossing again.
 
+The first step of a segment (until one is accepted) is judged by the larger of its error
+estimate and the defect of its dense output at the midpoint over DEFECT_RATIO
+(``_defect_error``): the step size it starts with was not confirmed by these dynamics, and
+beyond the asymptotic range the embedded estimate can be far too small (docs/runtime.md).
+
 Conventions: forward integration (t_end >= t0); the last step is clipped to land
 exactly on t_end; the mode never changes inside a segment (error estimators are
 not valid across a switch, scipy issue 18039), the caller restarts after events.
@@ -69,6 +74,9 @@ N_JAC = 3  # Calls of jac.
 N_COUNTERS = 4
 
 MIN_STEP_ULPS = 10.0  # A step must exceed 10 ulp(t) to move t reliably (scipy's min_step).
+# A segment's first step (module docstring): its error is also judged by the defect of its dense
+# output at the midpoint over this ratio, which that defect stays below where the error estimate holds.
+DEFECT_RATIO = 50.0
 
 
 
@@ -100,6 +108,29 @@ def _eval_guards(fns, seg, t, y, g):
 def _error_order(method):
     """Order of the method's error estimator (for the initial step)."""
     return dopri5.ERROR_ORDER if method == DOPRI5 else rosenbrock.ERROR_ORDER
+
+
+@njit(cache=True, error_model="numpy")
+def _step_factor(method, e):
+    """The method's step factor after a step with scaled error e."""
+    if method == DOPRI5:
+        return control.step_factor(e, dopri5.ERROR_ORDER, dopri5.SAFETY, dopri5.MIN_FACTOR, dopri5.MAX_FACTOR)
+    return control.step_factor(e, rosenbrock.ERROR_ORDER, rosenbrock.SAFETY, rosenbrock.MIN_FACTOR,
+                               rosenbrock.MAX_FACTOR)
+
+
+@njit(cache=True, error_model="numpy")
+def _defect_error(fns, seg, tol, t, y, h, s, counters):
+    """Second error indicator of the step just attempted (y_b in s.y_b, its dense output in
+    s.work.Q): h |y'(t_m) - f(t_m, y(t_m))| of the dense output at the midpoint t_m, scaled as the
+    error and divided by DEFECT_RATIO. One rhs call; s.y_tmp, s.y_ev and s.y_pert are overwritten."""
+    events.dense_eval(y, h, s.work.Q, 0.5, s.y_tmp)
+    fns.rhs(seg.mode, t + 0.5 * h, s.y_tmp, seg.p, s.y_ev)
+    counters[N_RHS] += 1
+    events.dense_slope(s.work.Q, 0.5, s.y_pert)
+    for i in range(y.size):
+        s.y_pert[i] = h * (s.y_pert[i] - s.y_ev[i])
+    return control.error_norm(s.y_pert, y, s.y_b, tol.atol, tol.rtol) / DEFECT_RATIO
 
 
 @njit(cache=True, error_model="numpy")
@@ -573,6 +604,10 @@ def run(fns, settings, seg, state, record, i, scratch):
             h = t_end - t
         e, factor = fns.attempt(fns.rhs, seg.mode, t, y, seg.p, h, scratch.f_a, work, scratch.y_b, scratch.f_b,
                                 scratch.err, tol, counters, True)
+        if e < 1.0 and ctl.h_acc == 0.0:  # no step taken in these dynamics yet: check the estimate
+            e_defect = _defect_error(fns, seg, tol, t, y, h, scratch, counters)
+            if e_defect > e:
+                e, factor = e_defect, _step_factor(settings.method, e_defect)
         too_short = max(tol.hmin, MIN_STEP_ULPS * (np.nextafter(t, np.inf) - t))
         if not e < 1.0:
             ctl, h_prop = _rejected(ctl, h, e, factor, counters)
