@@ -189,15 +189,18 @@ def test_over_heavy_body_two_is_reported_inconsistent_naming_the_masses(model):
     assert f"{b.m_eff:.6g}" in r.message
 
 
-@pytest.mark.parametrize("method, rate", [("dopri5", 1.0), ("rosenbrock23", 2 / 3)])
-def test_error_over_a_flank_switch_falls_at_the_methods_rate(model, method, rate):
+@pytest.mark.parametrize("method", ["dopri5", "rosenbrock23"])
+def test_error_over_a_flank_switch_falls_in_proportion_to_rtol(model, method):
     """Errors of x1 and of the time at the switch against the closed form as rtol shrinks,
     and of x1(t_end) after the equilibrium tail (held: integration.steady).
 
     Error-per-step control of an order-p pair gives a global error ~ rtol^(p/(p+1)) for
     the lower-order solution and ~ rtol^1 with local extrapolation: DOPRI5 advances
-    with its 5th-order solution (rate 1), ode23s with its 2nd-order one (rate 2/3).
+    with its 5th-order solution (rate 1); ode23s advances with its 2nd-order one (rate 2/3
+    alone), so its step tolerance is tightened below rtol 1e-3 (control.proportional_tolerance)
+    to bring it to rate 1 too.
     """
+    rate = 1.0
     p = params(F2_before=200.0, F2_after=200.0)
     a, b = mode_of(p, 1, 1, 200.0), mode_of(p, -1, 1, 200.0)
     v_star = p["V0"] * (1 - p["m1"] * 200.0 / (p["m2"] * math.tan(p["gamma"]) * p["F0"]))
