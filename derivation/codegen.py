@@ -513,9 +513,12 @@ def scheduled(model: Model) -> set[str]:
 
 
 def _array(values: list, name: str, dtype: str) -> str:
-    """Source of a numpy array of scene values, each printed inertly, wrapped at 100 characters."""
-    lines = textwrap.wrap(", ".join(inert(v, name) for v in values), 96, break_long_words=False,
-                          break_on_hyphens=False)
+    """Source of a numpy array of scene values, each printed inertly: on one line where
+    ``NAME = ...`` fits in 100 characters, else wrapped at 100 characters."""
+    text = ", ".join(inert(v, name) for v in values)
+    if len(name) + len(text) + len(f" = np.array([], dtype=np.{dtype})") <= 100:
+        return f"np.array([{text}], dtype=np.{dtype})"
+    lines = textwrap.wrap(text, 96, break_long_words=False, break_on_hyphens=False)
     return "np.array([" + "".join(f"\n    {line}" for line in lines) + f"\n], dtype=np.{dtype})"
 
 
