@@ -8,8 +8,10 @@ at no cost. Free parameters are read from the parameter vector ``p``. Every func
 top-level ``@njit(cache=True)`` function calling the others as module globals, so numba
 caches and inlines them. Mirror-image modes (the other flank or direction: the same
 equations with -rho for rho) share one set of functions taking ``rho_sign``; a function
-whose body equals an earlier one's is emitted as an alias of it. The module imports math
-and numba only.
+whose body equals an earlier one's is emitted as an alias of it. A schedule's breakpoints
+and values are numpy arrays of the module (data, printed inertly), read at the latched piece
+by one law and one event function. The module imports math and numba only, and numpy for
+a schedule's arrays.
 """
 from __future__ import annotations
 
@@ -18,6 +20,7 @@ import hashlib
 import keyword
 import math
 import re
+import textwrap
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
@@ -27,7 +30,7 @@ import sympy as sp
 from sympy.functions.elementary.piecewise import ExprCondPair
 from sympy.printing.pycode import PythonCodePrinter
 
-from derivation import mechanics
+from derivation import laws, mechanics
 from derivation.mechanics import S1, S2, t
 from derivation.model import Model, compose_laws as _compose, param_symbol
 from derivation.scene import NAME, SceneError
@@ -268,7 +271,8 @@ class _Emitter:
         self.model = model
         self.vector = free + latch_names(model)   # the names in p
         self.printer = _Printer()
-        fixed = [p for p in model.params if p.name not in free]
+        arrays = scheduled(model)   # schedule entries: arrays of the module, never in an expression
+        fixed = [p for p in model.params if p.name not in free and p.name not in arrays]
         self.fixed = {param_symbol(p): sp.Float(repr(p.value)) for p in fixed}
         self.fixed_params = {param_symbol(p): p for p in fixed}
         self.derived: dict[sp.Expr, sp.Symbol] = {}   # subexpression of fixed parameters -> its constant
@@ -297,6 +301,10 @@ class _Emitter:
         lines = [f"{s} = y[{i}]" for i, s in enumerate(self.model.states) if s in used and states_from_y]
         lines += [f"{name} = p[{i}]" for i, name in enumerate(self.vector)
                   if sp.Symbol(name, real=True) in used and sp.Symbol(name, real=True) not in calls]
+        for schedule in schedules(self.model):
+            if used & set(schedule.piece_symbols):
+                names = ", ".join(str(s) if s in used else "_" for s in schedule.piece_symbols)
+                lines.append(f"{names} = {schedule.owner}_schedule_piece(p)")
         lines += [f"{s} = {self.law_functions[s]}(t, y, p)" for s in calls]
         replacements, reduced = sp.cse(exprs, symbols=sp.numbered_symbols("c"))
         if any(_non_finite(e) for e in [*(e for _, e in replacements), *reduced]):   # CSE folds numbers too
@@ -484,8 +492,48 @@ def guard_latches(model: Model, free: tuple[str, ...]) -> tuple[int, ...]:
     """Per guard, the index in p of the latch it sets (a trip time or a law's piece), else -1."""
     slot = {name: len(free) + i for i, name in enumerate(latch_names(model))}
     owner = {latch.name: slot[str(latch.symbol)] for latch in model.latches}
-    owner.update({e.name: slot[str(p.symbol)] for p in model.pieces for e in p.events})
+    owner.update({p.event.name: slot[str(p.symbol)] for p in model.pieces})
     return tuple(owner.get(name, -1) for name in guard_names(model))
+
+
+def guard_pieces(model: Model) -> tuple[int, ...]:
+    """Per guard, the number of pieces of the law whose piece it latches, else 0."""
+    count = {p.event.name: p.count for p in model.pieces}
+    return tuple(count.get(name, 0) for name in guard_names(model))
+
+
+def schedules(model: Model) -> list[laws.Schedule]:
+    """The model's schedules (their breakpoints and values are arrays of the module)."""
+    return [p.schedule for p in model.pieces if p.schedule is not None]
+
+
+def scheduled(model: Model) -> set[str]:
+    """Names of the parameters that are entries of a schedule's arrays, not module constants."""
+    return {p.name for s in schedules(model) for p in (*s.breakpoints, *s.values)}
+
+
+def _array(values: list, name: str, dtype: str) -> str:
+    """Source of a numpy array of scene values, each printed inertly, wrapped at 100 characters."""
+    lines = textwrap.wrap(", ".join(inert(v, name) for v in values), 96, break_long_words=False,
+                          break_on_hyphens=False)
+    return "np.array([" + "".join(f"\n    {line}" for line in lines) + f"\n], dtype=np.{dtype})"
+
+
+def _schedule_data(model: Model, free: tuple[str, ...]) -> list[dict]:
+    """Per schedule, what the template emits: its arrays (a free entry's default in the table, its
+    index in p in the slots, -1 where fixed) and the function reading the piece in force."""
+    out = []
+    index = {name: i for i, name in enumerate(free + latch_names(model))}
+    for piece in (p for p in model.pieces if p.schedule is not None):
+        s, prefix = piece.schedule, piece.schedule.owner.upper()
+        arrays = {}
+        for key, entries in (("AT", s.breakpoints), ("VALUES", s.values)):
+            arrays[f"{prefix}_{key}"] = _array([e.value for e in entries], f"{prefix}_{key}", "float64")
+            arrays[f"{prefix}_{key}_SLOTS"] = _array([index.get(e.name, -1) for e in entries],
+                                                     f"{prefix}_{key}_SLOTS", "int64")
+        out.append({"owner": s.owner, "shape": s.shape, "variable": s.variable, "arrays": arrays, "prefix": prefix,
+                    "slot": index[str(piece.symbol)], "piece": str(piece.symbol), "linear": s.shape == "linear"})
+    return out
 
 
 def _parameter_checks(model: Model, free: tuple[str, ...]) -> tuple[tuple, ...]:
@@ -512,7 +560,7 @@ def _guard_directions(model: Model) -> tuple[tuple[int, ...], ...]:
     """Per mode and guard: -1 falling, +1 rising, 0 both (constant-one guards never fire)."""
     names = guard_names(model)
     latches = {latch.name for latch in model.latches}
-    in_time = {e.name for e in model.events if sp.Symbol("x2", real=True) not in e.expr.free_symbols}
+    law_events = {e.name for e in model.events}
     table = []
     for mode in model.modes:
         row = []
@@ -522,10 +570,8 @@ def _guard_directions(model: Model) -> tuple[tuple[int, ...], ...]:
             elif name in ("v1", "slip"):
                 row.append(-mode.direction)
             elif name in ("D", "jam", "cone_forward", "cone_backward", "mesh_normal", *SLIDE_GUARDS, *GAP_GUARDS) \
-                    or name in latches:
+                    or name in latches or name in law_events:
                 row.append(-1)
-            elif name in in_time:
-                row.append(1)
             else:
                 row.append(0)
         table.append(tuple(row))
@@ -656,6 +702,7 @@ def generate_module(model: Model, free: tuple[str, ...] | None = None) -> str:
     by_name = {p.name: p for p in scene.params()}
     free_params = [by_name[n] for n in free]
     fixed = [p for p in scene.params() if p.name not in free]
+    constant = [p for p in fixed if p.name not in scheduled(model)]   # schedule entries are arrays instead
     constants = {
         "SCENE": scene.name, "DESCRIPTION": scene.description, "SCENE_DIGEST": scene.digest, "EQUATIONS": scene.equations,
         "STATES": tuple(str(s) for s in model.states), "MODES": tuple(m.name for m in model.modes),
@@ -666,6 +713,7 @@ def generate_module(model: Model, free: tuple[str, ...] | None = None) -> str:
         "PARAM_NAMES": tuple(p.name for p in free_params), "PARAM_UNITS": tuple(p.unit for p in free_params),
         "PARAM_DEFAULTS": tuple(p.value for p in free_params), "FIXED": {p.name: p.value for p in fixed},
         "LATCH_NAMES": latch_names(model), "GUARD_LATCH": guard_latches(model, free),
+        "GUARD_PIECES": guard_pieces(model),
         "MODE_D": tuple(_short(m.denominator) if m.denominator is not None else "" for m in model.modes),
         "PARAM_CHECKS": _parameter_checks(model, free),
         "OBSERVABLES": tuple(map(str, OBSERVABLES)), "OUTPUTS": ("a1", "S1", "S2", "F1", "F2"),
@@ -679,8 +727,8 @@ def generate_module(model: Model, free: tuple[str, ...] | None = None) -> str:
     env.filters["comment"] = _comment
     body = env.get_template("module.py.j2").render(
         scene=scene, model=model, functions=functions, calls=em.calls,
-        sources={p.name: source_form(p.value, scene.written.get(p.key), p.name) for p in fixed},
-        free=free_params, latches=model.latches, fixed=fixed,
+        sources={p.name: source_form(p.value, scene.written.get(p.key), p.name) for p in constant},
+        free=free_params, latches=model.latches, fixed=constant, schedules=_schedule_data(model, free),
         pieces=model.pieces, derived=em.derived_constants(), guards_function=guards_function, impact=impact,
         rates=_rate_sources(model), accelerations=_further_accelerations(model),
         load_factors=load_factors,

@@ -19,7 +19,7 @@ import jinja2
 import sympy as sp
 
 from derivation import audit, mechanics as M
-from derivation.model import Model
+from derivation.model import Model, param_symbol
 
 FLANK_WORDS = {"a": "flank a (body 1 pushes body 2)", "b": "flank b (body 2 pushes body 1)"}
 
@@ -39,7 +39,7 @@ class Section:
         self.blocks.append(("table", spec, header, rows))
 
 
-_SHORT_NAME = re.compile(r"([A-Za-z]|alpha|beta|gamma|delta|epsilon|mu|phi|psi|rho|tau|omega)(\d*)")
+_SHORT_NAME = re.compile(r"([A-Za-z]|alpha|beta|gamma|delta|epsilon|mu|phi|psi|Psi|rho|tau|omega)(\d*)")
 
 
 STATE_LATEX = {"gap": "g", "gap_rate": "\\dot g"}   # the clearance's states, as the text names them
@@ -291,16 +291,33 @@ def _laws_section(model: Model) -> Section:
         s.text("The Kloss curve $2F_{max}/(s/s_{max} + s_{max}/s)$ is singular at synchronous speed ($s = 0$); "
                "brought over a common denominator, as above, it is regular there.")
     for pieces in model.pieces:
-        s.text(f"The law is piecewise: ${_l(pieces.symbol)}$ is its {pieces.doc}, the number of the events below "
-               "whose function is $\\ge 0$. The runtime latches it at the start and after each of these events, "
-               "so inside a segment the law is one smooth piece and no integration step sees it jump.")
-    for e in model.events:
-        s.text(f"Event: {e.doc}, where ${_l(e.expr)}$ changes sign.")
+        s.text(f"The law is piecewise: ${_l(pieces.symbol)}$ is its {pieces.doc} ({pieces.count} pieces). The "
+               "runtime latches it at the start and after each event of the law, so inside a segment the law is "
+               "one smooth piece and no integration step sees it jump.")
+        if pieces.schedule is not None:
+            _schedule_text(s, pieces.schedule)
+        e = pieces.event
+        s.text(f"Event `{e.name}`: {e.doc}, where ${_l(e.expr)}$ falls through zero: it is $\\ge 0$ while the state "
+               "lies in the latched piece, and the runtime latches the piece in which it is $\\ge 0$ again.")
     for latch in model.latches:
         s.text(f"Latch ${_l(latch.symbol)}$: {latch.doc}. While ${_l(latch.armed)}$ the guard ${_l(latch.guard)}$ "
                f"($S_1$ of the current mode) is watched; ${_l(latch.symbol)}$ is $+\\infty$ until it falls through "
                "zero, and that time from then on.")
     return s
+
+
+def _schedule_text(s: Section, schedule) -> None:
+    """What the schedule's piece symbols are: entries of its arrays at the latched piece."""
+    lower, upper, level, slope, origin = (f"${_l(x)}$" for x in schedule.piece_symbols)
+    at, values = (f"${_l(param_symbol(e[0]))}, \\dots, {_l(param_symbol(e[-1]))}$" if len(e) > 1
+                  else f"${_l(param_symbol(e[0]))}$" for e in (schedule.breakpoints, schedule.values))
+    s.text(f"The {schedule.owner} schedule's {len(schedule.breakpoints)} breakpoints ({at}) and "
+           f"{len(schedule.values)} values ({values}) "
+           f"are data, arrays of the generated module, not one expression per piece: {lower} and {upper} are the "
+           f"breakpoints around the latched piece ($\\mp\\infty$ beyond the first and the last), {level} the force "
+           f"at {origin} and {slope} its slope in the piece ({schedule.shape}: "
+           + ("the piece's value, slope 0)." if schedule.shape == "steps" else
+              "the line between the values at the two breakpoints, slope 0 before the first and after the last)."))
 
 
 def _slide_mode(s: Section, mode) -> None:
@@ -437,12 +454,16 @@ def render(doc: dict, target: str) -> str:
 def write_documents(model: Model, *, latex=None, markdown=None, pdf=None) -> list[Path]:
     """Write the document of ``model`` as Markdown, LaTeX and a PDF (``pdf``: a path, or True for
     the LaTeX file's name, else SCENE-derivation.pdf; needs pdflatex); the paths written."""
+    if not (latex or markdown or pdf):
+        return []
+    return write_built(build_document(model), model.scene.name, latex=latex, markdown=markdown, pdf=pdf)
+
+
+def write_built(doc: dict, name: str, *, latex=None, markdown=None, pdf=None) -> list[Path]:
+    """Write a built document (``build_document``'s shape) for scene ``name``; see write_documents."""
     from derivation.latex import build_pdf
     from tswm_common.files import write_atomic
 
-    if not (latex or markdown or pdf):
-        return []
-    doc = build_document(model)
     written = []
     if markdown:
         written.append(write_atomic(markdown, render(doc, "markdown")))
@@ -451,6 +472,6 @@ def write_documents(model: Model, *, latex=None, markdown=None, pdf=None) -> lis
         if latex:
             written.append(write_atomic(latex, tex))
         if pdf:
-            target = Path(pdf if not isinstance(pdf, bool) else (latex or f"{model.scene.name}-derivation.tex"))
+            target = Path(pdf if not isinstance(pdf, bool) else (latex or f"{name}-derivation.tex"))
             written.append(build_pdf(tex, target.with_suffix(".pdf")))
     return written

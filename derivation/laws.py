@@ -4,7 +4,10 @@ Each force builder takes the scene's ``Law`` and a function that maps a ``Param`
 symbol, and returns the expression together with its ``Pieces`` when the law is
 piecewise (a step, a spring contact, a schedule): the law is then written in terms of a
 piece index that the runtime latches per segment, so no integration step ever sees the
-law jump or kink; the breakpoints are events (segment boundaries) instead.
+law jump or kink; the breakpoints are events (segment boundaries) instead, through one
+event function per law whose target moves with the piece. A schedule's breakpoints and
+values are data (``Schedule``), arrays of the emitted module: however many breakpoints it
+has, the law is one expression in the piece in force.
 """
 from __future__ import annotations
 
@@ -21,7 +24,8 @@ SymbolOf = Callable[[Param], sp.Symbol]
 
 @dataclass(frozen=True)
 class LawEvent:
-    """A breakpoint of a law: ``expr`` rises through 0 where the law passes it."""
+    """The event of a piecewise law: ``expr``, how far the state lies inside the latched piece,
+    is >= 0 there and falls through 0 where the state leaves it (either way)."""
 
     name: str
     expr: sp.Expr
@@ -29,16 +33,44 @@ class LawEvent:
 
 
 @dataclass(frozen=True)
+class Schedule:
+    """A schedule's breakpoints and values: data, arrays of the emitted module (a free entry is
+    read from p), never one expression per piece. The law and its event are written in the
+    symbols of the piece in force, which the module reads from the arrays at the latched piece:
+    the breakpoints around it and its line, force = level + slope (variable - origin)."""
+
+    owner: str                   # "load" or "drive"
+    shape: str                   # "steps" or "linear"
+    variable: str                # "t" or "x2"
+    breakpoints: tuple[Param, ...]
+    values: tuple[Param, ...]
+    lower: sp.Symbol             # the breakpoint below the piece (-inf before the first)
+    upper: sp.Symbol             # the breakpoint above it (+inf after the last)
+    level: sp.Symbol             # the force at origin
+    slope: sp.Symbol             # d force / d variable inside the piece (0 for steps, outside the breakpoints)
+    origin: sp.Symbol            # where the piece's line has the force level
+
+    @property
+    def piece_symbols(self) -> tuple[sp.Symbol, ...]:
+        """In the order the module's piece function returns them."""
+        return self.lower, self.upper, self.level, self.slope, self.origin
+
+
+@dataclass(frozen=True)
 class Pieces:
-    """A piecewise law's latched piece index: the number of its events whose expr is >= 0.
+    """A piecewise law's latched piece index: the number of its breakpoints the state has passed.
 
     The runtime sets ``symbol`` (a slot of the parameter vector) at the start and after
-    every event of the law, so inside a segment the law is one smooth piece.
+    every event of the law, so inside a segment the law is one smooth piece. ``event``
+    is the law's one event function, written in the latched piece: it tells whether the
+    state lies in a piece, which is how the runtime finds the piece to latch.
     """
 
     symbol: sp.Symbol
-    events: tuple[LawEvent, ...]
+    event: LawEvent
+    count: int                   # number of pieces (breakpoints + 1)
     doc: str
+    schedule: Schedule | None = None
 
 
 def piecewise(index: sp.Symbol, pieces: list[sp.Expr]) -> sp.Expr:
@@ -52,21 +84,24 @@ def kloss_textbook(Fmax: sp.Expr, slip: sp.Expr, slip_max: sp.Expr) -> sp.Expr:
     return 2 * Fmax / (slip / slip_max + slip_max / slip)
 
 
-def _schedule(law: Law, sym: SymbolOf, owner: str, variable: sp.Expr) -> tuple[sp.Expr, Pieces]:
-    """A schedule in t or x2: piecewise constant ("steps") or linear between breakpoints."""
-    at = [sym(p) for p in law.breakpoints]
-    values = [sym(p) for p in law.values]
-    if law.options["shape"] == "steps":
-        pieces = values                      # values[k] after breakpoint k (values[0] before the first)
-    else:
-        pieces = [values[0]] + [values[k] + (values[k + 1] - values[k]) * (variable - at[k]) / (at[k + 1] - at[k])
-                                for k in range(len(at) - 1)] + [values[-1]]
-    name = law.options["variable"]
-    events = tuple(LawEvent(f"{owner}_at{k + 1}", variable - a, f"the {owner} schedule passes {name} = {a}")
-                   for k, a in enumerate(at))
+def _two_pieces(index: sp.Symbol, pieces: list[sp.Expr], past: sp.Expr, event: tuple[str, str],
+                doc: str) -> tuple[sp.Expr, Pieces]:
+    """A law of two pieces, the second where ``past`` >= 0; ``event`` is its (name, doc)."""
+    return piecewise(index, pieces), Pieces(index, LawEvent(event[0], piecewise(index, [-past, past]), event[1]),
+                                            2, doc)
+
+
+def _schedule(law: Law, owner: str, variable: sp.Expr) -> tuple[sp.Expr, Pieces]:
+    """A schedule in t or x2: piecewise constant ("steps") or linear between breakpoints, as data."""
+    name, shape = law.options["variable"], law.options["shape"]
+    symbols = [sp.Symbol(f"{owner}_{s}", real=True) for s in ("lower", "upper", "level", "slope", "origin")]
+    schedule = Schedule(owner, shape, name, law.breakpoints, law.values, *symbols)
+    force = schedule.level if shape == "steps" else schedule.level + schedule.slope * (variable - schedule.origin)
+    event = LawEvent(f"{owner}_schedule", sp.Min(variable - schedule.lower, schedule.upper - variable),
+                     f"the {owner} schedule passes a breakpoint in {name}")
     index = sp.Symbol(f"{owner}_piece", real=True)
-    doc = f"piece of the {owner} schedule in {name} ({law.options['shape']}): breakpoints passed"
-    return piecewise(index, pieces), Pieces(index, events, doc)
+    doc = f"piece of the {owner} schedule in {name} ({shape}): breakpoints passed"
+    return force, Pieces(index, event, len(law.breakpoints) + 1, doc, schedule)
 
 
 def drive_force(law: Law, sym: SymbolOf, x2: sp.Expr) -> tuple[sp.Expr, Pieces | None]:
@@ -80,7 +115,7 @@ def drive_force(law: Law, sym: SymbolOf, x2: sp.Expr) -> tuple[sp.Expr, Pieces |
     if law.kind == "linear":
         return p["F0"] * (1 - v1 / p["V0"]), None
     if law.kind == "schedule":
-        return _schedule(law, sym, "drive", t if law.options["variable"] == "t" else x2)
+        return _schedule(law, "drive", t if law.options["variable"] == "t" else x2)
     raise ValueError(f"drive.law = {law.kind!r}: not a drive law")
 
 
@@ -91,16 +126,15 @@ def load_force(law: Law, sym: SymbolOf, x2: sp.Expr) -> tuple[sp.Expr, Pieces | 
         return p["F2"], None
     index = sp.Symbol("load_piece", real=True)
     if law.kind == "step":
-        event = LawEvent("load_step", t - p["t_step"], "the load steps at t = t_step")
-        return (piecewise(index, [p["F2_before"], p["F2_after"]]),
-                Pieces(index, (event,), "piece of the step load: 1 from t = t_step on"))
+        return _two_pieces(index, [p["F2_before"], p["F2_after"]], t - p["t_step"],
+                           ("load_step", "the load steps at t = t_step"), "piece of the step load: 1 from t = t_step on")
     if law.kind == "spring":
         squeeze = x2 - p["x2_contact"]
-        event = LawEvent("load_contact", squeeze, "body 2 reaches the spring at x2 = x2_contact")
-        return (piecewise(index, [sp.Integer(0), -(p["preload"] + p["k"] * squeeze)]),
-                Pieces(index, (event,), "piece of the spring load: 1 while body 2 presses the spring"))
+        return _two_pieces(index, [sp.Integer(0), -(p["preload"] + p["k"] * squeeze)], squeeze,
+                           ("load_contact", "body 2 reaches the spring at x2 = x2_contact"),
+                           "piece of the spring load: 1 while body 2 presses the spring")
     if law.kind == "schedule":
-        return _schedule(law, sym, "load", t if law.options["variable"] == "t" else x2)
+        return _schedule(law, "load", t if law.options["variable"] == "t" else x2)
     raise ValueError(f"load.law = {law.kind!r}: not a load law")
 
 

@@ -104,7 +104,7 @@ class Model:
     symbols: dict[str, sp.Symbol]        # parameter name -> symbol
     states: tuple[sp.Symbol, ...]        # (x1, v1), or (v1,) when no law reads x1
     laws: tuple[Quantity, ...]           # in evaluation order
-    events: tuple[laws.LawEvent, ...]    # where a law jumps or kinks: the breakpoints of its pieces
+    events: tuple[laws.LawEvent, ...]    # one per piecewise law: the state leaves the latched piece
     switching: sp.Expr                   # phi
     modes: tuple[Mode, ...]
     stick: StickConditions | None
@@ -166,7 +166,7 @@ def _laws(scene: Scene, rho_of: dict[str, sp.Symbol]) -> tuple[tuple[Quantity, .
     load, load_pieces = laws.load_force(scene.load, param_symbol, mechanics.x3 if scene.lost_motion else x2)
     drive, doc, latches, drive_pieces = _drive(scene, x2)
     quantities = []
-    breakpoints = [e.expr for p in (load_pieces, drive_pieces) if p is not None for e in p.events]
+    breakpoints = [p.event.expr for p in (load_pieces, drive_pieces) if p is not None]
     if scene.lost_motion or x2 in set().union(load.free_symbols, drive.free_symbols,
                                               *(e.free_symbols for e in breakpoints)):
         if scene.clearance is None:
@@ -385,7 +385,7 @@ def build_model(scene: Scene) -> Model:
     for q in quantities:     # a parameter may carry a law's name only if it is that law (constant F1, F2)
         assert str(q.symbol) not in symbols or q.expr == q.symbol, f"parameter {q.symbol} shadows the law {q.doc}"
     return Model(scene=scene, symbols=symbols, states=states,
-                 laws=quantities, events=tuple(e for p in pieces for e in p.events), switching=switching,
+                 laws=quantities, events=tuple(p.event for p in pieces), switching=switching,
                  modes=tuple(modes), stick=stick, latches=latches, pieces=pieces,
                  clearance=param_symbol(scene.clearance) if scene.clearance else None, impacts=impacts,
                  body2=body2, pickup=pickup)

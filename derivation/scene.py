@@ -34,6 +34,10 @@ class SceneError(ValueError):
     """A scene that cannot be used; the message names file, dotted key, value and allowed range."""
 
 
+class ChainSceneGiven(SceneError):
+    """A chain scene ([[stage]] tables) given to the one-stage reader: derivation.chain.scene reads it."""
+
+
 @dataclass(frozen=True)
 class Param:
     """One model parameter, in SI; free ones are read from a parameter vector at run time."""
@@ -207,16 +211,21 @@ def parse_scene(text: str, source: str = "<string>") -> Scene:
     return _parse(text.encode("utf-8"), source)
 
 
-def _parse(data: bytes, source: str) -> Scene:
+def read_toml(data: bytes, source: str) -> dict:
+    """A scene file's TOML document, refusing oversized, undecodable or too deeply nested files."""
     if len(data) > MAX_SCENE_BYTES:
         raise SceneError(f"{printable(source)}: {len(data)} bytes: a scene file must be at most {MAX_SCENE_BYTES} bytes")
     try:
-        doc = tomllib.loads(data.decode("utf-8"))
+        return tomllib.loads(data.decode("utf-8"))
     except (UnicodeDecodeError, tomllib.TOMLDecodeError) as err:
         raise SceneError(f"{printable(source)}: not a valid UTF-8 TOML file: {printable(err)}") from err
     except RecursionError:
         raise SceneError(f"{printable(source)}: not a usable TOML file: its arrays or tables are nested too deeply "
                          "(a scene nests tables two levels deep)") from None
+
+
+def _parse(data: bytes, source: str) -> Scene:
+    doc = read_toml(data, source)
     try:
         return _Reader(source).scene(doc, hashlib.sha256(data).hexdigest())
     except RecursionError:   # writing a deeply nested value back for a message
@@ -622,6 +631,10 @@ class _Reader:
         return Run(**{**value, "max_steps": int(value["max_steps"])}, method=method)
 
     def scene(self, doc: dict, digest: str) -> Scene:
+        if "stage" in doc:
+            raise ChainSceneGiven(f"{printable(self.source)}: stage: a chain of stages ([[stage]] tables, "
+                                  "docs/scene-format.md, \"Chains\") is derivation only, not yet simulated: "
+                                  "derivation.chain.scene reads it")
         self.keys(doc, "", TOP_KEYS)
         name = self.text(doc, "name", "", pattern=NAME)
         description = self.text(doc, "description", "", default="")

@@ -118,7 +118,7 @@ def test_velocity_friction_law_in_degrees():
     assert math.degrees(float(rho.subs(values).subs(M.v1, -v))) == pytest.approx(expected)
 
 
-def test_step_load_is_piecewise_in_its_latched_piece_with_a_time_event():
+def test_step_load_is_piecewise_in_its_latched_piece_with_one_event_in_that_piece():
     model = build_model(load_scene("asymmetric"))
     F2 = {q.symbol: q.expr for q in model.laws}[M.F2]
     t_step, piece = sp.Symbol("t_step", real=True), sp.Symbol("load_piece", real=True)
@@ -126,7 +126,10 @@ def test_step_load_is_piecewise_in_its_latched_piece_with_a_time_event():
     assert F2.subs(piece, 0) == sp.Symbol("F2_before", real=True)
     assert F2.subs(piece, 1) == sp.Symbol("F2_after", real=True)
     assert [p.symbol for p in model.pieces] == [piece]
-    assert [(e.name, e.expr) for e in model.events] == [("load_step", M.t - t_step)]
+    # the event: how far t lies inside the latched piece (t_step - t before the step, t - t_step after)
+    (event,) = model.events
+    assert event.name == "load_step" and [p.count for p in model.pieces] == [2]
+    assert event.expr.subs(piece, 0) == t_step - M.t and event.expr.subs(piece, 1) == M.t - t_step
     assert paper.PSI_TRACTIVE == sp.tan(M.gamma + M.rho)
 
 

@@ -140,16 +140,6 @@ def test_misfit_plot_shades_the_confidence_band_and_says_when_it_is_too_narrow_t
     _legends_clear_of_data(fig)
 
 
-def test_misfit_plot_shades_further_bands():
-    """The paper report adds the profile interval to the lost-motion fit's plot."""
-    fig = misfit_figure(_fit_result((0.0099999, 0.0100001)), bands=(("95% profile interval", 0.009, 0.018),))
-    fig.canvas.draw()
-    band = [p for p in fig.axes[0].patches if p.get_label().startswith("95% profile interval [0.009, 0.018]")]
-    assert len(band) == 1 and 0 < band[0].get_alpha() < 1
-    _titles_fit(fig)
-    _legends_clear_of_data(fig)
-
-
 def test_misfit_plot_without_a_finite_interval_says_so():
     fig = misfit_figure(_fit_result((-math.inf, math.inf)))
     entries = [t.get_text() for t in fig.legends[0].get_texts()]

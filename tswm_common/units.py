@@ -15,6 +15,8 @@ UNITS: dict[str, dict[str, float]] = {
     "time": {"s": 1.0, "ms": 1e-3},
     "stiffness": {"N/m": 1.0, "N/mm": 1e3, "kN/mm": 1e6},
     "damping": {"N s/m": 1.0, "kN s/m": 1e3},
+    "inertia": {"kg m^2": 1.0, "g m^2": 1e-3},      # moment of inertia of a rotating body (chains)
+    "torque": {"N m": 1.0, "kN m": 1e3},
     "dimensionless": {"": 1.0},
 }
 DISPLAY = {"angle": "deg"}  # unit used in messages where it is not the SI unit
@@ -31,6 +33,8 @@ LIMITS: dict[str, tuple[float | None, float]] = {
     "time": (None, 1e9),
     "stiffness": (None, 1e15),
     "damping": (None, 1e12),
+    "inertia": (1e-12, 1e9),
+    "torque": (None, 1e12),
 }
 
 _QUANTITY = re.compile(r"\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*(.*?)\s*")

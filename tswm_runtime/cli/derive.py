@@ -18,9 +18,12 @@ def run(args: argparse.Namespace) -> int:
     from derivation.audit import audit
     from derivation.document import write_documents
     from derivation.model import build_model
-    from derivation.scene import load_scene
+    from derivation.scene import ChainSceneGiven, load_scene
 
-    scene = load_scene(args.scene)
+    try:
+        scene = load_scene(args.scene)
+    except ChainSceneGiven:
+        return _derive_chain(args)
     model = build_model(scene)
     print(f"scene {scene.name} ({scene.source}): equations {scene.equations}, flanks {', '.join(scene.flanks)}")
     print(f"  modes: {', '.join(f'{m.name} ({m.regime})' for m in model.modes)}")
@@ -28,5 +31,29 @@ def run(args: argparse.Namespace) -> int:
           f"{', '.join(p.name for p in scene.free_params()) or 'none'}")
     print("  audit: " + "; ".join(f"eq. {e.equation} {'agrees' if e.agrees else 'differs'}" for e in audit()))
     for path in write_documents(model, latex=args.latex, markdown=args.markdown, pdf=args.pdf):
+        print(f"  wrote {path}")
+    return 0
+
+
+def _derive_chain(args: argparse.Namespace) -> int:
+    """A chain of stages: derivation only (its stages, its modes, the decision at rest, the document)."""
+    import math
+
+    from derivation.chain.document import write_chain_documents
+    from derivation.chain.dynamics import reachable
+    from derivation.chain.scene import load_chain
+    from derivation.chain.selector import decide
+
+    chain = load_chain(args.scene)
+    values = chain.values()
+    print(f"chain {chain.name} ({chain.source}): {len(chain.stages)} stages, derivation only (not yet simulated)")
+    for k, stage in enumerate(chain.stages):
+        locks = "self-locking" if values.rho[k] >= values.gamma[k] else "not self-locking"
+        print(f"  stage {k + 1}: {stage.kind}, gamma {math.degrees(values.gamma[k]):.6g} deg, "
+              f"rho' {math.degrees(values.rho[k]):.6g} deg, {locks}")
+    print(f"  modes: {len(reachable(values.flanks))} sliding modes the flanks allow, and resting")
+    decision = decide(values, 0.0)
+    print(f"  at rest under the scene's forces: {decision.outcome}: {', '.join(decision.modes) or 'no mode'}")
+    for path in write_chain_documents(chain, latex=args.latex, markdown=args.markdown, pdf=args.pdf):
         print(f"  wrote {path}")
     return 0

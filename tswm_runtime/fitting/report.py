@@ -19,12 +19,11 @@ if TYPE_CHECKING:
     from tswm_runtime.fitting.fit import FitResult
 
 
-def misfit_figure(res: FitResult, bands: tuple = ()):
+def misfit_figure(res: FitResult):
     """The misfit plot: cost over one parameter (curve) or two (contour of log10 cost), the
     optimum, the starts' ends and the confidence band (one parameter) or the linearised joint
     confidence region (two), shaded; the legend, below the axes, says when a band is narrower
-    than the optimum's line. ``bands``: further intervals of the one parameter, (name, lo, hi),
-    as the paper report's profile interval."""
+    than the optimum's line."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
@@ -46,8 +45,6 @@ def misfit_figure(res: FitResult, bands: tuple = ()):
         ax.set_xlabel(label[0])
         ax.set_ylabel("cost (log scale)")
         _band(ax, f"{res.confidence:.0%} profile interval", *res.ci[names[0]], xs, "C3")
-        for (name, lo, hi), colour in zip(bands, ("C2", "C4", "C1")):
-            _band(ax, name, lo, hi, xs, colour)
     else:
         xs, ys = (np.array(a) for a in g["axes"])
         cost = np.log10(np.maximum(np.array(g["cost"]), 1e-300))
@@ -112,10 +109,10 @@ def _region(ax, res: FitResult, names: list[str]) -> None:
     ax.add_patch(Polygon(points, closed=True, facecolor="C3", edgecolor="C3", alpha=0.35, label=text))
 
 
-def misfit_png(res: FitResult, bands: tuple = ()) -> bytes:
+def misfit_png(res: FitResult) -> bytes:
     """The misfit plot (``misfit_figure``) as PNG bytes."""
     buffer = io.BytesIO()
-    misfit_figure(res, bands).savefig(buffer, format="png", dpi=120)
+    misfit_figure(res).savefig(buffer, format="png", dpi=120)
     return buffer.getvalue()
 
 

@@ -36,8 +36,8 @@ from tswm_runtime.jit import cache_guard
 from tswm_runtime.jit.addresses import function_at
 from tswm_runtime.jit.cache_guard import njit
 from tswm_runtime.jit.signatures import MATRIX
-from tswm_runtime.jit.structures import (JUMP_WIDTH, MODE_TABLES, SETTINGS, START, EventLog, Outputs, Record,
-                                         Settings, Start, Tolerances)
+from tswm_runtime.jit.structures import (INDEX_WIDTH, JUMP_WIDTH, MODE_TABLES, SETTINGS, START, EventLog, Outputs,
+                                         Record, Settings, Start, Tolerances)
 
 F_T_STOP, F_S1M, F_TS1M, F_S2M, F_TS2M, F_X1, F_V1, F_IMPACT_E = range(8)
 N_F = 8
@@ -64,7 +64,7 @@ def _case_record(t_end, width, n_params, max_events, n_obs):
     """A case's Record: one output point (the state at t_end), an event log of max_events, the
     maxima of n_obs observables, the counters."""
     out = Outputs(np.full(1, t_end), np.full((1, width), np.nan), np.empty(1, np.int64), np.empty((1, n_params)))
-    log = EventLog(np.empty(max_events), np.empty((max_events, 3), np.int64), np.empty((max_events, width)),
+    log = EventLog(np.empty(max_events), np.empty((max_events, INDEX_WIDTH), np.int64), np.empty((max_events, width)),
                    np.zeros((max_events, JUMP_WIDTH)))
     return Record(out, log, np.zeros((n_obs, 3)), np.zeros(segment.N_COUNTERS, np.int64))
 

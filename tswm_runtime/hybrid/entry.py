@@ -18,8 +18,8 @@ from tswm_runtime.integration import segment
 from tswm_runtime.jit.addresses import function_at, guards_at, jac_at, rhs_at
 from tswm_runtime.jit.cache_guard import njit
 from tswm_runtime.jit.signatures import GUARDS_SIG, JAC_SIG, RHS_SIG, address, jit_address
-from tswm_runtime.jit.structures import (JUMP_WIDTH, EventLog, Functions, Outputs, Record, Settings, Start,
-                                         Tolerances)
+from tswm_runtime.jit.structures import (INDEX_WIDTH, JUMP_WIDTH, EventLog, Functions, Outputs, Record, Settings,
+                                         Start, Tolerances)
 
 _machine_at = function_at(types.FunctionType(HYBRID_SIG), raises=True)
 _attempt_at = function_at(segment.AttemptFunction)
@@ -85,7 +85,7 @@ def integrate(method, model, p, tables, y0, t_end, *, rtol, atol, t_out, max_eve
     t_out = np.ascontiguousarray(t_out, dtype=np.float64)
     out = Outputs(t_out, np.full((t_out.size, width), np.nan), np.full(t_out.size, -1, np.int64),
                   np.empty((t_out.size, p.size)))
-    log = EventLog(np.empty(max_events), np.empty((max_events, 3), np.int64), np.empty((max_events, width)),
+    log = EventLog(np.empty(max_events), np.empty((max_events, INDEX_WIDTH), np.int64), np.empty((max_events, width)),
                    np.zeros((max_events, JUMP_WIDTH)))
     mon, counters = np.zeros((len(model.OBSERVABLES), 3)), np.zeros(segment.N_COUNTERS, np.int64)
     atol = (np.full(y0.size, atol, dtype=np.float64) if np.ndim(atol) == 0

@@ -62,6 +62,10 @@ INCONSISTENT = -6  # D <= 0 or jam factor <= 0 in the mode the state asks for.
 UNDECLARED = -7  # The state needs a mode the scene does not declare (see NEED_*).
 CHATTERING = -8  # MAX_SAME_TIME events at one instant.
 TOO_MANY_EVENTS = -9  # The event log is full.
+INDETERMINATE = -10  # At rest at the start the contact conditions admit no mode or several.
+
+# How a sliding mode meets the contact conditions at rest (``_slide_at_rest``).
+NO, REGULAR, SINGULAR = 0, 1, 2
 
 # What an UNDECLARED stop needs.
 NEED_NOTHING, NEED_STICK, NEED_FORWARD, NEED_BACKWARD, NEED_FLANK = 0, 1, 2, 3, 4
@@ -454,18 +458,47 @@ def _consistent(mode, guards, t, y, p, tables, g):
 
 
 @njit(error_model="numpy")
-def _latch_pieces(guards, t, y, p, tables, g):
-    """Set every piecewise law's latched piece in p: the number of its breakpoint guards
-    that are >= 0 at (t, y). A located event lies strictly past its breakpoint, so the
-    piece is the one the state has entered (the right limit)."""
-    guard_kind, guard_latch = tables.guard_kind, tables.guard_latch
-    for k in range(guard_kind.size):
-        if guard_kind[k] == G_LAW:
-            p[guard_latch[k]] = 0.0
+def _inside(k, piece, guards, t, y, p, tables, g):
+    """Whether (t, y) lies in ``piece`` of the law whose event is guard k (its guard is >= 0
+    there); leaves that piece latched in p."""
+    p[tables.guard_latch[k]] = piece
     guards(0, t, y, p, g)
-    for k in range(guard_kind.size):
-        if guard_kind[k] == G_LAW and g[k] >= 0.0:
-            p[guard_latch[k]] += 1.0
+    return g[k] >= 0.0
+
+
+@njit(error_model="numpy")
+def _locate_piece(k, guards, t, y, p, tables, g):
+    """Latch in p the piece of guard k's law that (t, y) lies in, searched outward from the
+    piece in force: an event passes one breakpoint, so this costs a few guard calls however
+    many pieces the law has. On a breakpoint the later piece is taken (the right limit; a
+    located event lies strictly past its breakpoint anyway). Returns the breakpoint passed,
+    counted from 1 (the higher of the two pieces' numbers), 0 if the piece is unchanged."""
+    last = tables.guard_pieces[k] - 1
+    old = int(p[tables.guard_latch[k]])
+    found = -1
+    for d in range(last + 1):
+        if old + d <= last and _inside(k, old + d, guards, t, y, p, tables, g):
+            found = old + d
+            break
+        if 0 < d <= old and _inside(k, old - d, guards, t, y, p, tables, g):
+            found = old - d
+            break
+    if found < 0:  # in no piece (a state that is not finite): keep the piece in force
+        p[tables.guard_latch[k]] = old
+        return 0
+    while found < last and _inside(k, found + 1, guards, t, y, p, tables, g):
+        found += 1
+    p[tables.guard_latch[k]] = found
+    return max(old, found) if found != old else 0
+
+
+@njit(error_model="numpy")
+def _latch_pieces(guards, t, y, p, tables, g):
+    """Set every piecewise law's latched piece in p at the start: the piece (t, y) lies in."""
+    for k in range(tables.guard_kind.size):
+        if tables.guard_kind[k] == G_LAW:
+            p[tables.guard_latch[k]] = 0.0
+            _locate_piece(k, guards, t, y, p, tables, g)
 
 
 @njit(error_model="numpy")
@@ -492,12 +525,12 @@ def _observe_max(observe, mode, t, y, p, mon, obs):
 
 
 @njit(error_model="numpy")
-def _log(log, n_ev, t, k, mode_from, mode_to, y, quad, jump):
-    """Append an event (time, guard, from, to, state, impact jump) to the EventLog."""
+def _log(log, n_ev, t, k, mode_from, mode_to, breakpoint, y, quad, jump):
+    """Append an event (time, guard, from, to, breakpoint passed, state, impact jump) to the EventLog."""
     n = y.size
     log.jump[n_ev, :] = jump
     log.t[n_ev] = t
-    log.index[n_ev, 0], log.index[n_ev, 1], log.index[n_ev, 2] = k, mode_from, mode_to
+    log.index[n_ev, 0], log.index[n_ev, 1], log.index[n_ev, 2], log.index[n_ev, 3] = k, mode_from, mode_to, breakpoint
     log.state[n_ev, :n] = y
     log.state[n_ev, n:] = quad
     return n_ev + 1
@@ -526,30 +559,135 @@ def _valid(tables, start, settings, record):
 
 
 @njit(error_model="numpy")
-def _first_mode(fns, tables, start, y, p, tol, w):
-    """(mode, need) the run starts in at (start.t, y): start.mode, or (-1) free flight off
-    the flanks, compliant contact where pressed onto one, at rest or sliding the way v1 points;
-    a carried stem pulled off at once is released first."""
+def _slide_at_rest(m, flank, direction, rhs, guards, t, y, p, tables, g, f):
+    """How sliding mode ``m`` (on ``flank``, in ``direction``) meets the contact conditions at
+    rest at (t, y): REGULAR (D > 0, jam > 0, the contact force N >= 0 and a1 the way it slides),
+    SINGULAR (the same with D <= 0: a Painleve solution no integration can follow), else NO.
+    The contact force on ``flank`` has the sign of flank phi / D (S2 = -m1 m2 phi / D)."""
+    guards(m, t, y, p, g)
+    phi, d = g[_guard(G_PHI, tables.guard_kind)], g[_guard(G_D, tables.guard_kind)]
+    k_jam = _guard(G_JAM, tables.guard_kind)
+    rhs(m, t, y, p, f)
+    if not direction * f[y.size - 1] > 0.0 or (k_jam >= 0 and g[k_jam] <= 0.0):
+        return NO
+    if d > 0.0:
+        return REGULAR if flank * phi >= 0.0 else NO
+    return SINGULAR if flank * phi * d >= 0.0 else NO
+
+
+@njit(error_model="numpy")
+def _start_at_rest(flank, rhs, guards, t, y, p, tol, tables, g, y_tmp, f):
+    """(mode, status, need) of a start at rest (v1 = 0) in contact, by the contact conditions
+    (the complementarity the machine applies at every event): stick where both friction cones
+    hold and the static contact force presses the touched flank; sliding in a direction where
+    D > 0, the contact force is >= 0 and a1 points that way; parting where free flight opens
+    the gap (its normal acceleration is -cos(gamma) phi: where touched flank phi < 0). ``flank``: the touched flank with a clearance, else 0 (both flanks, or a one-sided
+    scene's only one). Exactly one must hold. Several (a Painleve solution with D <= 0 beside
+    another) or none: status INDETERMINATE, need = the bit mask (1 << mode) of those that hold;
+    a Painleve solution alone: INCONSISTENT in that mode. A mode that holds but the scene does
+    not declare: UNDECLARED (a one-sided scene's parting: NEED_FLANK)."""
+    has_a, has_b = _mode(M_SLIDING, 1, 1, tables) >= 0 or _mode(M_SLIDING, 1, -1, tables) >= 0, \
+        _mode(M_SLIDING, -1, 1, tables) >= 0 or _mode(M_SLIDING, -1, -1, tables) >= 0
+    one_sided = flank == 0 and has_a != has_b
+    touched = flank if flank != 0 else ((1 if has_a else -1) if one_sided else 0)
+    holds, mask, chosen, need, singular = 0, 0, -1, NEED_NOTHING, -1
+    ms = _mode(M_STICK, 0, 0, tables)
+    if ms >= 0:
+        guards(ms, t, y, p, g)
+        pressed = touched == 0 or g[_guard(G_FLANK_N, tables.guard_kind)] * touched >= 0.0
+        if pressed and g[_guard(G_CONE_F, tables.guard_kind)] >= 0.0 and g[_guard(G_CONE_B, tables.guard_kind)] >= 0.0:
+            holds, mask, chosen = holds + 1, mask | (1 << ms), ms
+    for direction in (1, -1):
+        found = -1
+        for side in (1, -1):
+            m = _mode(M_SLIDING, side, direction, tables)
+            if m < 0 or (touched != 0 and side != touched):
+                continue
+            outcome = _slide_at_rest(m, side, direction, rhs, guards, t, y, p, tables, g, f)
+            if outcome == SINGULAR:
+                holds, mask, singular = holds + 1, mask | (1 << m), m
+            elif outcome == REGULAR:  # on both flanks only where phi = 0: the probe picks one
+                found = m if found < 0 else _sliding(direction, 0, rhs, guards, t, y, p, tol, tables, g, y_tmp, f)[0]
+        if found >= 0:
+            holds, mask, chosen = holds + 1, mask | (1 << found), found
+    if touched != 0 and touched * _phi(guards, t, y, p, tables, g) < 0.0:  # free flight opens the gap
+        holds, chosen = holds + 1, _mode(M_FREE, 0, 0, tables)  # (one-sided: none, NEED_FLANK)
+        mask, need = (mask | (1 << chosen), NEED_NOTHING) if chosen >= 0 else (mask, NEED_FLANK)
+    if holds == 1 and singular >= 0:
+        return singular, INCONSISTENT, NEED_NOTHING
+    if holds == 1:
+        return (chosen, FINISHED, NEED_NOTHING) if chosen >= 0 else (-1, UNDECLARED, need)
+    if holds > 1:
+        return -1, INDETERMINATE, mask
+    return _missing_at_rest(ms, touched, rhs, guards, t, y, p, tables, g, f)
+
+
+@njit(error_model="numpy")
+def _phi(guards, t, y, p, tables, g):
+    """The switching function phi at (t, y) (a guard of every sliding mode, the same in each)."""
+    for m in range(tables.kind.size):
+        if tables.kind[m] == M_SLIDING:
+            guards(m, t, y, p, g)
+            return g[_guard(G_PHI, tables.guard_kind)]
+    return 0.0
+
+
+@njit(error_model="numpy")
+def _missing_at_rest(ms, touched, rhs, guards, t, y, p, tables, g, f):
+    """(mode, status, need) where no declared mode meets the contact conditions at rest: the
+    sliding mode the violated friction cone points to (on the touched flank, else the flank phi
+    presses) is not declared (UNDECLARED), or has D <= 0 (INCONSISTENT: no contact force
+    exists); without a stick mode, stick is missing; else INDETERMINATE with no mode (mask 0)."""
+    if ms < 0:
+        return -1, UNDECLARED, NEED_STICK
+    guards(ms, t, y, p, g)
+    direction = 1 if g[_guard(G_CONE_F, tables.guard_kind)] < 0.0 else (
+        -1 if g[_guard(G_CONE_B, tables.guard_kind)] < 0.0 else 0)
+    if direction == 0:
+        return -1, INDETERMINATE, 0
+    side = touched if touched != 0 else (1 if _phi(guards, t, y, p, tables, g) >= 0.0 else -1)
+    m = _mode(M_SLIDING, side, direction, tables)
+    if m < 0:
+        return -1, UNDECLARED, NEED_FORWARD if direction > 0 else NEED_BACKWARD
+    return (m, INCONSISTENT, NEED_NOTHING) if not _consistent(m, guards, t, y, p, tables, g) else (
+        -1, INDETERMINATE, 0)
+
+
+@njit(error_model="numpy")
+def _entered(fns, tables, t0, y, p, tol, w):
+    """(mode, status, need) the state (t0, y) enters: free flight off the flanks, compliant
+    contact where pressed onto one, at rest by the contact conditions (``_start_at_rest``; the
+    printed equations, which have no contact force to test: the way the sliding acceleration
+    points), or sliding the way v1 points."""
     rhs = fns.rhs  # (one name a line: numba unifies a tuple of functions, with a warning)
     guards = fns.guards
     g, y_tmp, f = w.g, w.y_tmp, w.f
-    t0, mode, need = start.t, start.mode, NEED_NOTHING
+    v = y[y.size - 1]
+    m_free = _mode(M_FREE, 0, 0, tables)
+    flank = _touching(guards, t0, y, p, tables, g)
+    if m_free >= 0 and flank == 0:
+        return m_free, FINISHED, NEED_NOTHING
+    if _guard(G_MESH_N, tables.guard_kind) >= 0:
+        if _pressed(flank, rhs, t0, y, p, tables, f):
+            return _outcome(*_mesh_enter(flank, guards, t0, y, p, tables, g))
+        return m_free, FINISHED, NEED_NOTHING
+    if v == 0.0 and _guard(G_JAM, tables.guard_kind) >= 0:
+        return _start_at_rest(flank, rhs, guards, t0, y, p, tol, tables, g, y_tmp, f)
+    if v == 0.0:
+        return _outcome(*_at_rest(flank, rhs, guards, t0, y, p, tol, tables, g, y_tmp, f, True))
+    return _outcome(*_sliding(1 if v > 0.0 else -1, flank, rhs, guards, t0, y, p, tol, tables, g, y_tmp, f))
+
+
+@njit(error_model="numpy")
+def _first_mode(fns, tables, start, y, p, tol, w):
+    """(mode, status, need) the run starts in at (start.t, y): start.mode, or (-1) the mode the
+    state enters (``_entered``); a carried stem pulled off at once is released first."""
+    mode, status, need = start.mode, FINISHED, NEED_NOTHING
     if mode < 0:
-        v = y[y.size - 1]
-        m_free = _mode(M_FREE, 0, 0, tables)
-        flank = _touching(guards, t0, y, p, tables, g)
-        if m_free >= 0 and flank == 0:
-            mode = m_free
-        elif _guard(G_MESH_N, tables.guard_kind) >= 0:
-            mode, need = (_mesh_enter(flank, guards, t0, y, p, tables, g) if _pressed(flank, rhs, t0, y, p, tables, f)
-                          else (m_free, NEED_NOTHING))
-        elif v == 0.0:
-            mode, need = _at_rest(flank, rhs, guards, t0, y, p, tol, tables, g, y_tmp, f, True)
-        else:
-            mode, need = _sliding(1 if v > 0.0 else -1, flank, rhs, guards, t0, y, p, tol, tables, g, y_tmp, f)
-    if mode >= 0 and _released(mode, guards, t0, y, p, tables, g):  # carried from the start, pulled off at once
-        mode, need = _moving_on(0, rhs, guards, t0, y, p, tol, tables, g, y_tmp, f)
-    return mode, need
+        mode, status, need = _entered(fns, tables, start.t, y, p, tol, w)
+    if status == FINISHED and _released(mode, fns.guards, start.t, y, p, tables, w.g):  # carried from the start
+        mode, status, need = _entered(fns, tables, start.t, y, p, tol, w)
+    return mode, status, need
 
 
 @njit(error_model="numpy")
@@ -587,11 +725,13 @@ def _segment(fns, tables, settings, mode, p, state, record, i, scratch, singular
 
 @njit(error_model="numpy")
 def _latch(kind, k, t, y, p, tables, guards, g):
-    """The laws' latches in p after guard k (of ``kind``) fired at (t, y)."""
+    """The laws' latches in p after guard k (of ``kind``) fired at (t, y); returns the breakpoint
+    of a piecewise law passed there (``_locate_piece``), else 0."""
     if kind == G_TRIP:
         p[tables.guard_latch[k]] = t
     elif kind == G_LAW:
-        _latch_pieces(guards, t, y, p, tables, g)
+        return _locate_piece(k, guards, t, y, p, tables, g)
+    return 0
 
 
 @njit(error_model="numpy")
@@ -685,10 +825,10 @@ def integrate_hybrid(fns, tables, start, settings, record):
     k_d = _guard(G_D, tables.guard_kind)
     _latch_pieces(guards, t0, y, p, tables, g)
     _carry_at_start(fns.impact, guards, t0, y, p, tables, g, w.frame)
-    mode, need = _first_mode(fns, tables, start, y, p, settings.tol, w)
-    if mode < 0:
-        return UNDECLARED, t0, 0, -1, need, -1
-    if not _consistent(mode, guards, t0, y, p, tables, g):
+    mode, status, need = _first_mode(fns, tables, start, y, p, settings.tol, w)
+    if status != FINISHED and status != INCONSISTENT:  # UNDECLARED, or INDETERMINATE at rest
+        return status, t0, 0, -1, need, -1
+    if status == INCONSISTENT or not _consistent(mode, guards, t0, y, p, tables, g):
         _unbounded(observe, guards, mode, t0, y, p, -1, mon, w.obs, g)
         return INCONSISTENT, t0, 0, mode, NEED_NOTHING, mode
     first, status = mode, FINISHED
@@ -722,17 +862,17 @@ def integrate_hybrid(fns, tables, start, settings, record):
         if kind == G_D or kind == G_JAM:  # D or the jam factor of this mode reached 0
             if mon.shape[0] > 0 and mon[0, 0] != np.inf:  # (the approach marked them already)
                 _unbounded(observe, guards, mode, t, y, p, k_d, mon, w.obs, g)
-            n_ev = _log(log, n_ev, t, k, mode, -1, y, q, jump)
+            n_ev = _log(log, n_ev, t, k, mode, -1, 0, y, q, jump)
             status = INCONSISTENT
             break
-        _latch(kind, k, t, y, p, tables, guards, g)
+        breakpoint = _latch(kind, k, t, y, p, tables, guards, g)
         new, status, need = _jump(fns, tables, settings.tol, mode, kind, k, t, y, p, w)
         if w.frame[0] < np.inf:  # a first step inside the bounce, so that the gap's guard is armed again
             h = 0.25 * w.frame[0] if h <= 0.0 else min(h, 0.25 * w.frame[0])
         new, status, need = _checked(fns, tables, settings.tol, mode, new, status, need, t, y, p, w)
         if status == FINISHED and new == mode and kind == G_PHI:
             continue  # phi crossed within its noise (the probe keeps the flank): no event
-        n_ev = _log(log, n_ev, t, k, mode, new if status == FINISHED else -1, y, q, jump)
+        n_ev = _log(log, n_ev, t, k, mode, new if status == FINISHED else -1, breakpoint, y, q, jump)
         if status != FINISHED:
             mode = new if status == INCONSISTENT else mode
             break

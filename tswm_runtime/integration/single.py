@@ -12,8 +12,8 @@ from tswm_runtime.jit.cache_guard import njit
 from tswm_runtime.integration.segment import (DOPRI5, INVALID_INPUT, N_COUNTERS, ROSENBROCK23, AttemptFunction, run,
                                               segment_work)
 from tswm_runtime.jit.signatures import MATRIX, VECTOR, GuardsFunction, JacFunction, RhsFunction
-from tswm_runtime.jit.structures import (EVENT_SETTINGS, JUMP_WIDTH, TOLERANCES, EventLog, Functions, Outputs,
-                                         Record, Segment, Settings, State)
+from tswm_runtime.jit.structures import (EVENT_SETTINGS, INDEX_WIDTH, JUMP_WIDTH, TOLERANCES, EventLog, Functions,
+                                         Outputs, Record, Segment, Settings, State)
 
 _VEC_I64 = types.int64[::1]
 
@@ -84,7 +84,7 @@ def integrate_segment(method, attempt, rhs, jac, guards, mode, p, t0, y0, t_end,
         y_out[i, :] = y0
         i += 1
     scratch = segment_work(y0.size, ev.directions.size, 0, 0)
-    log = EventLog(np.empty(0), np.empty((0, 3), np.int64), np.empty((0, 0)), np.empty((0, JUMP_WIDTH)))
+    log = EventLog(np.empty(0), np.empty((0, INDEX_WIDTH), np.int64), np.empty((0, 0)), np.empty((0, JUMP_WIDTH)))
     status, t, k, i, h_next = run(Functions(attempt, rhs, jac, guards, guards, guards),
                                   Settings(method, t_end, tol, max_steps), Segment(mode, p, ev),
                                   State(t0, y_stop, np.empty(0), h0), Record(out, log, np.empty((0, 3)), counters), i,

@@ -31,17 +31,21 @@ EVENT_SETTINGS = types.NamedTuple((INTS, types.float64, types.float64, types.boo
 Outputs = namedtuple("Outputs", "t y mode p")
 OUTPUTS = types.NamedTuple((VECTOR, MATRIX, INTS, MATRIX), Outputs)
 
-#: The event log: time; (guard, from-mode, to-mode or -1 for a stop); state after the event;
-#: for an impact (P_n, P_t, kinetic energy lost, v1 before it), NaN for other events.
+#: The event log: time; (guard, from-mode, to-mode or -1 for a stop, the breakpoint a piecewise
+#: law passed, counted from 1, else 0); state after the event; for an impact (P_n, P_t, kinetic
+#: energy lost, v1 before it), NaN for other events.
 EventLog = namedtuple("EventLog", "t index state jump")
 EVENT_LOG = types.NamedTuple((VECTOR, types.int64[:, ::1], MATRIX, MATRIX), EventLog)
+INDEX_WIDTH = 4
 JUMP_WIDTH = 4
 
 #: A model's modes and guards as integers (``modes.tables``): per mode its kind (sliding,
 #: stick, Filippov), flank, direction, whether the scene declares it; per mode and guard
-#: the guard's direction; per guard its kind and the latch slot of p it sets (-1 none).
-ModeTables = namedtuple("ModeTables", "kind flank direction declared guard_direction guard_kind guard_latch")
-MODE_TABLES = types.NamedTuple((INTS, INTS, INTS, INTS, types.int64[:, ::1], INTS, INTS), ModeTables)
+#: the guard's direction; per guard its kind, the latch slot of p it sets (-1 none) and the
+#: number of pieces of the law whose piece it latches (0 none).
+ModeTables = namedtuple("ModeTables", "kind flank direction declared guard_direction guard_kind guard_latch "
+                                      "guard_pieces")
+MODE_TABLES = types.NamedTuple((INTS, INTS, INTS, INTS, types.int64[:, ::1], INTS, INTS, INTS), ModeTables)
 
 #: Work arrays of one step of either method: stages K, dense-output coefficients Q, the
 #: Jacobian J and df/dt, the LU factors of W = I - h d J and their pivots (Rosenbrock).

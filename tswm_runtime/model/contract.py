@@ -32,6 +32,8 @@ CONSTANTS = {
                    "latched event times (+inf until their guard fires), then each piecewise law's piece "
                    "(set by the runtime at the start and at every event of the law)",
     "GUARD_LATCH": "per guard, the index in p of the latch it sets (a trip time or a law's piece), -1 none",
+    "GUARD_PIECES": "per guard, the number of pieces of the law whose piece it latches, 0 none; that guard is "
+                    ">= 0 while the state lies in the latched piece and falls through 0 where it leaves it",
     "MODE_D": "per mode, the formula of its denominator D ('' where it has none), for messages",
     "PARAM_CHECKS": "the scene file's rules that involve a free parameter, as data (tswm_runtime.model.checks)",
     "PARAM_UNITS": "SI unit of each free parameter",

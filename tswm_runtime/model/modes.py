@@ -45,6 +45,7 @@ GUARD_KINDS = {
     "cone_forward": GuardKind.CONE_FORWARD, "cone_backward": GuardKind.CONE_BACKWARD,
     "flank_normal": GuardKind.FLANK_NORMAL, "load_step": GuardKind.LAW, "load_contact": GuardKind.LAW,
     "slide_exit_a": GuardKind.SLIDE_EXIT_A, "slide_exit_b": GuardKind.SLIDE_EXIT_B,
+    "load_schedule": GuardKind.LAW, "drive_schedule": GuardKind.LAW,
     "torque_switch": GuardKind.TRIP, "gap_a": GuardKind.GAP_A, "gap_b": GuardKind.GAP_B,
     "mesh_normal": GuardKind.MESH_NORMAL, "slip": GuardKind.SLIP,
     "stem_gap": GuardKind.STEM_GAP, "stem_contact": GuardKind.STEM_CONTACT,
@@ -53,23 +54,32 @@ GUARD_EVENT_NAMES = {
     "phi": "flank switch (phi = 0)", "v1": "v1 = 0", "D": "D = 0", "jam": "jam factor = 0",
     "cone_forward": "breakaway forward", "cone_backward": "breakaway backward",
     "flank_normal": "flank change in stick", "load_step": "load step", "load_contact": "load contact",
+    "load_schedule": "load schedule breakpoint", "drive_schedule": "drive schedule breakpoint",
     "slide_exit_a": "leaves phi = 0 to flank a", "slide_exit_b": "leaves phi = 0 to flank b",
     "torque_switch": "torque switch trips",
     "gap_a": "gap closes on flank a", "gap_b": "gap closes on flank b",
     "mesh_normal": "flanks part (mesh force 0)", "slip": "slip stops",
     "stem_gap": "body 2 strikes the stem", "stem_contact": "the stem leaves body 2",
 }
-SCHEDULE_GUARD = re.compile(r"(load|drive)_at([0-9]+)")
+SCHEDULE_GUARD = re.compile(r"(load|drive)_schedule")
+BREAKPOINT_EVENT = re.compile(r"(load|drive)_at([0-9]+)")
 
 
 def guard_kind(name: str) -> int | None:
-    """hybrid.G_* of a guard name; a schedule's breakpoints (load_at1, ...) are law events."""
-    return GuardKind.LAW if SCHEDULE_GUARD.fullmatch(name) else GUARD_KINDS.get(name)
+    """hybrid.G_* of a guard name."""
+    return GUARD_KINDS.get(name)
+
+
+def event_guard(guard: str, breakpoint: int) -> str:
+    """The name an event goes by: a schedule's event is named after the breakpoint it passed
+    (``load_at2``, the name of that breakpoint's parameter), every other after its guard."""
+    match = SCHEDULE_GUARD.fullmatch(guard)
+    return f"{match[1]}_at{breakpoint}" if match and breakpoint > 0 else guard
 
 
 def event_name(guard: str) -> str:
-    """What an event of ``guard`` is, in words."""
-    match = SCHEDULE_GUARD.fullmatch(guard)
+    """What an event named ``guard`` (``event_guard``) is, in words."""
+    match = BREAKPOINT_EVENT.fullmatch(guard)
     if match:
         return f"{match[1]} schedule breakpoint {match[2]}"
     return GUARD_EVENT_NAMES[guard]
@@ -101,4 +111,4 @@ def tables(module: ModuleType) -> ModeTables:
     return ModeTables(as_int([mode_kind(m) for m in module.MODES]), as_int(module.MODE_FLANK),
             as_int(module.MODE_DIRECTION), as_int([bool(d) for d in declared]),
             as_int(module.GUARD_DIRECTIONS).reshape(len(module.MODES), len(module.GUARDS)),
-            as_int([guard_kind(g) for g in module.GUARDS]), as_int(module.GUARD_LATCH))
+            as_int([guard_kind(g) for g in module.GUARDS]), as_int(module.GUARD_LATCH), as_int(module.GUARD_PIECES))

@@ -21,6 +21,7 @@ class Status(IntEnum):
     UNDECLARED_MODE = hybrid.UNDECLARED
     CHATTERING = hybrid.CHATTERING
     TOO_MANY_EVENTS = hybrid.TOO_MANY_EVENTS
+    INDETERMINATE = hybrid.INDETERMINATE
     STEP_TOO_SMALL = hybrid.STEP_TOO_SMALL
     MAX_STEPS = hybrid.MAX_STEPS
     NOT_FINITE = hybrid.NOT_FINITE
@@ -318,6 +319,27 @@ def _inconsistent(module: ModuleType, t_stop: float, y_stop: np.ndarray, last: i
             f"lower m2 or the friction, or raise m1")
 
 
+def _indeterminate(module: ModuleType, t_stop: float, y_stop: np.ndarray, mask: int, p: np.ndarray) -> str:
+    """Why the start at rest has no mode or several: the modes whose contact conditions hold (``mask``,
+    bit 1 << mode), with D where a mode has one."""
+    held = [m for m in range(len(module.MODES)) if mask >> m & 1]
+    if not held:
+        return (f"indeterminate at t = {t_stop:.9g} s: at rest, no mode meets the contact conditions (stick: both "
+                f"friction cones hold; sliding: D > 0, contact force >= 0, a1 the way it slides; parting: free "
+                f"flight opens the gap): the forces lie on a boundary between them within rounding; change a "
+                f"force or the friction slightly")
+    g = np.empty(len(module.GUARDS))
+    described = []
+    for m in held:
+        module.guards(m, t_stop, np.ascontiguousarray(y_stop, dtype=np.float64), p, g)
+        d = f" (D = {module.MODE_D[m]} = {g[module.GUARDS.index('D')]:.6g})" if module.MODE_D[m] else ""
+        described.append(module.MODES[m] + d)
+    return (f"indeterminate at t = {t_stop:.9g} s: at rest, the contact conditions hold in several modes: "
+            f"{', '.join(described)}; a mode with D <= 0 is a Painleve-type solution (contact force >= 0 only "
+            f"because D < 0), so rigid contact with friction does not say how the motion starts; lower m2 or "
+            f"the friction, or raise m1")
+
+
 def first_non_finite(t: np.ndarray, columns: dict[str, np.ndarray]) -> tuple[str, float, float] | None:
     """(name, time, value) of the earliest inf or NaN among ``columns`` (each sampled at ``t``), or None."""
     found = None
@@ -381,6 +403,8 @@ def status_message(module: ModuleType, status: int, t_stop: float, y_stop: np.nd
                 f"include to follow the sliding motion")
     if status == hybrid.INCONSISTENT:
         return _inconsistent(module, t_stop, y_stop, last, events, p)
+    if status == hybrid.INDETERMINATE:
+        return _indeterminate(module, t_stop, y_stop, need, p)
     if status == hybrid.CHATTERING:
         return f"{hybrid.MAX_SAME_TIME} mode changes at {at} without time advancing (chattering); stopped"
     if status == hybrid.TOO_MANY_EVENTS:

@@ -354,7 +354,8 @@ def simulate(model: str | ModuleType, params: dict | None = None, *, interruptib
     last_point = (float(t_kept[-1]), {k: float(v[-1]) for k, v in values.items()}) if t_kept.size else None
     y_stop = log.state[n_ev - 1, :n].copy() if n_ev else y0
     at = x1_column(module)
-    events = [Event(float(log.t[e]), module.GUARDS[log.index[e, 0]], module.MODES[log.index[e, 1]],
+    events = [Event(float(log.t[e]), modes.event_guard(module.GUARDS[log.index[e, 0]], int(log.index[e, 3])),
+                    module.MODES[log.index[e, 1]],
                     module.MODES[log.index[e, 2]] if log.index[e, 2] >= 0 else None,
                     float(log.state[e, at]), float(log.state[e, n - 1]),
                     None if math.isnan(log.jump[e, 0]) else Jump(*map(float, log.jump[e])),

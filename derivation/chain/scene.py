@@ -1,0 +1,152 @@
+"""Chain scene files: ``[[stage]]`` and ``[[body]]`` tables, read, checked and turned into numbers.
+
+Stage k (counted from 1) joins body k-1 and body k ([[body]] tables counted from 0). Messages name a
+key as stage[k].mu or body[k].inertia. Chains are derived, not yet simulated (docs/scene-format.md).
+"""
+from __future__ import annotations
+
+import hashlib
+import math
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import sympy as sp
+
+from derivation.chain import stages as st
+from derivation.chain.dynamics import MAX_STAGES
+from derivation.chain.selector import ChainValues
+from derivation.scene import DEG, FLANKS, MAX_DESCRIPTION, NAME, Param, Rule, SceneError, _Reader, _toml, read_toml
+from tswm_common import units
+from tswm_common.text import printable
+
+TOP_KEYS = ("name", "description", "stage", "body")
+ANGLE = Rule("angle", 0.0, 90 * DEG)
+TILT = Rule("angle", 0.0, 90 * DEG, lo_in=True)      # 0: a flank square to the wedge plane
+SIZE = Rule("length", 0.0)
+MU = Rule("dimensionless", 0.0, 10.0, lo_in=True)
+RULES = {"gamma": ANGLE, "lead_angle": ANGLE, "pressure_angle": TILT, "flank_angle": TILT,
+         "worm_radius": SIZE, "wheel_radius": SIZE, "lead": SIZE, "mean_diameter": SIZE, "mu": MU}
+BODY = {st.ROTATION: ("inertia", "torque"), st.TRANSLATION: ("mass", "force")}
+
+
+@dataclass(frozen=True)
+class Stage:
+    """One stage as written: its kind, its parameters (in SI) and its modelled flanks."""
+    kind: str
+    params: dict[str, Param]
+    flanks: tuple[str, ...]
+
+
+@dataclass(frozen=True)
+class Body:
+    """One body: rotating (inertia in kg m^2, torque in N m) or translating (mass in kg, force in N)."""
+    motion: str
+    inertia: Param
+    force: Param
+
+
+@dataclass(frozen=True)
+class ChainScene:
+    name: str
+    description: str
+    stages: tuple[Stage, ...]
+    bodies: tuple[Body, ...]
+    source: str
+    digest: str
+
+    def values(self) -> ChainValues:
+        """The equivalent wedges' numbers (slope, friction angle, levers) and the bodies', in SI."""
+        wedges = [_equivalent(stage) for stage in self.stages]
+        return ChainValues(*(tuple(w[k] for w in wedges) for k in range(4)),
+                           tuple(b.inertia.value for b in self.bodies), tuple(b.force.value for b in self.bodies),
+                           tuple(s.flanks for s in self.stages))
+
+
+def _equivalent(stage: Stage) -> tuple[float, float, float, float]:
+    """(gamma, rho, lever_in, lever_out) of a stage from stages.equivalent_wedge."""
+    wedge = st.equivalent_wedge(stage.kind)
+    at = {symbol: stage.params[key].value for key, symbol in st.kinds()[stage.kind].keys.items()}
+    number = lambda expr: float(sp.sympify(expr).subs(at))   # noqa: E731
+    return (math.atan(number(wedge.tan_gamma)), math.atan(number(wedge.tan_rho)),
+            number(wedge.lever_in), number(wedge.lever_out))
+
+
+def load_chain(path: str | os.PathLike) -> ChainScene:
+    """Read a chain scene file."""
+    source = os.fspath(path)
+    try:
+        data = Path(source).read_bytes()
+    except OSError as err:
+        raise SceneError(f"{printable(source)}: cannot read scene file ({err.strerror})") from err
+    return _ChainReader(source).chain(read_toml(data, source), hashlib.sha256(data).hexdigest())
+
+
+def parse_chain(text: str, source: str = "<string>") -> ChainScene:
+    """Parse chain scene text; source names it in messages."""
+    data = text.encode("utf-8")
+    return _ChainReader(source).chain(read_toml(data, source), hashlib.sha256(data).hexdigest())
+
+
+class _ChainReader(_Reader):
+    """The scene reader's checks (units, ranges, unknown keys), applied to [[stage]] and [[body]]."""
+
+    def tables(self, doc: dict, key: str, lo: int, hi: int) -> list[dict]:
+        """The list of [[key]] tables, lo to hi of them."""
+        expected = f"expected {lo} to {hi} [[{key}]] tables"
+        raw = doc.get(key)
+        if raw is None:
+            self.fail(key, f"missing: {expected}")
+        if not isinstance(raw, list) or not all(isinstance(t, dict) for t in raw):
+            self.fail(key, expected, _toml(raw)[:80])
+        if not lo <= len(raw) <= hi:
+            self.fail(key, f"{expected} ({len(raw)} given)")
+        return raw
+
+    def stage(self, table: dict, k: int) -> Stage:
+        path = f"stage[{k}]"
+        kind = self.text(table, "kind", path, tuple(st.kinds()))
+        keys = tuple(st.kinds()[kind].keys)
+        self.keys(table, path, ("kind", "flanks", *keys))
+        params = self.params(table, path, {key: RULES[key] for key in keys}, f"stage{k}_")
+        flanks = self.subset(table, "flanks", path, FLANKS, default=list(FLANKS))
+        stage = Stage(kind, params, flanks)
+        gamma, rho, _, _ = _equivalent(stage)
+        if gamma + rho >= 90 * DEG:
+            self.fail(f"{path}.mu", f"slope {units.show(gamma, 'angle')} + effective friction angle "
+                      f"{units.show(rho, 'angle')} (mu over the cosine of the flank's tilt) must be < 90 deg (else the "
+                      "stage jams)", f"{params['mu'].value:g}")
+        return stage
+
+    def body(self, table: dict, j: int, motion: str) -> Body:
+        path = f"body[{j}]"
+        inertia_key, force_key = BODY[motion]
+        other = BODY[st.TRANSLATION if motion == st.ROTATION else st.ROTATION]
+        for key in other:
+            if key in table:
+                self.fail(f"{path}.{key}", f"body {j} {'rotates' if motion == st.ROTATION else 'translates'} "
+                          f"(set by the stages it joins): give {inertia_key} and {force_key}")
+        self.keys(table, path, (inertia_key, force_key))
+        quantity = "mass" if motion == st.TRANSLATION else "inertia"
+        params = self.params(table, path, {inertia_key: Rule(quantity, 0.0),
+                                           force_key: Rule(force_key if force_key == "torque" else "force",
+                                                           default=0.0)}, f"body{j}_")
+        return Body(motion, params[inertia_key], params[force_key])
+
+    def chain(self, doc: dict, digest: str) -> ChainScene:
+        self.keys(doc, "", TOP_KEYS)
+        name = self.text(doc, "name", "", pattern=NAME)
+        description = self.text(doc, "description", "", default="")
+        if len(description) > MAX_DESCRIPTION:
+            self.fail("description", f"{len(description)} characters: must be at most {MAX_DESCRIPTION}")
+        stages = tuple(self.stage(t, k) for k, t in enumerate(self.tables(doc, "stage", 1, MAX_STAGES), 1))
+        kinds = [st.kinds()[s.kind] for s in stages]
+        for k in range(1, len(stages)):
+            if kinds[k - 1].motion_out != kinds[k].motion_in:
+                self.fail(f"stage[{k + 1}].kind", f"takes a body in {kinds[k].motion_in}, but stage[{k}] "
+                          f"({stages[k - 1].kind}) drives body {k} in {kinds[k - 1].motion_out}",
+                          _toml(stages[k].kind))
+        tables = self.tables(doc, "body", len(stages) + 1, len(stages) + 1)
+        motions = [kinds[0].motion_in, *(kind.motion_out for kind in kinds)]
+        bodies = tuple(self.body(t, j, m) for j, (t, m) in enumerate(zip(tables, motions)))
+        return ChainScene(name, description, stages, bodies, self.source, digest)

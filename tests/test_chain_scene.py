@@ -1,0 +1,158 @@
+"""Chain scene files ([[stage]], [[body]]): what they convert to, and clear refusals of bad input."""
+import math
+
+import pytest
+
+from derivation.chain.scene import load_chain, parse_chain
+from derivation.chain.selector import decide
+from derivation.scene import SceneError, parse_scene
+
+DEG = math.pi / 180
+VALVE = '''
+name = "valve-chain"
+
+[[stage]]
+kind = "worm_gear"
+lead_angle = "4.76 deg"
+pressure_angle = "20 deg"
+worm_radius = "25 mm"
+wheel_radius = "80 mm"
+mu = 0.05
+
+[[stage]]
+kind = "power_screw"
+lead = "4 mm"
+flank_angle = "15 deg"
+mean_diameter = "18 mm"
+mu = 0.15
+
+[[body]]
+inertia = "0.0069 kg m^2"
+torque = "5 N m"
+
+[[body]]
+inertia = "0.02 kg m^2"
+
+[[body]]
+mass = "20 kg"
+force = "-20 kN"
+'''
+
+
+def test_valve_chain_converts_to_equivalent_wedges():
+    """By hand: worm gamma = lead angle, tan(rho') = mu / cos(20 deg), levers r1, r2; Tr 18x4 nut:
+    tan(lambda) = 4 / (18 pi), tan(alpha_n) = tan(15 deg) cos(lambda), levers d_m / 2 and 1."""
+    v = parse_chain(VALVE, "v.toml").values()
+    lam = math.atan(4 / (18 * math.pi))
+    assert v.gamma == pytest.approx((4.76 * DEG, lam), rel=1e-14)
+    alpha_n = math.atan(math.tan(15 * DEG) * math.cos(lam))
+    assert v.rho == pytest.approx((math.atan(0.05 / math.cos(20 * DEG)), math.atan(0.15 / math.cos(alpha_n))), rel=1e-13)
+    assert v.lever_in == pytest.approx((0.025, 0.009)) and v.lever_out == pytest.approx((0.08, 1.0))
+    assert v.inertia == pytest.approx((0.0069, 0.02, 20.0)) and v.force == pytest.approx((5.0, 0.0, -20000.0))
+    assert v.flanks == (("a", "b"), ("a", "b"))
+
+
+def test_valve_chain_is_decided_from_the_file(tmp_path):
+    path = tmp_path / "valve.toml"
+    path.write_text(VALVE)
+    decision = decide(load_chain(path).values(), 0.0)
+    assert decision.outcome == "unique" and decision.modes == ("forward: tractive (a), tractive (a)",)
+
+
+def test_a_one_stage_chain_reads_like_the_wedge():
+    text = '''name = "one"
+[[stage]]
+kind = "wedge"
+gamma = "4.76 deg"
+mu = 0.2
+flanks = ["a"]
+[[body]]
+mass = "11.8 kg"
+force = "1 kN"
+[[body]]
+mass = "200 kg"
+force = "-5 kN"
+'''
+    v = parse_chain(text).values()
+    assert v.gamma == pytest.approx((4.76 * DEG,)) and v.rho == pytest.approx((math.atan(0.2),))
+    assert v.lever_in == v.lever_out == (1.0,) and v.flanks == (("a",),)
+
+
+def test_the_one_stage_reader_points_to_the_chain_reader():
+    with pytest.raises(SceneError, match=r"v.toml: stage: a chain of stages .* derivation only, not yet simulated"):
+        parse_scene(VALVE, "v.toml")
+
+
+BAD = [
+    ('kind = "worm_gear"', 'kind = "gear"', ['stage[1].kind = "gear"', '"wedge", "worm_gear", "power_screw"']),
+    ('lead = "4 mm"\n', "", ["stage[2].lead", "missing required key", "> 0 m"]),
+    ('lead_angle = "4.76 deg"', 'lead_angle = "95 deg"', ["stage[1].lead_angle = 95 deg", "(0, 90) deg"]),
+    ('lead_angle = "4.76 deg"', "lead_angle = 4.76", ["stage[1].lead_angle", "(0, 90) deg", "write '4.76 deg'"]),
+    ('flank_angle = "15 deg"', 'flank_angle = "-1 deg"', ["stage[2].flank_angle = -1 deg", "[0, 90) deg"]),
+    ("mu = 0.15", "mu = 20", ["stage[2].mu = 20", "in [0, 10)"]),
+    ('pressure_angle = "20 deg"', 'pressure_angle = "89.9 deg"', ["stage[1].mu = 0.05", "slope 4.76 deg",
+                                                                   "must be < 90 deg (else the stage jams)"]),
+    ('mean_diameter = "18 mm"', 'mean_diameter = "2e9 m"', ["stage[2].mean_diameter", "<= 1e+06 m"]),
+    ('mean_diameter = "18 mm"', 'mean_diametre = "18 mm"', ["stage[2].mean_diametre", "did you mean 'mean_diameter'"]),
+    ("mu = 0.05", 'mu = 0.05\nflanks = ["c"]', ["stage[1].flanks", '["a", "b"]']),
+    ('mass = "20 kg"', 'inertia = "20 kg m^2"', ["body[2].inertia", "body 2 translates", "give mass and force"]),
+    ('inertia = "0.02 kg m^2"', 'inertia = "0.02 kg"', ["body[1].inertia", "mass unit"]),
+    ('torque = "5 N m"', 'torque = "5 N"', ["body[0].torque", "force unit"]),
+    ('inertia = "0.0069 kg m^2"', 'inertia = "0 kg m^2"', ["body[0].inertia = 0 kg m^2", "> 0 kg m^2"]),
+    ('[[body]]\nmass = "20 kg"\nforce = "-20 kN"\n', "", ["body", "expected 3 to 3 [[body]] tables (2 given)"]),
+    ('kind = "worm_gear"\nlead_angle = "4.76 deg"\npressure_angle = "20 deg"\nworm_radius = "25 mm"\n'
+     'wheel_radius = "80 mm"', 'kind = "wedge"\ngamma = "4.76 deg"',
+     ['stage[2].kind = "power_screw"', "takes a body in rotation", "stage[1] (wedge) drives body 1 in translation"]),
+    ('name = "valve-chain"', 'name = "valve-chain"\nwedge = 1', ["wedge", "unknown key", "stage, body"]),
+]
+
+
+@pytest.mark.parametrize("old, new, parts", BAD, ids=[n[:30] for _, n, _ in BAD])
+def test_bad_chain_input(old, new, parts):
+    assert old in VALVE
+    with pytest.raises(SceneError) as err:
+        parse_chain(VALVE.replace(old, new, 1), "v.toml")
+    message = str(err.value)
+    assert message.startswith("v.toml: ")
+    for part in parts:
+        assert part in message, message
+
+
+def test_stages_must_be_tables():
+    with pytest.raises(SceneError, match=r"v.toml: stage = 3: expected 1 to 4 \[\[stage\]\] tables"):
+        parse_chain('name = "x"\nstage = 3\n', "v.toml")
+    with pytest.raises(SceneError, match=r"v.toml: stage: missing: expected 1 to 4"):
+        parse_chain('name = "x"\n', "v.toml")
+
+
+def test_at_most_four_stages():
+    stage = '[[stage]]\nkind = "wedge"\ngamma = "10 deg"\nmu = 0.1\n'
+    body = '[[body]]\nmass = "1 kg"\n'
+    with pytest.raises(SceneError, match=r"stage: expected 1 to 4 \[\[stage\]\] tables \(5 given\)"):
+        parse_chain('name = "long"\n' + stage * 5 + body * 6, "v.toml")
+
+
+def test_cli_derive_of_a_chain_writes_its_document(tmp_path, capsys):
+    from tswm_runtime.cli import main
+
+    path = tmp_path / "valve.toml"
+    path.write_text(VALVE.replace('name = "valve-chain"', 'name = "valve-chain"\ndescription = "\\\\input{x} $y$ 50%"'))
+    assert main(["derive", str(path), "--markdown", str(tmp_path / "v.md"), "--latex", str(tmp_path / "v.tex")]) == 0
+    out = capsys.readouterr().out
+    assert "2 stages, derivation only (not yet simulated)" in out
+    assert "stage 2: power_screw, gamma 4.04611 deg, rho' 8.82559 deg, self-locking" in out
+    assert "8 sliding modes" in out and "unique: forward: tractive (a), tractive (a)" in out
+    md, tex = (tmp_path / "v.md").read_text(), (tmp_path / "v.tex").read_text()
+    for text in (md, tex):
+        assert "Resting chain" in text and "statically undetermined" in text and "agrees exactly" in text
+    assert "\\textbackslash{}input\\{x\\} \\$y\\$ 50\\%" in tex and "\\input{x}" not in tex
+    assert "\\Psi_{1}" in md
+
+
+def test_cli_derive_of_a_bad_chain_names_the_key(tmp_path, capsys):
+    from tswm_runtime.cli import main
+
+    path = tmp_path / "bad.toml"
+    path.write_text(VALVE.replace("mu = 0.05", "mu = -1"))
+    assert main(["derive", str(path)]) == 2
+    assert "stage[1].mu = -1: must be in [0, 10)" in capsys.readouterr().err
