@@ -60,7 +60,7 @@ BATCH_SIG = types.none(
 )
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def _case_record(t_end, width, n_params, max_events, n_obs):
     """A case's Record: one output point (the state at t_end), an event log of max_events, the
     maxima of n_obs observables, the counters, no step log."""
@@ -70,7 +70,7 @@ def _case_record(t_end, width, n_params, max_events, n_obs):
     return Record(out, log, np.zeros((n_obs, 3)), np.zeros(segment.N_COUNTERS, np.int64), no_steps(width, n_params))
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def _write_floats(row, t_stop, n_ev, n, record):
     """t_stop, the maxima of S1 and S2, and x1, v1 at t_stop into ``row`` (out_f[c])."""
     out, log, mon = record.out, record.log, record.mon
@@ -96,7 +96,7 @@ def _write_floats(row, t_stop, n_ev, n, record):
         row[F_S2M], row[F_TS2M] = np.nan, np.nan
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def _write_sequence(row_f, row_i, seq_row, first, n_ev, log):
     """The modes visited into seq_row and their number, the impacts and the energy they took."""
     n_seq = seq_row.size

@@ -30,7 +30,7 @@ ADDRESSES = types.UniTuple(types.int64, 8)
 ENTRY_SIG = HYBRID_SIG.return_type(ADDRESSES, *HYBRID_SIG.args[1:])
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def model_functions(functions):
     """The Functions (the method's step, the model's rhs, jac, guards, observe, impact) at the
     last six of the addresses ``functions``."""

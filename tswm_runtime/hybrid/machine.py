@@ -75,7 +75,7 @@ MAX_SAME_TIME = 8  # Events allowed at one instant before CHATTERING.
 SAME_TIME_ULPS = 64.0  # "One instant": within 64 ulp(t).
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def _guard(kind, guard_kind):
     """Index of the first guard of ``kind``, -1 if the model has none."""
     for k in range(guard_kind.size):
@@ -84,7 +84,7 @@ def _guard(kind, guard_kind):
     return -1
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def _mode(kind, flank, direction, tables):
     """Index of the mode of ``kind`` (sliding: on ``flank`` in ``direction``; flank 0 = any)."""
     mode_kind, mode_flank, mode_dir = tables.kind, tables.flank, tables.direction
@@ -96,7 +96,7 @@ def _mode(kind, flank, direction, tables):
     return -1
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def _phi_sign(rhs, guards, mode, t, y, p, tol, k_phi, g, y_tmp, f):
     """Sign of phi at (t, y) for entering a sliding mode. If phi is zero within its
     noise (its change under a v1 error at the tolerance), the sign phi takes after
@@ -121,7 +121,7 @@ def _phi_sign(rhs, guards, mode, t, y, p, tol, k_phi, g, y_tmp, f):
     return -1 if g[k_phi] < 0.0 else 1
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def _part(flank, tables, guards, t, y, p, g):
     """(mode, need) when the contact on ``flank`` lets go (its normal force reaches 0): free
     flight, or, where the clearance is zero, contact on the other flank at once."""
@@ -136,7 +136,7 @@ def _part(flank, tables, guards, t, y, p, g):
     return m, (NEED_NOTHING if m >= 0 else NEED_STICK if v == 0.0 else NEED_FORWARD if v > 0.0 else NEED_BACKWARD)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def _touching(guards, t, y, p, tables, g):
     """The flank in contact with a clearance (+1 a, -1 b: the one whose gap is 0), 0 without one."""
     m_free = _mode(M_FREE, 0, 0, tables)
@@ -150,7 +150,7 @@ def _touching(guards, t, y, p, tables, g):
     return 0
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def _sliding(direction, flank, rhs, guards, t, y, p, tol, tables, g, y_tmp, f):
     """(mode, need) for sliding in ``direction`` from (t, y): without a clearance (``flank``
     0) on the flank the sign of phi gives; with one, on ``flank`` while phi keeps its contact
@@ -170,7 +170,7 @@ def _sliding(direction, flank, rhs, guards, t, y, p, tol, tables, g, y_tmp, f):
     return m, NEED_NOTHING
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def _at_rest(flank, rhs, guards, t, y, p, tol, tables, g, y_tmp, f, start):
     """(mode, need) at v1 = 0: stick inside both friction cones, else sliding off in the
     direction whose cone is violated; with a clearance (contact on ``flank`` != 0) the
@@ -200,7 +200,7 @@ def _at_rest(flank, rhs, guards, t, y, p, tol, tables, g, y_tmp, f, start):
     return ms, NEED_NOTHING
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def _filippov(mode, guards, t, y, p, tables, g):
     """The slide mode if phi = 0 attracts from both sides at (t, y), else -1."""
     ms = _mode(M_FILIPPOV, 0, tables.direction[mode], tables)
@@ -211,13 +211,13 @@ def _filippov(mode, guards, t, y, p, tables, g):
     return ms if exit_a > 0.0 and exit_b > 0.0 else -1
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def _outcome(m, need):
     """(mode, status, need) of a mode choice: FINISHED with mode ``m``, or UNDECLARED with ``need``."""
     return (m, FINISHED, NEED_NOTHING) if m >= 0 else (-1, UNDECLARED, need)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def _select(mode, kind, rhs, guards, t, y, p, tol, tables, g, y_tmp, f):
     """(next mode, status, need) after guard ``kind`` fired in ``mode`` at (t, y)."""
     mode_kind, mode_dir, declared = tables.kind, tables.direction, tables.declared
@@ -260,7 +260,7 @@ def _select(mode, kind, rhs, guards, t, y, p, tol, tables, g, y_tmp, f):
     return _outcome(m, need)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def _collide(impact, flank, rhs, guards, t, y, p, tol, tables, g, y_tmp, f, frame, jump):
     """(next mode, status, need) after the gap closes on ``flank``: the impulse (``impact``
     module) changes v1 and gap_rate; the flanks stay together where the rebound is within the
@@ -293,7 +293,7 @@ def _collide(impact, flank, rhs, guards, t, y, p, tol, tables, g, y_tmp, f, fram
     return _outcome(m, need)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def _settles(nu, toward, speed, y, tol):
     """Whether a rebound at normal speed nu (> 0: apart) ends a sequence of bounces: its speed is
     within the velocity tolerance (scaled by ``speed``), or the height of the next bounce under the
@@ -304,7 +304,7 @@ def _settles(nu, toward, speed, y, tol):
     return nu <= tol.atol[n - 2] + tol.rtol * abs(speed) or (toward > 0.0 and nu * nu <= 2.0 * toward * gap_tol)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def _moving_on(flank, rhs, guards, t, y, p, tol, tables, g, y_tmp, f):
     """(mode, need) for the rigid wedge (touching ``flank`` with a clearance, else 0) from (t, y)
     after a jump in v1 or in the laws: at rest or sliding the way v1 points."""
@@ -314,7 +314,7 @@ def _moving_on(flank, rhs, guards, t, y, p, tol, tables, g, y_tmp, f):
     return _sliding(1 if v > 0.0 else -1, flank, rhs, guards, t, y, p, tol, tables, g, y_tmp, f)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def _pickup(impact, k, rhs, guards, t, y, p, tol, tables, g, y_tmp, f, frame, jump):
     """(next mode, status, need) after body 2 reaches the stem (guard ``k``): the impulse through
     the wedge (``impact`` module) changes v1 and v3; where the rebound is within the tolerances
@@ -351,7 +351,7 @@ def _pickup(impact, k, rhs, guards, t, y, p, tol, tables, g, y_tmp, f, frame, ju
     return _outcome(m, need)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def _carry_at_start(impact, guards, t, y, p, tables, g, frame):
     """Body 2 starting at the stem (lost motion 0) carries it from the start, at its speed."""
     k = _guard(G_STEM_GAP, tables.guard_kind)
@@ -364,7 +364,7 @@ def _carry_at_start(impact, guards, t, y, p, tables, g, frame):
         y[y.size - 2] = frame[11] * y[y.size - 1]
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def _released(mode, guards, t, y, p, tables, g):
     """Release the carried stem if its contact force is negative in ``mode`` at (t, y) (after an
     event that changed the laws it leaves body 2 at once: the guard would not see it); True if so."""
@@ -378,13 +378,13 @@ def _released(mode, guards, t, y, p, tables, g):
     return True
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def _need(m, direction):
     """What a missing sliding mode in ``direction`` needs (nothing when mode ``m`` exists)."""
     return NEED_NOTHING if m >= 0 else NEED_FORWARD if direction > 0 else NEED_BACKWARD
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def _mesh_rest(flank, guards, t, y, p, tables, g):
     """(mode, need) where the slip of a compliant contact on ``flank`` is 0: stick while both
     friction cones hold, else sliding the way the violated cone points."""
@@ -400,7 +400,7 @@ def _mesh_rest(flank, guards, t, y, p, tables, g):
     return m, _need(m, direction)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def _mesh_enter(flank, guards, t, y, p, tables, g):
     """(mode, need) for compliant contact on ``flank``: sliding with the sign of the slip, or
     as at rest (``_mesh_rest``) where the slip is 0."""
@@ -418,7 +418,7 @@ def _mesh_enter(flank, guards, t, y, p, tables, g):
     return m, _need(m, direction)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def _mesh_select(mode, kind, guards, t, y, p, tables, g):
     """(next mode, need) after guard ``kind`` fired in compliant contact ``mode``: the normal
     force reached 0 (free flight), the slip stopped, a cone broke, or a law event."""
@@ -439,7 +439,7 @@ def _mesh_select(mode, kind, guards, t, y, p, tables, g):
     return mode, NEED_NOTHING
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def _pressed(flank, rhs, t, y, p, tables, f):
     """Whether free flight would press the bodies onto ``flank`` (its normal acceleration)."""
     n = y.size
@@ -447,7 +447,7 @@ def _pressed(flank, rhs, t, y, p, tables, f):
     return -flank * f[n - 2] > 0.0
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def _consistent(mode, guards, t, y, p, tables, g):
     """False if D or the jam factor of ``mode`` is <= 0 at (t, y)."""
     guards(mode, t, y, p, g)
@@ -458,7 +458,7 @@ def _consistent(mode, guards, t, y, p, tables, g):
     return True
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def _inside(k, piece, guards, t, y, p, tables, g):
     """Whether (t, y) lies in ``piece`` of the law whose event is guard k (its guard is >= 0
     there); leaves that piece latched in p."""
@@ -467,7 +467,7 @@ def _inside(k, piece, guards, t, y, p, tables, g):
     return g[k] >= 0.0
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def _locate_piece(k, guards, t, y, p, tables, g):
     """Latch in p the piece of guard k's law that (t, y) lies in, searched outward from the
     piece in force: an event passes one breakpoint, so this costs a few guard calls however
@@ -493,7 +493,7 @@ def _locate_piece(k, guards, t, y, p, tables, g):
     return max(old, found) if found != old else 0
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def _latch_pieces(guards, t, y, p, tables, g):
     """Set every piecewise law's latched piece in p at the start: the piece (t, y) lies in."""
     for k in range(tables.guard_kind.size):
@@ -502,7 +502,7 @@ def _latch_pieces(guards, t, y, p, tables, g):
             _locate_piece(k, guards, t, y, p, tables, g)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def _unbounded(observe, guards, mode, t, y, p, k_d, mon, obs, g):
     """Mark the observables' maxima unbounded at time t: +-inf with the sign they take as
     D -> 0+ in ``mode``, i.e. the sign of S D (continuous through D = 0, so a state just
@@ -516,7 +516,7 @@ def _unbounded(observe, guards, mode, t, y, p, k_d, mon, obs, g):
         mon[k, 0], mon[k, 1], mon[k, 2] = np.inf, np.inf if obs[k] * d >= 0.0 else -np.inf, t
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def _observe_max(observe, mode, t, y, p, mon, obs):
     """Update the running maxima of the observables with their values at (t, y)."""
     observe(mode, t, y, p, obs)
@@ -525,7 +525,7 @@ def _observe_max(observe, mode, t, y, p, mon, obs):
             mon[k, 0], mon[k, 1], mon[k, 2] = abs(obs[k]), obs[k], t
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def _log(log, n_ev, t, k, mode_from, mode_to, breakpoint, y, quad, jump):
     """Append an event (time, guard, from, to, breakpoint passed, state, impact jump) to the EventLog."""
     n = y.size
@@ -542,14 +542,14 @@ def _log(log, n_ev, t, k, mode_from, mode_to, breakpoint, y, quad, jump):
 MachineWork = namedtuple("MachineWork", "g y_tmp f frame jump obs segment")
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def _work(n, n_guards, n_quad, n_obs):
     """The machine's work arrays for n states, n_guards guards, n_quad integrals, n_obs observables."""
     return MachineWork(np.empty(n_guards), np.empty(n), np.empty(n), np.empty(IMPACT_FRAME), np.empty(JUMP_WIDTH),
                        np.empty(n_obs), segment.segment_work(n, n_guards, n_quad, n_obs))
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def _valid(tables, start, settings, record):
     """The sizes agree and the settings make sense (the array accesses below are unchecked)."""
     n, n_quad, out, log, steps = start.y.size, start.quad.size, record.out, record.log, record.steps
@@ -566,7 +566,7 @@ def _valid(tables, start, settings, record):
             and steps.count.size == 2)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def _slide_at_rest(m, flank, direction, rhs, guards, t, y, p, tables, g, f):
     """How sliding mode ``m`` (on ``flank``, in ``direction``) meets the contact conditions at
     rest at (t, y): REGULAR (D > 0, jam > 0, the contact force N >= 0 and a1 the way it slides),
@@ -583,7 +583,7 @@ def _slide_at_rest(m, flank, direction, rhs, guards, t, y, p, tables, g, f):
     return SINGULAR if flank * phi * d >= 0.0 else NO
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def _start_at_rest(flank, rhs, guards, t, y, p, tol, tables, g, y_tmp, f):
     """(mode, status, need) of a start at rest (v1 = 0) in contact, by the contact conditions
     (the complementarity the machine applies at every event): stick where both friction cones
@@ -630,7 +630,7 @@ def _start_at_rest(flank, rhs, guards, t, y, p, tol, tables, g, y_tmp, f):
     return _missing_at_rest(ms, touched, rhs, guards, t, y, p, tables, g, f)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def _phi(guards, t, y, p, tables, g):
     """The switching function phi at (t, y) (a guard of every sliding mode, the same in each)."""
     for m in range(tables.kind.size):
@@ -640,7 +640,7 @@ def _phi(guards, t, y, p, tables, g):
     return 0.0
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def _missing_at_rest(ms, touched, rhs, guards, t, y, p, tables, g, f):
     """(mode, status, need) where no declared mode meets the contact conditions at rest: the
     sliding mode the violated friction cone points to (on the touched flank, else the flank phi
@@ -661,7 +661,7 @@ def _missing_at_rest(ms, touched, rhs, guards, t, y, p, tables, g, f):
         -1, INDETERMINATE, 0)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def _entered(fns, tables, t0, y, p, tol, w):
     """(mode, status, need) the state (t0, y) enters: free flight off the flanks, compliant
     contact where pressed onto one, at rest by the contact conditions (``_start_at_rest``; the
@@ -686,7 +686,7 @@ def _entered(fns, tables, t0, y, p, tol, w):
     return _outcome(*_sliding(1 if v > 0.0 else -1, flank, rhs, guards, t0, y, p, tol, tables, g, y_tmp, f))
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def _first_mode(fns, tables, start, y, p, tol, w):
     """(mode, status, need) the run starts in at (start.t, y): start.mode, or (-1) the mode the
     state enters (``_entered``); a carried stem pulled off at once is released first."""
@@ -698,7 +698,7 @@ def _first_mode(fns, tables, start, y, p, tol, w):
     return mode, status, need
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def _segment(fns, tables, settings, mode, p, state, record, i, scratch, singular):
     """One segment in ``mode`` from ``state`` (``segment.run``), handed over to the Painleve
     approach where D heads for 0 (``singular``) or where steps in t shrank to nothing near it.
@@ -731,7 +731,7 @@ def _segment(fns, tables, settings, mode, p, state, record, i, scratch, singular
     return outcome, t_new, k, i, h, True
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def _latch(kind, k, t, y, p, tables, guards, g):
     """The laws' latches in p after guard k (of ``kind``) fired at (t, y); returns the breakpoint
     of a piecewise law passed there (``_locate_piece``), else 0."""
@@ -742,7 +742,7 @@ def _latch(kind, k, t, y, p, tables, guards, g):
     return 0
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def _jump(fns, tables, tol, mode, kind, k, t, y, p, w):
     """(next mode, status, need) after guard k (of ``kind``) fired in ``mode``: an impact where a
     gap closes or body 2 reaches the stem (its jump into w.jump, the flight time to the next
@@ -765,7 +765,7 @@ def _jump(fns, tables, tol, mode, kind, k, t, y, p, w):
     return _select(mode, kind, rhs, guards, t, y, p, tol, tables, g, y_tmp, f)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def _checked(fns, tables, tol, mode, new, status, need, t, y, p, w):
     """(mode, status, need) after a jump: a carried stem the new mode pulls off is released; a
     new mode without a consistent contact force stops the run (INCONSISTENT; the maxima keep the

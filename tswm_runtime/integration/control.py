@@ -28,7 +28,7 @@ H0_FRACTION = 0.01  # Target: first step changes y by ~1% of its scale.
 H0_GROWTH = 100.0  # The initial step is at most 100 times the trial step.
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def error_norm(err, y, y_new, atol, rtol):
     """RMS norm of err_i / (atol_i + rtol * max(|y_i|, |y_new_i|)) (scipy's convention)."""
     s = 0.0
@@ -38,7 +38,7 @@ def error_norm(err, y, y_new, atol, rtol):
     return np.sqrt(s / err.size)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def step_factor(err, error_order, safety, min_factor, max_factor):
     """Elementary controller: h_new / h = safety * err^(-1/(q+1)), clipped.
 
@@ -51,7 +51,7 @@ def step_factor(err, error_order, safety, min_factor, max_factor):
     return min(max_factor, max(min_factor, safety * err ** (-1.0 / (error_order + 1))))
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def _scaled_rms(x, y0, atol, rtol):
     s = 0.0
     for i in range(x.size):
@@ -59,7 +59,7 @@ def _scaled_rms(x, y0, atol, rtol):
     return np.sqrt(s / x.size)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def select_initial_step(rhs, mode, t0, y0, p, f0, t_end, hmax, error_order, rtol, atol, y1, f1):
     """Hairer's initial step ("Solving ODEs I", Sec. II.4; scipy's select_initial_step).
 
@@ -88,7 +88,7 @@ def select_initial_step(rhs, mode, t0, y0, p, f0, t_end, hmax, error_order, rtol
     return min(H0_GROWTH * h0, h1, interval, hmax)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def proportional_tolerance(rtol, order, corner, floor):
     """The fraction of the tolerance a step's error is held to, so that the global error of a
     method of this order that is advanced without local extrapolation stays about proportional
@@ -108,14 +108,14 @@ PREDICTIVE_SAFETY = 0.9
 PREDICTIVE_MIN_ERR = 1e-2  # RADAU5's floor on the previous step's error
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def observed_order_factor(err, order):
     """Step factor after a second rejection at the same t, for err ~ h^order as the two tries
     showed (order taken as at least 1)."""
     return max(OBSERVED_MIN_FACTOR, OBSERVED_SAFETY * err ** (-1.0 / max(order, 1.0)))
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def predictive_factor(h, err, h_prev, err_prev, error_order):
     """Gustafsson's predictive step factor after an accepted step h with error err, the one
     before being h_prev with err_prev: safety (h / h_prev) (err_prev / err^2)^(1/(q+1))."""

@@ -55,7 +55,7 @@ P = np.array([
 ])
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def stages(rhs, mode, t, y, p, h, K, y_new):
     """One DOPRI5 step without its FSAL stage: y_new = y + h sum_s B_s K_s.
 
@@ -77,7 +77,7 @@ def stages(rhs, mode, t, y, p, h, K, y_new):
         y_new[i] = y[i] + h * acc
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def error_estimate(h, K, err):
     """err = h K^T E: 5th- minus 4th-order solution; needs K[6] = f(t + h, y_new)."""
     for i in range(err.size):
@@ -87,7 +87,7 @@ def error_estimate(h, K, err):
         err[i] = h * acc
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def dense_coeffs(K, Q):
     """Q = K^T P: coefficients of theta^1..theta^4 of the continuous extension."""
     for i in range(Q.shape[0]):
@@ -105,7 +105,7 @@ DEFECT_THETAS = (1.0 / 3.0, 2.0 / 3.0)  # where the dense output's defect is sam
 DEFECT_WEIGHT = 0.35
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def dense_error(rhs, mode, t, y, p, h, K, Q, est):
     """est = the estimated error of the dense output Q, per component.
 

@@ -57,7 +57,7 @@ ROOT_EPS_FACTOR = 4.0  # Root time tolerance floor: 4 eps, relative to max(1, |t
 _EPS = np.finfo(np.float64).eps
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def dense_eval(y_a, h, Q, theta, out):
     """out = y_a + h * sum_j Q[:, j] theta^(j+1) (Horner); theta = (t - t_a) / h."""
     for i in range(out.size):
@@ -67,13 +67,13 @@ def dense_eval(y_a, h, Q, theta, out):
         out[i] = y_a[i] + h * theta * poly
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def time_tolerance(t, ttol):
     """Width to which event times are located: (4 eps + ttol) * max(1, |t|)."""
     return (ROOT_EPS_FACTOR * _EPS + ttol) * max(1.0, abs(t))
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def arm_guards(g, gtol, sgn):
     """Initial signs at a segment start: 0 (disarmed) for guards within gtol of zero."""
     for k in range(g.size):
@@ -85,7 +85,7 @@ def arm_guards(g, gtol, sgn):
             sgn[k] = -1
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def guard_rates(guards, mode, t, y, f, p, g, h, y_tmp, g_tmp, rates):
     """rates = dg/dt along the flow at (t, y) with y' = f and g = g(t, y): one forward
     difference of length RATE_STEP h (at least 64 ulp of t), one guard call."""
@@ -100,7 +100,7 @@ def guard_rates(guards, mode, t, y, f, p, g, h, y_tmp, g_tmp, rates):
         rates[k] = (g_tmp[k] - g[k]) / d
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def _hermite_lowest(s, g_a, g_b, slope_a, slope_b):
     """Lowest value of s H(theta) on [0, 1], H the cubic with H(0) = g_a, H(1) = g_b,
     H'(0) = slope_a, H'(1) = slope_b (slopes per unit theta): its ends and the roots of H'.
@@ -113,7 +113,7 @@ def _hermite_lowest(s, g_a, g_b, slope_a, slope_b):
     return _hermite_lowest_scaled(s, g_a, g_b, slope_a, slope_b)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def _hermite_lowest_scaled(s, g_a, g_b, slope_a, slope_b):
     a2 = 3.0 * (g_b - g_a) - 2.0 * slope_a - slope_b
     a3 = 2.0 * (g_a - g_b) + slope_a + slope_b
@@ -136,7 +136,7 @@ def _hermite_lowest_scaled(s, g_a, g_b, slope_a, slope_b):
     return lowest
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def clear_of_zero(g_a, g_b, rate_a, rate_b, h, sgn, gtol):
     """True if no guard can reach zero inside the step [t_a, t_a + h] (module docstring):
     each is armed and beyond gtol on its side at both ends, and the cubic Hermite
@@ -152,7 +152,7 @@ def clear_of_zero(g_a, g_b, rate_a, rate_b, h, sgn, gtol):
     return True
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def bracket_start(a, fa, b, fb):
     """Illinois state (a, fa, b, fb, side, w1, w2) for a < b, fa pre-, fb post-crossing.
 
@@ -162,14 +162,14 @@ def bracket_start(a, fa, b, fb):
     return (a, fa, b, fb, 0.0, np.inf, np.inf)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def bracket_done(state, tol):
     """True when b is an exact zero or the bracket is narrower than tol."""
     a, b, fb = state[0], state[2], state[3]
     return fb == 0.0 or b - a <= tol
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def bracket_next(state, tol):
     """Next trial point: regula falsi, or bisection if two updates did not halve the
     bracket; kept tol/2 inside the bracket so every update shrinks it."""
@@ -181,7 +181,7 @@ def bracket_next(state, tol):
     return min(max(c, a + 0.5 * tol), b - 0.5 * tol)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def bracket_update(state, c, fc):
     """Replace the end on c's side; halve the kept end's value if it was kept twice
     in a row (the Illinois modification, superlinear convergence). An exact zero
@@ -198,7 +198,7 @@ def bracket_update(state, c, fc):
     return (c, fc, b, fb, -1.0, width, w1)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def sample_time(t_a, t_b, j):
     """Time of guard sample j = 0..GUARD_SUBINTERVALS (exactly t_a and t_b at the ends)."""
     if j == GUARD_SUBINTERVALS:
@@ -206,7 +206,7 @@ def sample_time(t_a, t_b, j):
     return t_a + (t_b - t_a) * (j / GUARD_SUBINTERVALS)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def _sign_changes(G, j, directions, gtol, sgn, cand, ignore):
     """Update the guards' last signs with sample j; mark sign changes in an allowed
     direction in cand (their sgn is kept: the pre-crossing sign), and disarmed guards
@@ -232,7 +232,7 @@ def _sign_changes(G, j, directions, gtol, sgn, cand, ignore):
     return found
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def _drop_noise(guards, mode, p, t, y, g, atol, rtol, cand, y_tmp, g_tmp):
     """Unmark candidates whose value g[k] at (t, y) lies within the guard's noise band
     (module docstring); their sign stays the pre-crossing one. True if any is left."""
@@ -251,7 +251,7 @@ def _drop_noise(guards, mode, p, t, y, g, atol, rtol, cand, y_tmp, g_tmp):
     return found
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def _root_on_dense(guards, mode, p, k, step, G, j, tol, y_tmp, g_tmp):
     """Crossing time of guard k, which has its new sign at sample j of ``step``.
 
@@ -275,7 +275,7 @@ def _root_on_dense(guards, mode, p, k, step, G, j, tol, y_tmp, g_tmp):
     return state[2]
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def _zero_at_end(G, directions, gtol, sgn, ignore):
     """Lowest armed guard that reached zero at the last sample in an allowed direction."""
     last = G.shape[0] - 1
@@ -286,7 +286,7 @@ def _zero_at_end(G, directions, gtol, sgn, ignore):
     return -1
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def _earliest_root(guards, mode, p, step, G, j, ttol, cand, y_tmp, g_tmp):
     """Locate every candidate's crossing before sample j; the earliest wins (ties: lowest k)."""
     tol = time_tolerance(step.t_b, ttol)
@@ -301,7 +301,7 @@ def _earliest_root(guards, mode, p, step, G, j, ttol, cand, y_tmp, g_tmp):
     return k_best, t_best, j
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def find_event(guards, mode, p, step, G, ev, tol, sgn, at_end, cand, y_tmp, g_tmp, y_pert,
                j_start, ignore):
     """Earliest event in the accepted ``step`` (structures.Step); returns (k, t_event, j).
@@ -331,7 +331,7 @@ def find_event(guards, mode, p, step, G, ev, tol, sgn, at_end, cand, y_tmp, g_tm
     return -1, step.t_b, GUARD_SUBINTERVALS
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def dense_integral(y_a, h, Q, theta, out):
     """out = integral of the dense output from t_a to t_a + theta h (exact for the polynomial)."""
     for i in range(out.size):

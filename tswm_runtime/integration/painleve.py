@@ -41,14 +41,14 @@ CLEAR_STEPS = 8.0  # and gets it back when it would not within this many (or D g
 MAX_CHANGE = 2.0  # A step in t may change D by at most this factor, either way.
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def heading_for_zero(d_start, d_end):
     """True when a step took D from d_start down to d_end > 0 at a rate that reaches 0
     within TRIGGER_STEPS more steps of the same length."""
     return 0.0 < d_end < d_start and d_end <= TRIGGER_STEPS * (d_start - d_end)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def too_steep(d_start, d_end):
     """True when a step in t changed D (> 0 at its start) by more than MAX_CHANGE either
     way: a step that long may have jumped across D = 0 (its stages beyond the zero, where
@@ -63,7 +63,7 @@ def too_steep(d_start, d_end):
 Sundman = namedtuple("Sundman", "z z_new z_tmp err K K_row y f g g_new obs atol")
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def _work(n, n_quad, n_guards, n_obs):
     """The Sundman work arrays for n states, n_quad integrals, n_guards guards, n_obs observables."""
     m = 1 + n + n_quad
@@ -72,7 +72,7 @@ def _work(n, n_quad, n_guards, n_obs):
                    np.empty(m))
 
 
-@njit(cache=True, error_model="numpy", inline="always")  # a step of its caller, at no call
+@njit(error_model="numpy", forceinline=True)  # a step of its caller: inlined by LLVM, typed once
 def _rate(fns, seg, z, g, dz, w):
     """dz = d(t, y, q)/dsigma at z (the guards there into g); returns D."""
     n = w.y.size
@@ -88,7 +88,7 @@ def _rate(fns, seg, z, g, dz, w):
     return d
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def _step(fns, seg, z, h, z_new, g, w):
     """One DOPRI5 step of size h in sigma from z (w.K[0] = rate at z on entry); fills w.K[6]."""
     K = w.K
@@ -108,14 +108,14 @@ def _step(fns, seg, z, h, z_new, g, w):
     return _rate(fns, seg, z_new, g, K[dopri5.N_STAGES], w)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def _retake(fns, seg, h, z_out, w):
     """z_out = a full step of length h from w.z (w.K_row: the rate there); returns D there."""
     w.K[0, :] = w.K_row
     return _step(fns, seg, w.z, h, z_out, w.g_new, w)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def _root(fns, seg, h, z_out, w, which, target, tol, far):
     """sigma in (0, h] where component ``which`` of the step re-taken from w.z (D for which < 0)
     reaches ``target``, by Illinois; z_out holds the state on the far side of it (far) or on
@@ -137,7 +137,7 @@ def _root(fns, seg, h, z_out, w, which, target, tol, far):
     return state[2] if far else state[0]
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def _begin(fns, settings, seg, state, w):
     """z and its absolute tolerances from the state; returns D there (the rate into w.K[0],
     the guards into w.g)."""
@@ -150,7 +150,7 @@ def _begin(fns, settings, seg, state, w):
     return _rate(fns, seg, z, w.g, w.K[0], w)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def _stop_inside(fns, seg, t_end, d_new, w):
     """What ends the approach inside the accepted step from w.z to w.z_new (ZERO before END before
     OTHER: the order in sigma), -1 if nothing does."""
@@ -174,7 +174,7 @@ def _stop_inside(fns, seg, t_end, d_new, w):
     return stop
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def _unbounded(fns, seg, mon, w):
     """D reaches 0: the reactions grow without bound, with the signs they have at w.z (D > 0)."""
     n = w.y.size
@@ -184,7 +184,7 @@ def _unbounded(fns, seg, mon, w):
         mon[k, 0], mon[k, 1] = np.inf, np.inf if w.obs[k] >= 0.0 else -np.inf
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def _land(fns, seg, stop, t_end, h, d, tol_t, w):
     """w.z_new on D = 0 (ZERO) or on t = t_end (END), located in the step of size h; returns the
     sigma of it. END: the far side (t >= t_end, then set to t_end); ZERO: the near side, where
@@ -197,7 +197,7 @@ def _land(fns, seg, stop, t_end, h, d, tol_t, w):
     return sigma
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def _write_rows(fns, seg, out, i, h, d, tol_t, w):
     """Output rows in (t, t_new] of the step from w.z to w.z_new: t(sigma) = t_out solved on
     re-taken steps. Returns the next row."""
@@ -213,7 +213,7 @@ def _write_rows(fns, seg, out, i, h, d, tol_t, w):
     return i
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def _observe_max(fns, seg, mon, w):
     """The observables' running maxima with their values at w.z."""
     n, z = w.y.size, w.z
@@ -224,7 +224,7 @@ def _observe_max(fns, seg, mon, w):
             mon[k, 0], mon[k, 1], mon[k, 2] = abs(w.obs[k]), w.obs[k], z[0]
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def approach(fns, settings, seg, state, record, i):
     """Follow the mode from ``state`` in Sundman time; see the module docstring.
 

@@ -49,7 +49,7 @@ PROPORTIONAL_RTOL = 1e-3
 STEP_RTOL_FLOOR = 1e-12
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def lu_factor(A, piv):
     """In-place LU factorisation with partial pivoting (Doolittle, row swaps in piv).
 
@@ -74,7 +74,7 @@ def lu_factor(A, piv):
     return True
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def lu_solve(LU, piv, b):
     """Solve A x = b in place (b becomes x) from ``lu_factor``'s output."""
     n = b.size
@@ -91,7 +91,7 @@ def lu_solve(LU, piv, b):
         b[i] /= LU[i, i]
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def stages(rhs, mode, t, y, p, h, f0, J, dfdt, LU, piv, K, y_new):
     """One ode23s step without its error stage: y_new = y + h k2 (1 rhs call).
 
@@ -122,7 +122,7 @@ def stages(rhs, mode, t, y, p, h, f0, J, dfdt, LU, piv, K, y_new):
         y_new[i] = y[i] + h * k2[i]
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def error_estimate(h, f0, f_new, dfdt, LU, piv, K, err):
     """err = h/6 (k1 - 2 k2 + k3) after ``stages`` with the same h; f_new = F2."""
     k1, k2, f1, k3 = K[0], K[1], K[2], K[3]
@@ -133,7 +133,7 @@ def error_estimate(h, f0, f_new, dfdt, LU, piv, K, err):
         err[i] = h / 6.0 * (k1[i] - 2.0 * k2[i] + k3[i])
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def dense_coeffs(K, Q):
     """Coefficients of s^1, s^2 of the ntrp23s interpolant; s^3, s^4 terms are zero."""
     k1, k2 = K[0], K[1]

@@ -80,7 +80,7 @@ def no_jacobian(mode, t, y, p, J, dfdt):
     dfdt[:] = np.nan
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def _all_finite(x):
     """True if no entry of x (any shape) is NaN or infinite."""
     for v in x.ravel():
@@ -89,7 +89,7 @@ def _all_finite(x):
     return True
 
 
-@njit(cache=True, error_model="numpy", inline="always")  # a step of its caller, at no call
+@njit(error_model="numpy", forceinline=True)  # a step of its caller: inlined by LLVM, typed once
 def _eval_guards(fns, seg, t, y, g):
     """Guards into g (skipped when the model has none); True if all are finite."""
     if g.size > 0:
@@ -97,13 +97,13 @@ def _eval_guards(fns, seg, t, y, g):
     return _all_finite(g)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def _error_order(method):
     """Order of the method's error estimator (for the initial step)."""
     return dopri5.ERROR_ORDER if method == DOPRI5 else rosenbrock.ERROR_ORDER
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def _step_tolerance(method, rtol):
     """The fraction of the tolerance a step's error is held to (1 for DOPRI5, which advances with
     its 5th-order solution; less for ROSENBROCK23 at tight rtol: ``control.proportional_tolerance``)."""
@@ -113,7 +113,7 @@ def _step_tolerance(method, rtol):
                                           rosenbrock.STEP_RTOL_FLOOR)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def _judged(e, y_new, order, safety, lo, hi):
     """(scaled error norm e, step factor): inf and the smallest factor if anything is not finite."""
     if not (np.isfinite(e) and _all_finite(y_new)):
@@ -184,7 +184,7 @@ def attempt_function(method):
     return compiled(_ATTEMPTS[method], ATTEMPT_SIG)
 
 
-@njit(cache=True, error_model="numpy", inline="always")  # a step of its caller, at no call
+@njit(error_model="numpy", forceinline=True)  # a step of its caller: inlined by LLVM, typed once
 def _state_at(fns, seg, tol, step, t, y, s, counters):
     """y = state at t in the step by a full step from t_a (exact at the ends); s.g_tmp = guards."""
     if t == step.t_b:
@@ -197,7 +197,7 @@ def _state_at(fns, seg, tol, step, t, y, s, counters):
     _eval_guards(fns, seg, t, y, s.g_tmp)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def _event_state(fns, seg, tol, step, k, t_star, j, s, counters):
     """(event time, True) and state s.y_ev for guard k crossing at t_star (found on the
     dense output); (t_star, False) if the re-taken steps show no crossing (the
@@ -245,7 +245,7 @@ def _event_state(fns, seg, tol, step, k, t_star, j, s, counters):
     return state[2], True
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def _write_samples(out, i, step, t_hi, y_hi, quad, q_tmp):
     """Rows out.y[i:] for the output times in (t_a, t_hi]; returns the next free index.
 
@@ -267,7 +267,7 @@ def _write_samples(out, i, step, t_hi, y_hi, quad, q_tmp):
     return i
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def _hold_samples(out, i, t, t_hi, y, quad):
     """Rows for the output times in (t, t_hi] while the state is held at y (steady)."""
     n = y.size
@@ -282,7 +282,7 @@ def _hold_samples(out, i, t, t_hi, y, quad):
 MaxWindow = namedtuple("MaxWindow", "f y Q s")  # per observable: 2 steps' (t_a, h, t_hi), y_a, Q; fill
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def _monitor(fns, seg, t, y, mon, step, t_hi, obs, win):
     """Track max |observable k| at (t, y) in mon[k] = (|value|, value, t).
 
@@ -311,7 +311,7 @@ _SQRT_EPS = np.sqrt(np.finfo(np.float64).eps)
 _GOLDEN = 0.5 * (3.0 - np.sqrt(5.0))
 
 
-@njit(cache=True, error_model="numpy", inline="always")  # a step of its caller, at no call
+@njit(error_model="numpy", forceinline=True)  # a step of its caller: inlined by LLVM, typed once
 def _window_value(fns, seg, k, t, s):
     """|Observable k| at t, from the window slot whose step contains t."""
     win = s.win
@@ -322,7 +322,7 @@ def _window_value(fns, seg, k, t, s):
     return abs(s.obs[k])
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def _brent_max(fns, seg, k, s, a, b, x):
     """(t, |observable k|) at its largest on [a, b], from x: Brent's bounded method (parabolic
     steps with a golden-section fallback; scipy's fminbound), to REFINE_XTOL of b - a."""
@@ -374,7 +374,7 @@ def _brent_max(fns, seg, k, s, a, b, x):
     return x, -fx
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def _refine(fns, seg, mon, s):
     """Locate max |observable| in each pending window (Brent, from the largest step end) and
     reset them."""
@@ -395,7 +395,7 @@ SegmentWork = namedtuple("SegmentWork", "work f_a y_a y_b f_b err y_ev y_tmp y_p
                                         "rate_a rate_b obs win")
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def segment_work(n, m, n_quad, n_obs):
     """Scratch arrays for ``run``: n states, m guards, n_quad integrals, n_obs monitored observables."""
     return SegmentWork(
@@ -414,7 +414,7 @@ Control = namedtuple("Control", "rejected h_rej e_rej h_acc e_acc")
 _STEPPING = 3  # _start's code for a segment that has steps to take
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def _start(fns, settings, seg, state, record, s):
     """Set up the segment at ``state``: the maxima there, f_a and the guards G[0] (armed), their
     rates, the first step. Returns (_STEPPING, first step), or (REACHED_END or NOT_FINITE,
@@ -441,7 +441,7 @@ def _start(fns, settings, seg, state, record, s):
     return _STEPPING, h
 
 
-@njit(cache=True, error_model="numpy", inline="always")  # a step of its caller, at no call
+@njit(error_model="numpy", forceinline=True)  # a step of its caller: inlined by LLVM, typed once
 def _jacobian(fns, seg, t, y, work, counters):
     """The Jacobian and df/dt at (t, y) into work; True if they are finite."""
     fns.jac(seg.mode, t, y, seg.p, work.J, work.dfdt)
@@ -449,7 +449,7 @@ def _jacobian(fns, seg, t, y, work, counters):
     return _all_finite(work.J) and _all_finite(work.dfdt)
 
 
-@njit(cache=True, error_model="numpy", inline="always")  # a step of its caller, at no call
+@njit(error_model="numpy", forceinline=True)  # a step of its caller: inlined by LLVM, typed once
 def _rejected(ctl, h, e, factor, counters):
     """After a step of size h rejected with error e: (control, the next step size)."""
     counters[N_REJECTED] += 1
@@ -458,14 +458,14 @@ def _rejected(ctl, h, e, factor, counters):
     return Control(True, h, e, ctl.h_acc, ctl.e_acc), h * factor
 
 
-@njit(cache=True, error_model="numpy", inline="always")  # a step of its caller, at no call
+@njit(error_model="numpy", forceinline=True)  # a step of its caller: inlined by LLVM, typed once
 def _too_steep(ctl, h, counters):
     """After a step of size h rejected for changing D too much: (control, half the step)."""
     counters[N_REJECTED] += 1
     return Control(True, ctl.h_rej, 0.0, ctl.h_acc, ctl.e_acc), 0.5 * h
 
 
-@njit(cache=True, error_model="numpy", inline="always")  # a step of its caller, at no call
+@njit(error_model="numpy", forceinline=True)  # a step of its caller: inlined by LLVM, typed once
 def _accepted(ctl, h, h_want, e, factor, order, counters):
     """After a step of size h (h_want before it was clipped to t_end) accepted with error e:
     (control, the next step size)."""
@@ -479,7 +479,7 @@ def _accepted(ctl, h, h_want, e, factor, order, counters):
     return Control(ctl.rejected, ctl.h_rej, ctl.e_rej, h, max(e, control.PREDICTIVE_MIN_ERR)), h_next
 
 
-@njit(cache=True, error_model="numpy", inline="always")  # a step of its caller, at no call
+@njit(error_model="numpy", forceinline=True)  # a step of its caller: inlined by LLVM, typed once
 def _first_event(fns, seg, tol, step, t_end, s, counters):
     """(guard, time) of the first event in the accepted ``step`` (its state into s.y_ev), or
     (-1, step.t_b); the guards' rates at t_b into s.rate_b."""
@@ -503,7 +503,7 @@ def _first_event(fns, seg, tol, step, t_end, s, counters):
     return k, t_new
 
 
-@njit(cache=True, error_model="numpy", inline="always")  # a step of its caller, at no call
+@njit(error_model="numpy", forceinline=True)  # a step of its caller: inlined by LLVM, typed once
 def _advance(fns, seg, record, i, step, t_new, y_hi, quad, s):
     """The rows, the step log, the integral and the maxima up to t_new (state y_hi) in ``step``;
     returns the next output row."""
@@ -517,7 +517,7 @@ def _advance(fns, seg, record, i, step, t_new, y_hi, quad, s):
     return i
 
 
-@njit(cache=True, error_model="numpy", inline="always")  # a step of its caller, at no call
+@njit(error_model="numpy", forceinline=True)  # a step of its caller: inlined by LLVM, typed once
 def _stable_rest(fns, seg, tol, t, y, quad, s, counters):
     """True if (t, y) is a stable equilibrium of the autonomous scalar segment (``steady``); the
     Jacobian there is left in s.work."""
@@ -527,7 +527,7 @@ def _stable_rest(fns, seg, tol, t, y, quad, s, counters):
     return steady.at_stable_rest(s.f_b, work.J, work.dfdt, tol, y, quad)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def _hold(fns, seg, t_end, t, state, record, i, s):
     """Hold the state at its equilibrium (one Newton step onto it) up to the next guard crossing
     or t_end, its observables in the maxima (the rows carry the held state, so must the maxima).
@@ -546,7 +546,7 @@ def _hold(fns, seg, t_end, t, state, record, i, s):
     return t_hold, k, i
 
 
-@njit(cache=True, error_model="numpy", inline="always")  # a step of its caller, at no call
+@njit(error_model="numpy", forceinline=True)  # a step of its caller: inlined by LLVM, typed once
 def _next_step(s):
     """The end of the accepted step becomes the start of the next."""
     s.f_a[:] = s.f_b
@@ -554,7 +554,7 @@ def _next_step(s):
     s.rate_a[:] = s.rate_b
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def run(fns, settings, seg, state, record, i, scratch):
     """The step loop of one segment from ``state``, whose y and quad are updated in place.
 

@@ -19,7 +19,7 @@ from tswm_runtime.jit.structures import (EVENT_SETTINGS, INDEX_WIDTH, JUMP_WIDTH
 _VEC_I64 = types.int64[::1]
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def _valid(method, t0, y0, t_end, tol, max_steps, ev, out, i_out, y_stop, counters):
     """Argument checks that keep the unchecked array accesses below in bounds."""
     n = y0.size

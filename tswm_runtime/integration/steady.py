@@ -20,14 +20,14 @@ OFFSET_FRACTION = 0.5  # hold when |f| / |J| is below this fraction of the toler
 STEP_FRACTION = 10.0  # look (one Jacobian) when the last step moved the state by less than this many tolerances
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def worth_checking(f, h, tol, y):
     """Cheap filter: a scalar state that the last step moved by a few tolerances at most (an
     explicit method on a stable equilibrium moves it by about 3 |f / J|, its stability limit)."""
     return y.size == 1 and abs(f[0]) * h < STEP_FRACTION * (tol.atol[0] + tol.rtol * abs(y[0]))
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def at_stable_rest(f, J, dfdt, tol, y, quad):
     """True at a stable equilibrium of an autonomous scalar segment, close enough that
     holding it moves the state by less than OFFSET_FRACTION of its tolerance, and its
@@ -42,7 +42,7 @@ def at_stable_rest(f, J, dfdt, tol, y, quad):
     return held
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def hold(guards, mode, t, y, p, t_end, g_now, ev, g_tmp):
     """(time, guard) up to which the held state lasts: the earliest guard sign change in
     (t, t_end] with y fixed (guard -1: none, the time is t_end). The time is the far end

@@ -30,14 +30,14 @@ T_STEP, HELD, SUNDMAN = 0, 1, 2  # the kinds of step
 BISECTIONS = 200  # a bound; bisection on theta stops when the bracket no longer shrinks
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def no_steps(width, n_params):
     """A StepLog of no rows (it only counts): for runs whose rows are written as they go."""
     return StepLog(np.empty((0, 4)), np.empty((0, 2), np.int64), np.empty((0, width)), np.empty((0, width)),
                    np.empty((0, width + 1, 4)), np.empty(0, np.int64), np.empty((0, n_params)), np.zeros(2, np.int64))
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def _slot(steps, kind, t_a, h, t_hi, theta_hi):
     """The row for the next step, its times and kind written; -1 for a log of no rows. Every step
     is counted, so that the caller sees how many there were; when the log is full, its last row
@@ -52,7 +52,7 @@ def _slot(steps, kind, t_a, h, t_hi, theta_hi):
     return k
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def log_step(steps, t_a, h, t_hi, y_a, quad, y_hi, Q):
     """A step in t from (t_a, y_a) with dense output Q, used up to t_hi where the state is y_hi;
     quad: the integral at t_a (size 0: none)."""
@@ -71,7 +71,7 @@ def log_step(steps, t_a, h, t_hi, y_a, quad, y_hi, Q):
             end[j] = quad[j] + end[j]
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def log_held(steps, t_a, t_hi, y, quad):
     """The state y held from t_a to t_hi (quad: its integral at t_a)."""
     if not t_hi > t_a:
@@ -87,7 +87,7 @@ def log_held(steps, t_a, t_hi, y, quad):
         steps.y_hi[k, n + j] = quad[j] + y[j] * (t_hi - t_a)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def log_sundman(steps, z, h, z_hi, Qz, theta_hi):
     """A step of size h in Sundman time from z = (t, y, q) with dense output Qz (one row per
     component of z), used up to theta_hi of it, where z is z_hi."""
@@ -101,7 +101,7 @@ def log_sundman(steps, z, h, z_hi, Qz, theta_hi):
     steps.Q[k, width, :] = Qz[0, :]
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def end_segment(steps, mode, p):
     """Close the segment whose steps were just logged: its mode and parameter vector."""
     s = steps.count[1]
@@ -111,7 +111,7 @@ def end_segment(steps, mode, p):
         steps.seg_p[s, :] = p
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def _covering(f, n_steps, t, side):
     """The step that covers t: the first that ends at or after it (side 0), the last that starts
     at or before it (side 1); -1 outside [start of the first, end of the last] or for NaN."""
@@ -135,7 +135,7 @@ def _covering(f, n_steps, t, side):
     return lo
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def _sundman_theta(t_a, h, q, theta_hi, t):
     """theta in [0, theta_hi] where t(theta) = t_a + h theta (q0 + q1 theta + q2 theta^2 + q3 theta^3)
     equals t, by bisection to the resolution of theta."""
@@ -151,7 +151,7 @@ def _sundman_theta(t_a, h, q, theta_hi, t):
     return 0.5 * (lo + hi)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def _evaluate(steps, k, n, t, out):
     """out = the n states and their integral (out[n:]) at t from step k."""
     t_a, h, t_hi = steps.f[k, 0], steps.f[k, 1], steps.f[k, 2]

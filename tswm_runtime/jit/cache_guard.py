@@ -1,5 +1,5 @@
 """Eager, cached compilation that notices edits in the kernel modules it inlines; ``njit``
-for the kernels' helpers.
+for the kernels' helpers, which are compiled as code to link (``linking``).
 
 numba keys a function's on-disk cache on its own source file only (dependencies are
 not tracked, as numba's caching docs say), while the compiled integrators inline
@@ -17,17 +17,19 @@ from pathlib import Path
 
 import numba
 from numba import types
-from numba.core import caching
+from numba.core import caching, compiler
 from numba.core.cpu import CPUContext
 from numba.core.runtime import rtsys
 from numba.core.registry import CPUDispatcher
 
 from tswm_common.files import write_atomic
+from tswm_runtime.jit.linking import HelperCompiler
 
 KERNEL_SOURCES = ("jit/borrow.py", "jit/structures.py", "integration/control.py",
                   "integration/dopri5.py", "integration/rosenbrock.py", "integration/events.py", "integration/segment.py",
-                  "integration/single.py", "integration/painleve.py", "integration/steplog.py", "integration/steady.py", "hybrid/machine.py",
-                  "hybrid/impact.py", "hybrid/batch.py", "hybrid/rows.py", "hybrid/entry.py", "jit/addresses.py")
+                  "integration/single.py", "integration/painleve.py", "integration/steplog.py", "integration/steady.py",
+                  "hybrid/machine.py", "hybrid/impact.py", "hybrid/batch.py", "hybrid/rows.py", "hybrid/entry.py",
+                  "jit/addresses.py", "jit/linking.py")
 
 
 class CacheIOWarning(UserWarning):
@@ -119,8 +121,8 @@ def check_kernel_caches() -> None:
 
 
 class _Helper(CPUDispatcher):
-    """A dispatcher for the kernels' helpers (measured: each compile of a helper is a full
-    compile, repeated in every caller's link).
+    """A dispatcher for the kernels' helpers (measured: each compile of a helper costs a typing
+    and a lowering of it; its code is optimized where it is linked, ``linking``).
 
     It types the constants it is called with from compiled code as their plain types (int64,
     not Literal[int](3)): numba's own compiles a callee once per literal value, and once more
@@ -142,13 +144,18 @@ class _Helper(CPUDispatcher):
 
 
 def njit(*, cache=False, **options):
-    """``numba.njit(cache=cache, **options)`` with the dispatcher above, for the kernels' helpers;
-    ``options`` may turn the wrappers back on (no_cfunc_wrapper=False for a first-class function).
-    The function itself while numba's jit is off, as numba.njit does."""
+    """``numba.njit(**options)`` with the dispatcher above, for the kernels' helpers; ``options``
+    may turn the wrappers back on (no_cfunc_wrapper=False for a first-class function). A helper
+    is code for its callers to link (``linking.HelperLibrary``: optimized and compiled to machine
+    code in the kernel that calls it, once) and is not cached on its own: it lives in its
+    kernels' cache. ``cache=True`` is for a function that is entered by address (a method's
+    step): compiled in full on its own and cached. The function itself while numba's jit is off,
+    as numba.njit does."""
     def decorate(py_func):
         if numba.config.DISABLE_JIT:   # an interpreted run (startup.warmup)
             return py_func
         dispatcher = _Helper(py_func=py_func, locals={},
+                             pipeline_class=compiler.Compiler if cache else HelperCompiler,
                              targetoptions={"nopython": True, "boundscheck": None, "no_cpython_wrapper": True,
                                             "no_cfunc_wrapper": True, **options})
         if cache:
