@@ -40,6 +40,7 @@ from tswm_runtime.jit import cache_guard
 from tswm_runtime.integration import painleve
 from tswm_runtime.integration import segment
 from tswm_runtime.integration import steplog
+from tswm_runtime.jit.arrays import copy_into
 from tswm_runtime.jit.borrow import borrowed
 from tswm_runtime.jit.cache_guard import njit
 from tswm_runtime.jit.structures import (JUMP_WIDTH, MODE_TABLES, RECORD, SETTINGS, START, EventSettings, Segment,
@@ -103,7 +104,7 @@ def _phi_sign(rhs, guards, mode, t, y, p, tol, k_phi, g, y_tmp, f):
     a probe step along ``mode`` that moves v1 by that tolerance."""
     n = y.size
     dv = tol.atol[n - 1] + tol.rtol * abs(y[n - 1])
-    y_tmp[:] = y
+    copy_into(y_tmp, y)
     y_tmp[n - 1] += dv
     guards(mode, t, y_tmp, p, g)
     phi_moved = g[k_phi]
@@ -529,11 +530,11 @@ def _observe_max(observe, mode, t, y, p, mon, obs):
 def _log(log, n_ev, t, k, mode_from, mode_to, breakpoint, y, quad, jump):
     """Append an event (time, guard, from, to, breakpoint passed, state, impact jump) to the EventLog."""
     n = y.size
-    log.jump[n_ev, :] = jump
+    copy_into(log.jump[n_ev], jump)
     log.t[n_ev] = t
     log.index[n_ev, 0], log.index[n_ev, 1], log.index[n_ev, 2], log.index[n_ev, 3] = k, mode_from, mode_to, breakpoint
-    log.state[n_ev, :n] = y
-    log.state[n_ev, n:] = quad
+    copy_into(log.state[n_ev, :n], y)
+    copy_into(log.state[n_ev, n:], quad)
     return n_ev + 1
 
 
@@ -849,8 +850,9 @@ def integrate_hybrid(fns, tables, start, settings, record):
         i0 = i
         seg_status, t_new, k, i, h, singular = _segment(fns, tables, settings, mode, p, State(t, y, q, h), record, i,
                                                         w.segment, singular)
-        out.mode[i0:i] = mode
-        out.p[i0:i] = p
+        for r in range(i0, i):
+            out.mode[r] = mode
+            copy_into(out.p[r], p)
         steplog.end_segment(record.steps, mode, p)
         if seg_status == segment.APPROACH:  # back from the approach, on in t
             t = t_new

@@ -9,6 +9,7 @@ functions row by row from Python cost about 3 us a row. ``outputs`` comes as its
 import numpy as np
 
 from tswm_runtime.jit import cache_guard
+from tswm_runtime.jit.arrays import copy_into
 from tswm_runtime.jit.addresses import guards_at
 from tswm_runtime.jit.borrow import borrowed
 from tswm_runtime.jit.signatures import MATRIX, VECTOR
@@ -26,7 +27,7 @@ def fill_rows(outputs, t, y, mode, p, n_states, out):
     t, y, mode, p, out = borrowed((t, y, mode, p, out))  # the row views cost no reference counting
     state, values = np.empty(n_states), np.empty(out.shape[0])
     for r in range(t.size):
-        state[:] = y[r, :n_states]
+        copy_into(state, y[r, :n_states])
         outputs(mode[r], t[r], state, p[r], values)
         for k in range(values.size):
             out[k, r] = values[k]

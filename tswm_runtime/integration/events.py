@@ -48,6 +48,7 @@ so that ``segment`` runs the same iteration on the re-taken full-order step.
 import math
 
 import numpy as np
+from tswm_runtime.jit.arrays import copy_into
 from tswm_runtime.jit.cache_guard import njit
 
 GUARD_SUBINTERVALS = 4  # Guard samples per step: 3 interior points + the step end.
@@ -238,7 +239,7 @@ def _drop_noise(guards, mode, p, t, y, g, atol, rtol, cand, y_tmp, g_tmp):
     (module docstring); their sign stays the pre-crossing one. True if any is left."""
     band = np.zeros(g.size)
     for i in range(y.size):
-        y_tmp[:] = y
+        copy_into(y_tmp, y)
         y_tmp[i] += atol[i] + rtol * abs(y[i])
         guards(mode, t, y_tmp, p, g_tmp)
         for k in range(g.size):
@@ -322,7 +323,7 @@ def find_event(guards, mode, p, step, G, ev, tol, sgn, at_end, cand, y_tmp, g_tm
             dense_eval(step.y_a, step.h, step.Q, (t_j - step.t_a) / step.h, y_tmp)
             guards(mode, t_j, y_tmp, p, G[j])
         else:
-            y_tmp[:] = step.y_b
+            copy_into(y_tmp, step.y_b)
         if _sign_changes(G, j, ev.directions, ev.gtol, sgn, cand, ignore) and (not ev.noise_band or _drop_noise(
                 guards, mode, p, t_j, y_tmp, G[j], tol.atol, tol.rtol, cand, y_pert, g_tmp)):
             return _earliest_root(guards, mode, p, step, G, j, ev.ttol, cand, y_tmp, g_tmp)

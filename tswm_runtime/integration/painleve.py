@@ -28,6 +28,7 @@ from collections import namedtuple
 
 import numpy as np
 
+from tswm_runtime.jit.arrays import copy_into
 from tswm_runtime.jit.cache_guard import njit
 
 from tswm_runtime.integration import control
@@ -76,7 +77,7 @@ def _work(n, n_quad, n_guards, n_obs):
 def _rate(fns, seg, z, g, dz, w):
     """dz = d(t, y, q)/dsigma at z (the guards there into g); returns D."""
     n = w.y.size
-    w.y[:] = z[1:1 + n]
+    copy_into(w.y, z[1:1 + n])
     fns.guards(seg.mode, z[0], w.y, seg.p, g)
     d = g[seg.ev.singular]
     fns.rhs(seg.mode, z[0], w.y, seg.p, w.f)
@@ -111,7 +112,7 @@ def _step(fns, seg, z, h, z_new, g, w):
 @njit(error_model="numpy")
 def _retake(fns, seg, h, z_out, w):
     """z_out = a full step of length h from w.z (w.K_row: the rate there); returns D there."""
-    w.K[0, :] = w.K_row
+    copy_into(w.K[0], w.K_row)
     return _step(fns, seg, w.z, h, z_out, w.g_new, w)
 
 
@@ -130,10 +131,10 @@ def _root(fns, seg, h, z_out, w, which, target, tol, far):
         d_c = _retake(fns, seg, c, z_out, w)
         state = events.bracket_update(state, c, (d_c if which < 0 else z_out[which]) - target)
         if state[2] == c:
-            z_far[:] = z_out
+            copy_into(z_far, z_out)
         else:
-            z_near[:] = z_out
-    z_out[:] = z_far if far else z_near
+            copy_into(z_near, z_out)
+    copy_into(z_out, z_far if far else z_near)
     return state[2] if far else state[0]
 
 
@@ -143,10 +144,12 @@ def _begin(fns, settings, seg, state, w):
     the guards into w.g)."""
     n, z = state.y.size, w.z
     w.atol[0] = settings.tol.rtol * max(abs(state.t), 1e-3)
-    w.atol[1:1 + n] = settings.tol.atol
+    copy_into(w.atol[1:1 + n], settings.tol.atol)
     for i_q in range(state.quad.size):
         w.atol[1 + n + i_q] = settings.tol.atol[i_q]
-    z[0], z[1:1 + n], z[1 + n:] = state.t, state.y, state.quad
+    z[0] = state.t
+    copy_into(z[1:1 + n], state.y)
+    copy_into(z[1 + n:], state.quad)
     return _rate(fns, seg, z, w.g, w.K[0], w)
 
 
@@ -161,7 +164,7 @@ def _stop_inside(fns, seg, t_end, d_new, w):
         return END
     n = w.y.size
     directions, g, g_new = seg.ev.directions, w.g, w.g_new
-    w.y[:] = z_new[1:1 + n]
+    copy_into(w.y, z_new[1:1 + n])
     fns.guards(seg.mode, z_new[0], w.y, seg.p, g_new)
     stop = -1
     for k in range(directions.size):
@@ -178,7 +181,7 @@ def _stop_inside(fns, seg, t_end, d_new, w):
 def _unbounded(fns, seg, mon, w):
     """D reaches 0: the reactions grow without bound, with the signs they have at w.z (D > 0)."""
     n = w.y.size
-    w.y[:] = w.z[1:1 + n]
+    copy_into(w.y, w.z[1:1 + n])
     fns.observe(seg.mode, w.z[0], w.y, seg.p, w.obs)
     for k in range(mon.shape[0]):
         mon[k, 0], mon[k, 1] = np.inf, np.inf if w.obs[k] >= 0.0 else -np.inf
@@ -204,11 +207,11 @@ def _write_rows(fns, seg, out, i, h, d, tol_t, w):
     n, t_out, z_new, z_tmp = w.y.size, out.t, w.z_new, w.z_tmp
     while i < t_out.size and t_out[i] <= z_new[0]:
         if t_out[i] == z_new[0]:
-            z_tmp[:] = z_new
+            copy_into(z_tmp, z_new)
         else:
             _root(fns, seg, h, z_tmp, w, 0, t_out[i], tol_t / max(d, 1e-300), True)
-        out.y[i, :n] = z_tmp[1:1 + n]
-        out.y[i, n:] = z_tmp[1 + n:]
+        copy_into(out.y[i, :n], z_tmp[1:1 + n])
+        copy_into(out.y[i, n:], z_tmp[1 + n:])
         i += 1
     return i
 
@@ -217,7 +220,7 @@ def _write_rows(fns, seg, out, i, h, d, tol_t, w):
 def _observe_max(fns, seg, mon, w):
     """The observables' running maxima with their values at w.z."""
     n, z = w.y.size, w.z
-    w.y[:] = z[1:1 + n]
+    copy_into(w.y, z[1:1 + n])
     fns.observe(seg.mode, z[0], w.y, seg.p, w.obs)
     for k in range(mon.shape[0]):
         if abs(w.obs[k]) > mon[k, 0]:
@@ -248,7 +251,7 @@ def approach(fns, settings, seg, state, record, i):
     tol_t = events.time_tolerance(state.t, 0.0)
     outcome = -2
     for _ in range(settings.max_steps):
-        w.K_row[:] = K[0]
+        copy_into(w.K_row, K[0])
         d_new = _step(fns, seg, z, h, z_new, w.g_new, w)
         counters[2] += dopri5.N_STAGES
         dopri5.error_estimate(h, K, w.err)
@@ -257,7 +260,7 @@ def approach(fns, settings, seg, state, record, i):
                                      dopri5.MAX_FACTOR)
         if not (e < 1.0 and np.isfinite(e)):
             counters[1] += 1
-            K[0, :] = w.K_row
+            copy_into(K[0], w.K_row)
             h *= factor
             if h * max(d, 1e-300) <= 10.0 * (np.nextafter(z[0], np.inf) - z[0]):
                 outcome = -1
@@ -276,7 +279,7 @@ def approach(fns, settings, seg, state, record, i):
             theta_hi = _land(fns, seg, stop, t_end, h, d, tol_t, w) / h
         i = _write_rows(fns, seg, record.out, i, h, d, tol_t, w)
         steplog.log_sundman(record.steps, z, h, z_new, Qz, theta_hi)
-        z[:] = z_new
+        copy_into(z, z_new)
         if stop == ZERO:
             for k in range(mon.shape[0]):
                 mon[k, 2] = z[0]
@@ -293,6 +296,6 @@ def approach(fns, settings, seg, state, record, i):
             outcome = CLEAR
             break
         h *= factor
-    state.y[:] = z[1:1 + n]
-    state.quad[:] = z[1 + n:]
+    copy_into(state.y, z[1:1 + n])
+    copy_into(state.quad, z[1 + n:])
     return outcome, z[0], i

@@ -44,6 +44,7 @@ from tswm_runtime.integration import painleve
 from tswm_runtime.integration import rosenbrock
 from tswm_runtime.integration import steady
 from tswm_runtime.integration import steplog
+from tswm_runtime.jit.arrays import copy_into, copy_rows
 from tswm_runtime.jit.borrow import borrowed
 from tswm_runtime.jit.cache_guard import njit
 from tswm_runtime.jit.signatures import JAC_SIG, VECTOR, GuardsFunction, JacFunction, RhsFunction, compiled
@@ -126,14 +127,14 @@ def dopri5_attempt(rhs, mode, t, y, p, h, f0, work, y_new, f_new, err, tol, coun
     """DOPRI5's step of size h from (t, y), f0 = f(t, y): y_new; with ``estimate`` also
     f_new = f(t + h, y_new), the dense output work.Q, and returns (scaled error norm, step
     factor) for the controller (inf and the smallest factor when anything is not finite)."""
-    work.K[0, :] = f0
+    copy_into(work.K[0], f0)
     dopri5.stages(rhs, mode, t, y, p, h, work.K, y_new)
     counters[N_RHS] += dopri5.N_STAGES - 1
     if not estimate:
         return np.inf, dopri5.MIN_FACTOR
     rhs(mode, t + h, y_new, p, f_new)
     counters[N_RHS] += 1
-    work.K[dopri5.N_STAGES, :] = f_new
+    copy_into(work.K[dopri5.N_STAGES], f_new)
     dopri5.error_estimate(h, work.K, err)
     dopri5.dense_coeffs(work.K, work.Q)
     e = control.error_norm(err, y, y_new, tol.atol, tol.rtol)
@@ -188,9 +189,9 @@ def attempt_function(method):
 def _state_at(fns, seg, tol, step, t, y, s, counters):
     """y = state at t in the step by a full step from t_a (exact at the ends); s.g_tmp = guards."""
     if t == step.t_b:
-        y[:] = step.y_b
+        copy_into(y, step.y_b)
     elif t == step.t_a:
-        y[:] = step.y_a
+        copy_into(y, step.y_a)
     else:
         fns.attempt(fns.rhs, seg.mode, step.t_a, step.y_a, seg.p, t - step.t_a, step.f_a, s.work, y, y, y, tol,
                     counters, False)
@@ -227,13 +228,13 @@ def _event_state(fns, seg, tol, step, k, t_star, j, s, counters):
         g_probe = g_tmp[k]
         if (g_probe * post > 0.0) == far:
             if far:  # already across at t_a (it crossed inside the noise band): report t_a
-                y_ev[:] = y_tmp
+                copy_into(y_ev, y_tmp)
                 return t_probe, True
             return t_star, False
     if far:
         state = events.bracket_start(t_probe, g_probe, t_star, g_star)
     else:
-        y_ev[:] = y_tmp
+        copy_into(y_ev, y_tmp)
         state = events.bracket_start(t_star, g_star, t_probe, g_probe)
     ttol = events.time_tolerance(state[2], ev.ttol)
     while not events.bracket_done(state, ttol):
@@ -241,7 +242,7 @@ def _event_state(fns, seg, tol, step, k, t_star, j, s, counters):
         _state_at(fns, seg, tol, step, c, y_tmp, s, counters)
         state = events.bracket_update(state, c, g_tmp[k])
         if state[2] == c:
-            y_ev[:] = y_tmp
+            copy_into(y_ev, y_tmp)
     return state[2], True
 
 
@@ -256,7 +257,7 @@ def _write_samples(out, i, step, t_hi, y_hi, quad, q_tmp):
     while i < out.t.size and out.t[i] <= t_hi:
         theta = (out.t[i] - step.t_a) / step.h
         if out.t[i] == t_hi:
-            out.y[i, :n] = y_hi
+            copy_into(out.y[i, :n], y_hi)
         else:
             events.dense_eval(step.y_a, step.h, step.Q, theta, out.y[i, :n])
         if quad.size > 0:
@@ -272,7 +273,7 @@ def _hold_samples(out, i, t, t_hi, y, quad):
     """Rows for the output times in (t, t_hi] while the state is held at y (steady)."""
     n = y.size
     while i < out.t.size and out.t[i] <= t_hi:
-        out.y[i, :n] = y
+        copy_into(out.y[i, :n], y)
         for j in range(quad.size):
             out.y[i, n + j] = quad[j] + y[j] * (out.t[i] - t)
         i += 1
@@ -301,8 +302,8 @@ def _monitor(fns, seg, t, y, mon, step, t_hi, obs, win):
             continue
         if step is not None:
             win.f[k, slot, 0], win.f[k, slot, 1], win.f[k, slot, 2] = step.t_a, step.h, t_hi
-            win.y[k, slot] = step.y_a
-            win.Q[k, slot] = step.Q
+            copy_into(win.y[k, slot], step.y_a)
+            copy_rows(win.Q[k, slot], step.Q)
 
 
 REFINE_XTOL = 1e-9  # Maxima are located to 1e-9 of their window (plus sqrt(eps) relative to t: Brent's floor).
@@ -549,9 +550,9 @@ def _hold(fns, seg, t_end, t, state, record, i, s):
 @njit(error_model="numpy", forceinline=True)  # a step of its caller: inlined by LLVM, typed once
 def _next_step(s):
     """The end of the accepted step becomes the start of the next."""
-    s.f_a[:] = s.f_b
-    s.G[0, :] = s.G[events.GUARD_SUBINTERVALS]
-    s.rate_a[:] = s.rate_b
+    copy_into(s.f_a, s.f_b)
+    copy_into(s.G[0], s.G[events.GUARD_SUBINTERVALS])
+    copy_into(s.rate_a, s.rate_b)
 
 
 @njit(error_model="numpy")
@@ -614,13 +615,13 @@ def run(fns, settings, seg, state, record, i, scratch):
         if not guards_finite:
             status = NOT_FINITE
             break
-        scratch.y_a[:] = y
+        copy_into(scratch.y_a, y)
         step = Step(t, scratch.y_a, scratch.f_a, h, t_new, scratch.y_b, work.Q)
         k, t_new = _first_event(fns, seg, tol, step, t_end, scratch, counters)
         y_hi = scratch.y_ev if k >= 0 else scratch.y_b
         i = _advance(fns, seg, record, i, step, t_new, y_hi, state.quad, scratch)
         t = t_new
-        y[:] = y_hi
+        copy_into(y, y_hi)
         if k >= 0:
             status = EVENT
             break

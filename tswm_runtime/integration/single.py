@@ -8,6 +8,7 @@ import numpy as np
 from numba import types
 
 from tswm_runtime.jit import cache_guard
+from tswm_runtime.jit.arrays import copy_into
 from tswm_runtime.jit.cache_guard import njit
 from tswm_runtime.integration.steplog import no_steps
 from tswm_runtime.integration.segment import (DOPRI5, INVALID_INPUT, N_COUNTERS, ROSENBROCK23, AttemptFunction, run,
@@ -79,10 +80,10 @@ def integrate_segment(method, attempt, rhs, jac, guards, mode, p, t0, y0, t_end,
     out = Outputs(t_out, y_out, np.empty(0, np.int64), np.empty((0, 0)))
     if not _valid(method, t0, y0, t_end, tol, max_steps, ev, out, i_out, y_stop, counters):
         return INVALID_INPUT, t0, -1, 0, h0
-    y_stop[:] = y0
+    copy_into(y_stop, y0)
     i = i_out
     while i < t_out.size and t_out[i] <= t0:
-        y_out[i, :] = y0
+        copy_into(y_out[i], y0)
         i += 1
     scratch = segment_work(y0.size, ev.directions.size, 0, 0)
     log = EventLog(np.empty(0), np.empty((0, INDEX_WIDTH), np.int64), np.empty((0, 0)), np.empty((0, JUMP_WIDTH)))

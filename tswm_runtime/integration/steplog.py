@@ -22,6 +22,7 @@ from numba import types
 
 from tswm_runtime.integration import events
 from tswm_runtime.jit import cache_guard
+from tswm_runtime.jit.arrays import copy_into, copy_rows
 from tswm_runtime.jit.cache_guard import njit
 from tswm_runtime.jit.signatures import MATRIX, VECTOR
 from tswm_runtime.jit.structures import INTS, STEP_LOG, StepLog
@@ -60,11 +61,11 @@ def log_step(steps, t_a, h, t_hi, y_a, quad, y_hi, Q):
     if k < 0:
         return
     n = y_a.size
-    steps.y_a[k, :n] = y_a
-    steps.y_hi[k, :n] = y_hi
-    steps.Q[k, :n, :] = Q
+    copy_into(steps.y_a[k, :n], y_a)
+    copy_into(steps.y_hi[k, :n], y_hi)
+    copy_rows(steps.Q[k, :n], Q)
     if quad.size > 0:
-        steps.y_a[k, n:] = quad
+        copy_into(steps.y_a[k, n:], quad)
         end = steps.y_hi[k, n:]
         events.dense_integral(y_a, h, Q, (t_hi - t_a) / h, end)
         for j in range(quad.size):
@@ -80,8 +81,8 @@ def log_held(steps, t_a, t_hi, y, quad):
     if k < 0:
         return
     n = y.size
-    steps.y_a[k, :n] = y
-    steps.y_hi[k, :n] = y
+    copy_into(steps.y_a[k, :n], y)
+    copy_into(steps.y_hi[k, :n], y)
     for j in range(quad.size):
         steps.y_a[k, n + j] = quad[j]
         steps.y_hi[k, n + j] = quad[j] + y[j] * (t_hi - t_a)
@@ -95,10 +96,10 @@ def log_sundman(steps, z, h, z_hi, Qz, theta_hi):
     if k < 0:
         return
     width = z.size - 1
-    steps.y_a[k, :] = z[1:]
-    steps.y_hi[k, :] = z_hi[1:]
-    steps.Q[k, :width, :] = Qz[1:, :]
-    steps.Q[k, width, :] = Qz[0, :]
+    copy_into(steps.y_a[k], z[1:])
+    copy_into(steps.y_hi[k], z_hi[1:])
+    copy_rows(steps.Q[k, :width], Qz[1:])
+    copy_into(steps.Q[k, width], Qz[0])
 
 
 @njit(error_model="numpy")
@@ -108,7 +109,7 @@ def end_segment(steps, mode, p):
     steps.count[1] = s + 1
     if s < steps.seg_mode.size:
         steps.seg_mode[s] = mode
-        steps.seg_p[s, :] = p
+        copy_into(steps.seg_p[s], p)
 
 
 @njit(error_model="numpy")
@@ -157,7 +158,7 @@ def _evaluate(steps, k, n, t, out):
     t_a, h, t_hi = steps.f[k, 0], steps.f[k, 1], steps.f[k, 2]
     kind, y_a, Q = steps.index[k, 0], steps.y_a[k], steps.Q[k]
     if t == t_hi:
-        out[:] = steps.y_hi[k]
+        copy_into(out, steps.y_hi[k])
     elif kind == SUNDMAN:
         width = out.size
         events.dense_eval(y_a, h, Q[:width], _sundman_theta(t_a, h, Q[width], steps.f[k, 3], t), out)

@@ -29,7 +29,7 @@ KERNEL_SOURCES = ("jit/borrow.py", "jit/structures.py", "integration/control.py"
                   "integration/dopri5.py", "integration/rosenbrock.py", "integration/events.py", "integration/segment.py",
                   "integration/single.py", "integration/painleve.py", "integration/steplog.py", "integration/steady.py",
                   "hybrid/machine.py", "hybrid/impact.py", "hybrid/batch.py", "hybrid/rows.py", "hybrid/entry.py",
-                  "jit/addresses.py", "jit/linking.py")
+                  "jit/addresses.py", "jit/linking.py", "jit/arrays.py")
 
 
 class CacheIOWarning(UserWarning):
