@@ -71,6 +71,9 @@ def _print_summary(result, module, origin: str, t_load: float, t_run: float) -> 
         if len(result.events) > len(shown):
             print(f"    ... {len(result.events) - len(shown)} more (all in the -o summary JSON)")
     for name, value, t in (("S1", result.S1_max, result.t_S1_max), ("S2", result.S2_max, result.t_S2_max)):
+        if math.isnan(value):
+            print(f"  {name} max: none (the run stopped at its start: nothing was integrated)")
+            continue
         shown = f"{value:.6g} N" if math.isfinite(value) else f"unbounded ({'+' if value > 0 else '-'}inf)"
         print(f"  {name} max = {shown} at t = {t:.6g} s")
     if result.impacts:

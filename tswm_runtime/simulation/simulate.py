@@ -385,7 +385,8 @@ def simulate(model: str | ModuleType, params: dict | None = None, *, interruptib
         module, p0, run, y0, quad, interruptible)
     rows = Rows(module, steps, _output_times(run["t_end"], run["points"]), p, written)
     found = last_point = None
-    if status != INCONSISTENT and (status == NOT_FINITE or not np.isfinite(mon[:, 1]).all()):
+    # (a run that stopped at its start, first < 0, integrated nothing: its maxima are NaN, no defect)
+    if status != INCONSISTENT and first >= 0 and (status == NOT_FINITE or not np.isfinite(mon[:, 1]).all()):
         values = {k: v for k, v in rows.values().items() if k not in ("mode", "p", "y", "x2", "v2")}
         t_kept = values.pop("t")
         found = _first_non_finite(module, t_kept, values, mon)
