@@ -21,6 +21,9 @@ from test_injection import PAPER
     (["--atol", "1e300"], ["--atol", "in [1e-20, 1]"]),
     (["--rtol", "1e-300"], ["--rtol"]),
     (["--rtol", "0.1"], ["--rtol", "rtol = 0.1", "in [1e-13, 0.01]"]),
+    (["--rtol", "1e-13"], ["--rtol", "rtol = 1e-13", ">= 1e-12 with method dopri5"]),
+    (["--method", "rosenbrock23", "--rtol", "1e-10"],
+     ["--rtol", "rtol = 1e-10", ">= 1e-09 with method rosenbrock23", "use dopri5"]),
     (["--t-end", "inf"], ["t_end", "finite"]),
     (["--set", "F2=1e400"], ["F2", "finite"]),
 ])
@@ -109,6 +112,9 @@ def test_promises_page_states_the_limits_the_code_enforces():
         "`--max-steps` | [1, 10^{}]".format(round(math.log10(sim.MAX_STEPS))): "simulate.MAX_STEPS",
         "`--atol` | [{:g}, {:g}]".format(*sim.ATOL_RANGE): "simulate.ATOL_RANGE",
         "`--rtol` | [{:g}, {:g}]".format(*sim.RTOL_RANGE): "simulate.RTOL_RANGE",
+        "dopri5 from {:g}, rosenbrock23 from {:g}".format(sim.METHOD_RTOL_MIN["dopri5"][0],
+                                                          sim.METHOD_RTOL_MIN["rosenbrock23"][0]):
+            "simulate.METHOD_RTOL_MIN",
         "above 10^{} the sweep".format(round(math.log10(sweep.LARGE_SWEEP))): "sweep.LARGE_SWEEP",
         "above 10^{} refused".format(round(math.log10(sweep.MAX_SWEEP_CASES))): "sweep.MAX_SWEEP_CASES",
     }

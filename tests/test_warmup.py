@@ -186,6 +186,18 @@ def test_python_only_arithmetic_in_an_interpreted_run_reruns_the_command_compile
     assert main(argv) == 7 and reruns == [(argv, ZeroDivisionError)]
 
 
+@pytest.mark.parametrize("args", [["--rtol", "5"], ["--set", "F2=abc"], ["--set", "Fx=1"], ["--points", "0"]],
+                         ids=["rtol", "set-value", "set-name", "points"])
+def test_bad_input_exits_2_before_the_background_compile_starts(monkeypatch, capsys, args):
+    """A cold cache: --rtol and --set are checked before warmup.begin spawns the compile."""
+    begun = []
+    monkeypatch.setattr(warmup, "interpret_if_cold",
+                        lambda groups, spec: warmup.ColdStart(tuple(groups), None, "background"))
+    monkeypatch.setattr(warmup, "begin", lambda cold, method: begun.append(method) or "")
+    assert main(["simulate", "paper", *args]) == 2
+    assert begun == [] and capsys.readouterr().err.startswith("tswm simulate: error: ")
+
+
 def test_an_error_in_the_kernel_thread_reaches_the_caller():
     from tswm_runtime.simulation.simulate import _in_a_thread
 

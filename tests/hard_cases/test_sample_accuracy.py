@@ -15,7 +15,7 @@ import functools
 import pytest
 
 from tswm_runtime.reference import dense
-from tswm_runtime.simulation.simulate import simulate
+from tswm_runtime.simulation.simulate import METHOD_RTOL_MIN, SimulationInputError, simulate
 
 LIMIT = 10.0  # worst sample error in units of rtol (measure above)
 POINTS = 20001  # rows over 1 s: 50 us apart, 100 in the first 5 ms after a boundary
@@ -42,6 +42,21 @@ def test_every_output_row_is_within_ten_rtol_of_the_reference(case, rtol, method
     assert r.status == "finished", r.message
     worst = dense.worst_ratios(r, reference(case), rtol)
     assert max(worst.values()) <= LIMIT, {k: round(v, 2) for k, v in worst.items() if v > LIMIT}
+
+
+@pytest.mark.parametrize("method", sorted(METHOD_RTOL_MIN))
+@pytest.mark.parametrize("case", sorted(CASES))
+def test_each_method_delivers_at_the_tightest_rtol_it_accepts(case, method):
+    """At METHOD_RTOL_MIN too (dopri5 1e-12, rosenbrock23 1e-9; measured worst 3.8 and 3.9 rtol); a
+    tighter rtol is refused (rosenbrock23 at 1e-10 was 39 rtol off, tests/test_bounds.py)."""
+    rtol = METHOD_RTOL_MIN[method][0]
+    scene, params, v0, _ = CASES[case]
+    r = simulate(scene, params, method=method, rtol=rtol, atol=1e-3 * rtol, v1=v0, points=POINTS)
+    assert r.status == "finished", r.message
+    worst = dense.worst_ratios(r, reference(case), rtol)
+    assert max(worst.values()) <= LIMIT, {k: round(v, 2) for k, v in worst.items() if v > LIMIT}
+    with pytest.raises(SimulationInputError, match=f"rtol = {rtol / 10:g}: must be >= {rtol:g} with method {method}"):
+        simulate(scene, params, method=method, rtol=rtol / 10)
 
 
 def test_the_reference_agrees_with_the_quadrature():

@@ -1,7 +1,7 @@
 """The mode a run starts in at rest comes from the contact conditions at t = 0.
 
-Each case is solved by hand (``hand_start``): Newton's law for the worm (body 1, along x1) and
-the wheel (body 2, along x2) with the contact force written out for every candidate (stick,
+Each case is solved by hand (``at_rest.hand_start``): Newton's law for the worm (body 1, along x1)
+and the wheel (body 2, along x2) with the contact force written out for every candidate (stick,
 sliding forward or backward on a flank, parting), nothing from derivation/ or generated/.
 A candidate holds where its contact force and motion agree (normal force >= 0, friction inside
 the cone or against the slip, the slip the way the force drives it); the start is the one
@@ -13,10 +13,11 @@ import math
 import numpy as np
 import pytest
 
+from hard_cases.at_rest import DEG, expected, hand_start
+from tswm_runtime.cli import main
 from tswm_runtime.simulation.simulate import simulate
 from tswm_runtime.sweeps.sweep import sweep, sweep_cases
 
-DEG = math.pi / 180.0
 CLEARANCE = 5e-4
 
 SCENE = """
@@ -75,55 +76,6 @@ include = [MODES]
 t_end = "0.6 s"
 gap = "0 m"
 """
-
-
-def _bodies(gamma, m1, m2, F1, F2, force_on_2):
-    """(a1, a2): Newton for each body on its guide; body 2 feels ``force_on_2`` (x1, x2
-    components), body 1 the opposite."""
-    return (F1 - force_on_2[0]) / m1, (F2 + force_on_2[1]) / m2
-
-
-def hand_start(gamma, rho, m1, m2, F1, F2, flanks):
-    """Every candidate start at rest, written by hand: a list of (name, a1, S2, regular) for those
-    whose contact conditions hold. ``flanks``: the flanks in contact (1: a, body 1 pushes body 2;
-    -1: b, body 2 pushes body 1), both without a clearance; with one, parting is a candidate.
-    The flank normal (body 1 towards body 2 on flank a) is n = (sin g, cos g), the contact line
-    t = (-cos g, sin g); rigid contact keeps (a2 e2 - a1 e1).n = 0, i.e. a2 = a1 tan g.
-    regular: the normal acceleration the contact force produces grows with it (else a
-    Painleve-type solution)."""
-    n = np.array([math.sin(gamma), math.cos(gamma)])
-    t = np.array([-math.cos(gamma), math.sin(gamma)])
-    mu = math.tan(rho)
-    found = []
-    # stick: a1 = a2 = 0, the contact force (fN n + T t) balances both forces
-    fN, T = np.linalg.solve(np.column_stack([n, t]), np.array([F1, -F2]))
-    on_flank = len(flanks) == 2 or fN * flanks[0] >= 0.0
-    if on_flank and abs(T) <= mu * abs(fN):
-        found.append(("stick", 0.0, F2, True))
-    for f, s in itertools.product(flanks, (1, -1)):
-        # sliding with sign(v1) = s: body 2 slips along +t relative to body 1 at v1 / cos g,
-        # friction -s mu N on body 2; unknowns a1 and N >= 0
-        direction = f * n - s * mu * t
-        matrix = np.array([[m1, direction[0]], [-m2 * math.tan(gamma), direction[1]]])
-        a1, N = np.linalg.solve(matrix, np.array([F1, -F2]))
-        # d(normal acceleration apart on flank f)/dN for the force direction above
-        compliance = f * (direction[1] * n[1] / m2 + direction[0] * n[0] / m1)
-        if N >= 0.0 and s * a1 > 0.0:
-            name = ("fwd_" if s > 0 else "bwd_") + ("a" if f > 0 else "b")
-            found.append((name, a1, F2 - m2 * math.tan(gamma) * a1, compliance > 0.0))
-    if len(flanks) == 1:  # parting: both free, the gap opens
-        a1, a2 = _bodies(gamma, m1, m2, F1, F2, (0.0, 0.0))
-        if flanks[0] * (a2 * n[1] - a1 * n[0]) > 0.0:
-            found.append(("free", a1, 0.0, True))
-    return found
-
-
-def expected(found):
-    """(status, mode) tswm must report for the hand candidates ``found``: the one that holds, a
-    Painleve solution alone (inconsistent) or several (indeterminate)."""
-    if len(found) == 1:
-        return ("finished", found[0][0]) if found[0][3] else ("inconsistent", found[0][0])
-    return "indeterminate", None
 
 
 # (gamma, rho) not self-locking and self-locking; (m1, m2) a light worm on a heavy wheel and
@@ -196,6 +148,27 @@ def test_the_grid_covers_every_kind_of_start():
         status, mode = expected(hand_start(gamma * DEG, rho * DEG, m1, m2, F1, F2, STARTS[start][0]))
         kinds.add(mode if status == "finished" else status)
     assert kinds >= {"stick", "fwd_a", "fwd_b", "bwd_a", "bwd_b", "free", "indeterminate"}
+
+
+def test_an_indeterminate_start_reports_no_maxima_and_the_initial_state(models, capsys):
+    """Several candidates at rest at t = 0: the run stops there with nothing integrated. S1 and S2
+    have no maxima (NaN, not 0 at t = 0: no contact force was reached), the state reached is the
+    initial one (finite), and the message says so; in simulate, the CLI and a sweep alike."""
+    (gamma, rho), (m1, m2), F1, F2 = next(   # (without a clearance: the CLI starts there too)
+        (fr, ms, F1, F2) for s, fr, ms, F1, F2 in GRID if s == "no clearance"
+        and expected(hand_start(fr[0] * DEG, fr[1] * DEG, *ms, F1, F2, STARTS[s][0]))[0] == "indeterminate")
+    model = models["rigid"]
+    params = {"gamma": gamma * DEG, "friction_rho": rho * DEG, "m1": m1, "m2": m2, "F1": F1, "F2": F2}
+    r = simulate(model, params, t_end=1e-6, points=3)
+    assert r.status == "indeterminate" and "nothing was integrated" in r.message, r.message
+    assert math.isnan(r.S1_max) and math.isnan(r.S2_max)
+    assert r.final_state == {"x1": 0.0, "v1": 0.0}
+    argv = ["simulate", model.__file__, "--t-end", "1e-6", *(f"--set={k}={v!r}" for k, v in params.items())]
+    assert main(argv) == 1
+    assert "S1 max: none (the run stopped at its start: nothing was integrated)" in capsys.readouterr().out
+    row = sweep(model, np.array([[params[name] for name in model.PARAM_NAMES]]), {"t_end": 1e-6}).table.iloc[0]
+    assert row["status"] == "indeterminate" and (row["x1"], row["v1"]) == (0.0, 0.0)
+    assert math.isnan(row["S1m"]) and math.isnan(row["S2m"])
 
 
 def test_an_open_gap_starts_in_free_flight(models):

@@ -71,6 +71,9 @@ def _print_summary(result, module, origin: str, t_load: float, t_run: float) -> 
         if len(result.events) > len(shown):
             print(f"    ... {len(result.events) - len(shown)} more (all in the -o summary JSON)")
     for name, value, t in (("S1", result.S1_max, result.t_S1_max), ("S2", result.S2_max, result.t_S2_max)):
+        if math.isnan(value):
+            print(f"  {name} max: none (the run stopped at its start: nothing was integrated)")
+            continue
         shown = f"{value:.6g} N" if math.isfinite(value) else f"unbounded ({'+' if value > 0 else '-'}inf)"
         print(f"  {name} max = {shown} at t = {t:.6g} s")
     if result.impacts:
@@ -101,16 +104,21 @@ def run(args: argparse.Namespace) -> int:
     spec, cold = prepare_kernels(args.scene, ("integrate",))
     from tswm_runtime.model.contract import ContractError
     from tswm_runtime.model.scenes import load_model
-    from tswm_runtime.simulation.simulate import SimulationInputError, simulate
+    from tswm_runtime.simulation.simulate import SimulationInputError, parameter_vector, settings, simulate
     from tswm_runtime.startup import warmup
 
     module = load_model(spec)
     _warn_if_edited(module)
+    params = parse_sets(args.set)
+    overrides = setting_overrides(args, SETTING_OPTIONS)
+    try:  # bad input exits 2 before any background compile starts
+        parameter_vector(module, params)
+        settings(module, overrides)
+    except SimulationInputError as error:
+        raise setting_error(error, overrides) from None
     if cold is not None:
         warmup.begin(cold, run_method(args, module))
     t_load = time.perf_counter() - start
-    params = parse_sets(args.set)
-    overrides = setting_overrides(args, SETTING_OPTIONS)
     start = time.perf_counter()
     try:
         result = simulate(module, params, interruptible=True, **overrides)

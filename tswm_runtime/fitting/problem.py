@@ -55,10 +55,10 @@ class Problem:
         accepts (own counters)."""
         from copy import copy
 
-        from tswm_runtime.simulation.simulate import ATOL_RANGE, RTOL_RANGE
+        from tswm_runtime.simulation.simulate import ATOL_RANGE, METHOD_RTOL_MIN
 
         tight = copy(self)
-        tight.run = {**self.run, "rtol": max(self.run["rtol"] / factor, RTOL_RANGE[0]),
+        tight.run = {**self.run, "rtol": max(self.run["rtol"] / factor, METHOD_RTOL_MIN[self.run["method"]][0]),
                      "atol": max(self.run["atol"] / factor, ATOL_RANGE[0])}
         tight.evaluations = tight.runs = 0
         return tight

@@ -71,19 +71,22 @@ def _case_record(t_end, width, n_params, max_events, n_obs):
 
 
 @njit(error_model="numpy")
-def _write_floats(row, t_stop, n_ev, n, record):
+def _write_floats(row, t_stop, n_ev, n, record, case):
     """t_stop, the maxima of S1 and S2, and x1, v1 at t_stop into ``row`` (out_f[c])."""
     out, log, mon = record.out, record.log, record.mon
     width = out.y.shape[1]
     n_obs = mon.shape[0]
     row[F_T_STOP] = t_stop
     # The state at t_stop: the output point at t_end, else the last event's state
-    # if the run stopped at it, else unknown (NaN).
+    # if the run stopped at it, else the start's if it stopped there, else unknown (NaN).
     ys = out.y[0]
     if out.mode[0] < 0:
         ys = np.full(width, np.nan)
         if n_ev > 0 and log.t[n_ev - 1] == t_stop:
             ys = log.state[n_ev - 1].copy()
+        elif n_ev == 0 and t_stop == case.t:
+            ys[:n] = case.y
+            ys[n:] = case.quad
     row[F_X1] = ys[n] if n == 1 else ys[0]
     row[F_V1] = ys[n - 1]
     if n_obs > 0:
@@ -136,7 +139,7 @@ def run_batch(functions, tables, P, start, settings, max_events, n_obs, results)
         integrate = _machine_at(functions[0])
         status, t_stop, n_ev, last, need, first = integrate(entry.model_functions(functions), tables, case,
                                                             Settings(method, t_end, tol, max_steps), record)
-        _write_floats(results.f[c], t_stop, n_ev, n, record)
+        _write_floats(results.f[c], t_stop, n_ev, n, record, case)
         out_i = results.i[c]
         out_i[I_STATUS], out_i[I_EVENTS] = status, n_ev
         for k in range(4):

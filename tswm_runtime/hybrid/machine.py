@@ -173,10 +173,21 @@ def _sliding(direction, flank, rhs, guards, t, y, p, tol, tables, g, y_tmp, f):
 
 @njit(error_model="numpy")
 def _at_rest(flank, rhs, guards, t, y, p, tol, tables, g, y_tmp, f, start):
-    """(mode, need) at v1 = 0: stick inside both friction cones, else sliding off in the
-    direction whose cone is violated; with a clearance (contact on ``flank`` != 0) the
-    flanks part where the statics press the other flank. Without a stick mode only a start
-    can go on: in the direction its sliding acceleration points to."""
+    """(mode, status, need) at v1 = 0, at the start and whenever the run comes to rest: by the
+    contact conditions (``_rest_by_contact``) where the model has contact forces to test (a jam
+    factor: the consistent equations), else by the friction cones (``_rest_by_cones``)."""
+    if _guard(G_JAM, tables.guard_kind) >= 0:
+        return _rest_by_contact(flank, rhs, guards, t, y, p, tol, tables, g, y_tmp, f)
+    return _outcome(*_rest_by_cones(flank, rhs, guards, t, y, p, tol, tables, g, y_tmp, f, start))
+
+
+@njit(error_model="numpy")
+def _rest_by_cones(flank, rhs, guards, t, y, p, tol, tables, g, y_tmp, f, start):
+    """(mode, need) at v1 = 0 for the printed equations, which have no contact force to test:
+    stick inside both friction cones, else sliding off in the direction whose cone is violated;
+    with a clearance (contact on ``flank`` != 0) the flanks part where the statics press the
+    other flank. Without a stick mode only a start can go on: in the direction its sliding
+    acceleration points to."""
     ms = _mode(M_STICK, 0, 0, tables)
     if ms < 0:
         if not start:
@@ -243,7 +254,7 @@ def _select(mode, kind, rhs, guards, t, y, p, tol, tables, g, y_tmp, f):
         m, need = _part(flank, tables, guards, t, y, p, g) if flank != 0 else (mode, NEED_NOTHING)
     elif kind == G_V1 or mode_kind[mode] == M_STICK:  # came to rest, or a law event in stick
         y[n - 1] = 0.0
-        m, need = _at_rest(flank, rhs, guards, t, y, p, tol, tables, g, y_tmp, f, False)
+        return _at_rest(flank, rhs, guards, t, y, p, tol, tables, g, y_tmp, f, False)
     elif mode_kind[mode] == M_FILIPPOV:  # a law event while sliding along phi = 0
         guards(mode, t, y, p, g)
         m, need = mode, NEED_NOTHING
@@ -287,11 +298,11 @@ def _collide(impact, flank, rhs, guards, t, y, p, tol, tables, g, y_tmp, f, fram
     toward = -flank * f[n - 2]  # the normal acceleration of free flight back onto the flank
     if _settles(nu, toward, y[n - 1], y, tol):  # persistent contact
         y[n - 2], y[n - 1] = 0.0, frame[8] * s
-        m, need = _moving_on(flank, rhs, guards, t, y, p, tol, tables, g, y_tmp, f)
+        m, status, need = _moving_on(flank, rhs, guards, t, y, p, tol, tables, g, y_tmp, f)
     else:
-        m, need = m_free, NEED_NOTHING
+        m, status, need = m_free, FINISHED, NEED_NOTHING
     frame[0] = 2.0 * nu / toward if toward > 0.0 and m == m_free else np.inf
-    return _outcome(m, need)
+    return m, status, need
 
 
 @njit(error_model="numpy")
@@ -307,12 +318,12 @@ def _settles(nu, toward, speed, y, tol):
 
 @njit(error_model="numpy")
 def _moving_on(flank, rhs, guards, t, y, p, tol, tables, g, y_tmp, f):
-    """(mode, need) for the rigid wedge (touching ``flank`` with a clearance, else 0) from (t, y)
-    after a jump in v1 or in the laws: at rest or sliding the way v1 points."""
+    """(mode, status, need) for the rigid wedge (touching ``flank`` with a clearance, else 0) from
+    (t, y) after a jump in v1 or in the laws: at rest (``_at_rest``) or sliding the way v1 points."""
     v = y[y.size - 1]
     if v == 0.0:
         return _at_rest(flank, rhs, guards, t, y, p, tol, tables, g, y_tmp, f, False)
-    return _sliding(1 if v > 0.0 else -1, flank, rhs, guards, t, y, p, tol, tables, g, y_tmp, f)
+    return _outcome(*_sliding(1 if v > 0.0 else -1, flank, rhs, guards, t, y, p, tol, tables, g, y_tmp, f))
 
 
 @njit(error_model="numpy")
@@ -335,9 +346,9 @@ def _pickup(impact, k, rhs, guards, t, y, p, tol, tables, g, y_tmp, f, frame, ju
     k_pickup, k_carry = tables.guard_latch[k], tables.guard_latch[_guard(G_STEM_N, tables.guard_kind)]
     p[k_pickup] = min(p[k_pickup], t)
     y[n - 1], y[n - 2] = v1, v3
-    m, need = _moving_on(0, rhs, guards, t, y, p, tol, tables, g, y_tmp, f)
-    if m < 0:
-        return -1, UNDECLARED, need
+    m, status, need = _moving_on(0, rhs, guards, t, y, p, tol, tables, g, y_tmp, f)
+    if status != FINISHED:
+        return m, status, need
     rhs(m, t, y, p, f)
     nu = v3 - ratio * v1
     toward = ratio * f[n - 1] - f[n - 2]  # the stem's acceleration back onto body 2
@@ -347,9 +358,9 @@ def _pickup(impact, k, rhs, guards, t, y, p, tol, tables, g, y_tmp, f, frame, ju
         jump[0], v1, v3, jump[2], outcome = collision.pickup(frame)
         y[n - 1], y[n - 2] = v1, ratio * v1
         p[k_carry] = t
-        m, need = _moving_on(0, rhs, guards, t, y, p, tol, tables, g, y_tmp, f)
+        m, status, need = _moving_on(0, rhs, guards, t, y, p, tol, tables, g, y_tmp, f)
     frame[0] = 2.0 * nu / toward if toward > 0.0 and not carried else np.inf
-    return _outcome(m, need)
+    return m, status, need
 
 
 @njit(error_model="numpy")
@@ -585,9 +596,9 @@ def _slide_at_rest(m, flank, direction, rhs, guards, t, y, p, tables, g, f):
 
 
 @njit(error_model="numpy")
-def _start_at_rest(flank, rhs, guards, t, y, p, tol, tables, g, y_tmp, f):
-    """(mode, status, need) of a start at rest (v1 = 0) in contact, by the contact conditions
-    (the complementarity the machine applies at every event): stick where both friction cones
+def _rest_by_contact(flank, rhs, guards, t, y, p, tol, tables, g, y_tmp, f):
+    """(mode, status, need) at rest (v1 = 0) in contact, at the start or where v1 reaches 0 (or a
+    law changes while sticking), by the contact conditions: stick where both friction cones
     hold and the static contact force presses the touched flank; sliding in a direction where
     D > 0, the contact force is >= 0 and a1 points that way; parting where free flight opens
     the gap (its normal acceleration is -cos(gamma) phi: where touched flank phi < 0). ``flank``: the touched flank with a clearance, else 0 (both flanks, or a one-sided
@@ -665,9 +676,8 @@ def _missing_at_rest(ms, touched, rhs, guards, t, y, p, tables, g, f):
 @njit(error_model="numpy")
 def _entered(fns, tables, t0, y, p, tol, w):
     """(mode, status, need) the state (t0, y) enters: free flight off the flanks, compliant
-    contact where pressed onto one, at rest by the contact conditions (``_start_at_rest``; the
-    printed equations, which have no contact force to test: the way the sliding acceleration
-    points), or sliding the way v1 points."""
+    contact where pressed onto one, at rest as ``_at_rest`` decides, or sliding the way v1
+    points."""
     rhs = fns.rhs  # (one name a line: numba unifies a tuple of functions, with a warning)
     guards = fns.guards
     g, y_tmp, f = w.g, w.y_tmp, w.f
@@ -680,10 +690,8 @@ def _entered(fns, tables, t0, y, p, tol, w):
         if _pressed(flank, rhs, t0, y, p, tables, f):
             return _outcome(*_mesh_enter(flank, guards, t0, y, p, tables, g))
         return m_free, FINISHED, NEED_NOTHING
-    if v == 0.0 and _guard(G_JAM, tables.guard_kind) >= 0:
-        return _start_at_rest(flank, rhs, guards, t0, y, p, tol, tables, g, y_tmp, f)
     if v == 0.0:
-        return _outcome(*_at_rest(flank, rhs, guards, t0, y, p, tol, tables, g, y_tmp, f, True))
+        return _at_rest(flank, rhs, guards, t0, y, p, tol, tables, g, y_tmp, f, True)
     return _outcome(*_sliding(1 if v > 0.0 else -1, flank, rhs, guards, t0, y, p, tol, tables, g, y_tmp, f))
 
 
@@ -762,7 +770,7 @@ def _jump(fns, tables, tol, mode, kind, k, t, y, p, w):
         return _pickup(fns.impact, k, rhs, guards, t, y, p, tol, tables, g, y_tmp, f, frame, jump)
     if kind == G_STEM_N:  # the stem leaves body 2: the load and its mass leave with it
         p[tables.guard_latch[k]] = np.inf
-        return _outcome(*_moving_on(0, rhs, guards, t, y, p, tol, tables, g, y_tmp, f))
+        return _moving_on(0, rhs, guards, t, y, p, tol, tables, g, y_tmp, f)
     return _select(mode, kind, rhs, guards, t, y, p, tol, tables, g, y_tmp, f)
 
 
@@ -775,7 +783,7 @@ def _checked(fns, tables, tol, mode, new, status, need, t, y, p, w):
     guards = fns.guards
     g = w.g
     if status == FINISHED and _released(new, guards, t, y, p, tables, g):
-        new, status, need = _outcome(*_moving_on(0, rhs, guards, t, y, p, tol, tables, g, w.y_tmp, w.f))
+        new, status, need = _moving_on(0, rhs, guards, t, y, p, tol, tables, g, w.y_tmp, w.f)
     if status == FINISHED and not _consistent(new, guards, t, y, p, tables, g):
         status = INCONSISTENT
     return new, status, need
@@ -816,7 +824,8 @@ def integrate_hybrid(fns, tables, start, settings, record):
     loop, and the Painleve approach where D heads for 0: it locates D = 0, status
     INCONSISTENT, event guard D; the maxima in mon are then +-inf: the reactions grow without
     bound there) and at its event ``_latch``, ``_jump``, ``_checked`` (a mode or impact without
-    a consistent force stops the run with the finite maxima reached before it), ``_log``.
+    a consistent force stops the run with the finite maxima reached before it), ``_log``. A run
+    that stops at its start (UNDECLARED, INDETERMINATE) integrated nothing: its maxima are NaN.
 
     Returns (status, t_stop, number of events, last mode (for INCONSISTENT the mode
     found inconsistent), need, initial mode).
@@ -839,6 +848,7 @@ def integrate_hybrid(fns, tables, start, settings, record):
     _carry_at_start(fns.impact, guards, t0, y, p, tables, g, w.frame)
     mode, status, need = _first_mode(fns, tables, start, y, p, settings.tol, w)
     if status != FINISHED and status != INCONSISTENT:  # UNDECLARED, or INDETERMINATE at rest
+        mon[:, 0], mon[:, 1], mon[:, 2] = np.nan, np.nan, t0  # nothing integrated: no maxima
         return status, t0, 0, -1, need, -1
     if status == INCONSISTENT or not _consistent(mode, guards, t0, y, p, tables, g):
         _unbounded(observe, guards, mode, t0, y, p, -1, mon, w.obs, g)

@@ -124,7 +124,8 @@ class Result:
     phases: list[Phase]
     S1_max: float                 # the value of S1 where |S1| is largest, and its time (+-inf: unbounded,
                                   # status inconsistent where D reached 0 or at the start; a stop at an
-                                  # event or impact keeps the finite peaks reached before it)
+                                  # event or impact keeps the finite peaks reached before it; NaN: a run
+                                  # that stopped at its start, undeclared or indeterminate, integrated nothing)
     t_S1_max: float
     S2_max: float
     t_S2_max: float
@@ -329,12 +330,16 @@ def _inconsistent(module: ModuleType, t_stop: float, y_stop: np.ndarray, last: i
             f"lower m2 or the friction, or raise m1")
 
 
-def _indeterminate(module: ModuleType, t_stop: float, y_stop: np.ndarray, mask: int, p: np.ndarray) -> str:
-    """Why the start at rest has no mode or several: the modes whose contact conditions hold (``mask``,
-    bit 1 << mode), with D where a mode has one."""
+def _indeterminate(module: ModuleType, t_stop: float, y_stop: np.ndarray, mask: int, p: np.ndarray,
+                   at_start: bool) -> str:
+    """Why the state at rest (at the start, ``at_start``, or where v1 reached 0 or a law changed while
+    sticking) has no mode or several: the modes whose contact conditions hold (``mask``, bit 1 << mode),
+    with D where a mode has one."""
     held = [m for m in range(len(module.MODES)) if mask >> m & 1]
+    where = (f"indeterminate at t = {t_stop:.9g} s (the start: nothing was integrated, so S1 and S2 have no "
+             f"maxima; the state is the initial one)" if at_start else f"indeterminate at t = {t_stop:.9g} s")
     if not held:
-        return (f"indeterminate at t = {t_stop:.9g} s: at rest, no mode meets the contact conditions (stick: both "
+        return (f"{where}: at rest, no mode meets the contact conditions (stick: both "
                 f"friction cones hold; sliding: D > 0, contact force >= 0, a1 the way it slides; parting: free "
                 f"flight opens the gap): the forces lie on a boundary between them within rounding; change a "
                 f"force or the friction slightly")
@@ -344,7 +349,7 @@ def _indeterminate(module: ModuleType, t_stop: float, y_stop: np.ndarray, mask: 
         module.guards(m, t_stop, np.ascontiguousarray(y_stop, dtype=np.float64), p, g)
         d = f" (D = {module.MODE_D[m]} = {g[module.GUARDS.index('D')]:.6g})" if module.MODE_D[m] else ""
         described.append(module.MODES[m] + d)
-    return (f"indeterminate at t = {t_stop:.9g} s: at rest, the contact conditions hold in several modes: "
+    return (f"{where}: at rest, the contact conditions hold in several modes: "
             f"{', '.join(described)}; a mode with D <= 0 is a Painleve-type solution (contact force >= 0 only "
             f"because D < 0), so rigid contact with friction does not say how the motion starts; lower m2 or "
             f"the friction, or raise m1")
@@ -414,7 +419,7 @@ def status_message(module: ModuleType, status: int, t_stop: float, y_stop: np.nd
     if status == hybrid.INCONSISTENT:
         return _inconsistent(module, t_stop, y_stop, last, events, p)
     if status == hybrid.INDETERMINATE:
-        return _indeterminate(module, t_stop, y_stop, need, p)
+        return _indeterminate(module, t_stop, y_stop, need, p, not events)
     if status == hybrid.CHATTERING:
         return f"{hybrid.MAX_SAME_TIME} mode changes at {at} without time advancing (chattering); stopped"
     if status == hybrid.TOO_MANY_EVENTS:

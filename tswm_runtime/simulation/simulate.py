@@ -35,6 +35,16 @@ METHODS = {"dopri5": segment.DOPRI5, "rosenbrock23": segment.ROSENBROCK23}
 # Below 1e-13 a step's error is rounding; above 1e-2 the error per step is not controlled any more
 # (paper-runup against rtol 1e-12: S1 max 0.24 % off at rtol 1e-2, 90 % off at rtol 0.1).
 RTOL_RANGE = (1e-13, 1e-2)
+# The tightest rtol each method delivers: every output row within 10 rtol of the dense reference
+# (tests/hard_cases/test_sample_accuracy.py), and why not below. Measured worst rows on its three cases:
+# rosenbrock23 3.9 rtol at 1e-9, 38.6 at 1e-10; dopri5 3.8 at 1e-12, 37.7 at 1e-13 (below 1e-12 the
+# reference itself, 1.7e-12 of |v1|, cannot tell).
+METHOD_RTOL_MIN = {
+    "dopri5": (1e-12, "below it the rows cannot be shown to be within 10 rtol (the reference is good to "
+                      "1.7e-12)"),
+    "rosenbrock23": (1e-9, "its step tolerance stops at 1e-12, so below 1e-9 its rows are about "
+                           "1e-8/rtol rtol off (39 rtol at 1e-10); use dopri5 for a tighter rtol"),
+}
 # atol is absolute on x1 [m] and v1 [m/s]: below 1e-20 the error estimate underflows (NaN steps), above 1 m
 # it accepts any step and the answer is silently wrong. Within that range a run is judged after it ends:
 # atol must stay below ATOL_SCALE x the largest |state| it reached (atol 1 on paper-runup, where |v1|
@@ -164,6 +174,8 @@ def _validated(module: ModuleType, overrides: dict) -> dict:
             raise SimulationInputError(f"{key} = {run[key]!r}: {problem.replace('value', key, 1)}")
     lo, hi = RTOL_RANGE
     _check(lo <= run["rtol"] <= hi, "rtol", run["rtol"], lambda: f"in [{lo:g}, {hi:g}]")
+    least, why = METHOD_RTOL_MIN[run["method"]]
+    _check(run["rtol"] >= least, "rtol", run["rtol"], lambda: f">= {least:g} with method {run['method']}: {why}")
     lo_a, hi_a = ATOL_RANGE
     _check(lo_a <= run["atol"] <= hi_a, "atol", run["atol"],
            lambda: f"in [{lo_a:g}, {hi_a:g}] (absolute, in m and m/s)")
@@ -373,7 +385,8 @@ def simulate(model: str | ModuleType, params: dict | None = None, *, interruptib
         module, p0, run, y0, quad, interruptible)
     rows = Rows(module, steps, _output_times(run["t_end"], run["points"]), p, written)
     found = last_point = None
-    if status != INCONSISTENT and (status == NOT_FINITE or not np.isfinite(mon[:, 1]).all()):
+    # (a run that stopped at its start, first < 0, integrated nothing: its maxima are NaN, no defect)
+    if status != INCONSISTENT and first >= 0 and (status == NOT_FINITE or not np.isfinite(mon[:, 1]).all()):
         values = {k: v for k, v in rows.values().items() if k not in ("mode", "p", "y", "x2", "v2")}
         t_kept = values.pop("t")
         found = _first_non_finite(module, t_kept, values, mon)

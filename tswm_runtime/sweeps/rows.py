@@ -59,12 +59,14 @@ NOT_FINITE_COLUMNS = {"t_stop": batch.F_T_STOP, "S1m": batch.F_S1M, "S2m": batch
 def _mark_not_finite(out_f: np.ndarray, out_i: np.ndarray, valid: np.ndarray, problems: list[str]) -> None:
     """Cases whose results hold inf or NaN get status not-finite and the column in ``problems``
     (in place). Not an inconsistent case (S1m, S2m = +-inf: unbounded, its status says so), nor NaN
-    x1, v1 of a run that stopped inside a step (documented); a finished one holds finite numbers."""
+    x1, v1 of a run that stopped inside a step (documented), nor NaN S1m, S2m of a run that stopped
+    at its start (nothing integrated, no maxima); a finished one holds finite numbers."""
     status = out_i[:, batch.I_STATUS]
     finished = status == hybrid.FINISHED
+    integrated = out_i[:, batch.I_FIRST] >= 0
     for name, column in NOT_FINITE_COLUMNS.items():
         values = out_f[:, column]
-        bad = np.isinf(values) | (np.isnan(values) & (finished if name in ("x1", "v1") else True))
+        bad = np.isinf(values) | (np.isnan(values) & (finished if name in ("x1", "v1") else integrated))
         for case in np.flatnonzero(bad & valid & (status != hybrid.INCONSISTENT) & (status != hybrid.NOT_FINITE)):
             status[case] = hybrid.NOT_FINITE
             problems[case] = f"{name} = {values[case]:g}: not finite; likely cause: {NOT_FINITE_CAUSE}"
