@@ -35,6 +35,7 @@ from tswm_runtime.integration import segment
 from tswm_runtime.integration.steplog import no_steps
 from tswm_runtime.jit import cache_guard
 from tswm_runtime.jit.addresses import function_at
+from tswm_runtime.jit.arrays import copy_into
 from tswm_runtime.jit.cache_guard import njit
 from tswm_runtime.jit.signatures import MATRIX
 from tswm_runtime.jit.structures import (INDEX_WIDTH, JUMP_WIDTH, MODE_TABLES, SETTINGS, START, EventLog, Outputs,
@@ -85,8 +86,8 @@ def _write_floats(row, t_stop, n_ev, n, record, case):
         if n_ev > 0 and log.t[n_ev - 1] == t_stop:
             ys = log.state[n_ev - 1].copy()
         elif n_ev == 0 and t_stop == case.t:
-            ys[:n] = case.y
-            ys[n:] = case.quad
+            copy_into(ys[:n], case.y)
+            copy_into(ys[n:], case.quad)
     row[F_X1] = ys[n] if n == 1 else ys[0]
     row[F_V1] = ys[n - 1]
     if n_obs > 0:
