@@ -848,7 +848,8 @@ def integrate_hybrid(fns, tables, start, settings, record):
     _carry_at_start(fns.impact, guards, t0, y, p, tables, g, w.frame)
     mode, status, need = _first_mode(fns, tables, start, y, p, settings.tol, w)
     if status != FINISHED and status != INCONSISTENT:  # UNDECLARED, or INDETERMINATE at rest
-        mon[:, 0], mon[:, 1], mon[:, 2] = np.nan, np.nan, t0  # nothing integrated: no maxima
+        for i in range(mon.shape[0]):  # nothing integrated: no maxima
+            mon[i, 0], mon[i, 1], mon[i, 2] = np.nan, np.nan, t0
         return status, t0, 0, -1, need, -1
     if status == INCONSISTENT or not _consistent(mode, guards, t0, y, p, tables, g):
         _unbounded(observe, guards, mode, t0, y, p, -1, mon, w.obs, g)
