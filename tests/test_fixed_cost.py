@@ -50,6 +50,20 @@ def test_a_run_that_writes_its_rows_is_summarised_from_them(monkeypatch):
     assert seen == [np.abs(written.y[written.mode >= 0]).max(axis=0).tolist()]
 
 
+def test_runs_with_other_tolerances_in_between_are_not_run_twice(monkeypatch):
+    """The step log's size is guessed from the last run with the same settings: a long run (rtol 1e-11,
+    more steps than the smallest log) after a short one with other settings integrates once."""
+    calls = []
+    integrate = sim.entry.integrate
+    monkeypatch.setattr(sim.entry, "integrate", lambda *a, **k: calls.append(k["rtol"]) or integrate(*a, **k))
+    monkeypatch.setattr(sim, "_STEPS_NEEDED", {})
+    for rtol in (1e-11, 1e-4, 1e-11, 1e-4):
+        r = simulate("paper-runup", rtol=rtol, atol=rtol * 1e-3)
+        assert r.status == "finished"
+    assert r.n_steps < sim.MIN_STEP_CAPACITY < simulate("paper-runup", rtol=1e-11, atol=1e-14).n_steps
+    assert calls == [1e-11, 1e-11, 1e-4, 1e-11, 1e-4, 1e-11]
+
+
 def test_a_run_without_steps_stops_where_it_started():
     """Backward sliding at the start, which the scene does not declare: no step; the final state is the
     start, x1 (the integral of v1 here) included."""

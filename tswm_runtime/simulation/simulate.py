@@ -320,7 +320,9 @@ def _plan(run: dict, needed: tuple[int, int]) -> tuple[tuple, np.ndarray]:
 
 
 MIN_STEP_CAPACITY = 256
-_STEPS_NEEDED: dict = {}  # (module, method): (steps, segments) of its last run
+# (module, method, rtol, atol, t_end, hmax): (steps, segments) of the last run with these settings (runs
+# with other tolerances in between, as in a work-precision benchmark, do not make it run twice)
+_STEPS_NEEDED: dict = {}
 
 
 def _integrate(module: ModuleType, p: np.ndarray, ready: Prepared, interruptible: bool, summary: np.ndarray) -> tuple:
@@ -330,7 +332,7 @@ def _integrate(module: ModuleType, p: np.ndarray, ready: Prepared, interruptible
     vector with its latches unset (inf), which the run sets. Fills ``summary`` (``entry.summarize``).
     Returns entry.integrate's outcome and the rows written (or None)."""
     run = ready.run
-    key = (module, run["method"])
+    key = (module, run["method"], run["rtol"], run["atol"], run["t_end"], run["hmax"])
     capacity, t_out = _plan(run, _STEPS_NEEDED.get(key, (0, 0)))
     while True:
         outcome = entry.integrate(
