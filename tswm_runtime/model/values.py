@@ -18,8 +18,7 @@ def si_value(module: ModuleType, name: str, value):
     or without a unit of the parameter's quantity. A finite value outside ``units.LIMITS`` of its
     quantity is refused. Unknown names pass through unchanged (the caller refuses them with the
     list of free parameters)."""
-    si = dict(zip(module.PARAM_NAMES, module.PARAM_UNITS)).get(name)
-    quantity = {units.si_unit(q): q for q in units.UNITS}.get(si)
+    si, quantity = _quantities(module).get(name, (None, None))
     if isinstance(value, str):
         value = _from_text(name, value, si, quantity)
     try:
@@ -30,6 +29,21 @@ def si_value(module: ModuleType, name: str, value):
     if problem:
         raise ValueInputError(f"parameter {name} = {number:g} {si}".rstrip() + f": {problem}")
     return value
+
+
+def _quantities(module: ModuleType) -> dict:
+    """{free parameter: (its SI unit, its quantity or None)}, worked out once per module."""
+    known = _QUANTITIES.get(module)
+    if known is None:
+        quantity = {units.si_unit(q): q for q in units.UNITS}
+        known = {name: (si, quantity.get(si)) for name, si in zip(module.PARAM_NAMES, module.PARAM_UNITS)}
+        if len(_QUANTITIES) >= 256:
+            _QUANTITIES.clear()
+        _QUANTITIES[module] = known
+    return known
+
+
+_QUANTITIES: dict = {}
 
 
 def _from_text(name: str, value: str, si: str | None, quantity: str | None):

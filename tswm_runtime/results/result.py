@@ -4,13 +4,16 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from enum import IntEnum
+from functools import cached_property
 from types import ModuleType
+from typing import NamedTuple
 
 import numpy as np
 
 from tswm_runtime.common.words import plural
 from tswm_runtime.hybrid import machine as hybrid
-from tswm_runtime.model.modes import event_name
+from tswm_runtime.jit.structures import EventLog
+from tswm_runtime.model.modes import event_guard, event_name
 from tswm_runtime.results.rows import MAX_LOGGED_STEPS, Rows, state_names, states
 
 class Status(IntEnum):
@@ -108,20 +111,41 @@ _EMPTY = np.empty(0)
 _EMPTY.setflags(write=False)
 
 
+class RunRecord(NamedTuple):
+    """What a run leaves for the parts of its Result built on first access: the module, the
+    parameter vector (latches set), the running maxima, the EventLog and its number of events, the
+    first and last mode, the status code and the mode needed, the states at the start, and for a run
+    that met inf or NaN its first non-finite value and last values (``status_message``)."""
+
+    module: ModuleType
+    p: np.ndarray
+    mon: np.ndarray
+    log: EventLog
+    n_events: int
+    first_mode: int
+    last_mode: int
+    code: int
+    need: int
+    start: np.ndarray
+    found: tuple | None = None
+    last_values: tuple | None = None
+
+
+#: The parts of a Result built from its RunRecord on first access (``Result.__getstate__`` builds them).
+LAZY = ("params", "model", "mode_names", "events", "phases", "KD1", "KD2", "message", "extras")
+
+
 @dataclass
 class Result:
-    """Events, maxima, KD, the status and the final state, computed by the run; t, x1, v1, a1, x2,
-    v2, S1, S2, F1, F2 and mode per output point and ``sol(t)``, evaluated from the run's steps
+    """The status, maxima, final state and counts, computed by the run; events, phases, KD, the
+    message, parameters and model facts, built from the run's record on first access; t, x1, v1, a1,
+    x2, v2, S1, S2, F1, F2 and mode per output point and ``sol(t)``, evaluated from the run's steps
     when first read."""
 
     scene: str
-    params: dict
     settings: dict
     rows: Rows = field(repr=False, compare=False)   # the per-point series, evaluated on first access
     final_state: dict                               # the states (and x1) at t_stop, their left limit at an event
-    mode_names: tuple[str, ...]
-    events: list[Event]
-    phases: list[Phase]
     S1_max: float                 # the value of S1 where |S1| is largest, and its time (+-inf: unbounded,
                                   # status inconsistent where D reached 0 or at the start; a stop at an
                                   # event or impact keeps the finite peaks reached before it; NaN: a run
@@ -129,17 +153,75 @@ class Result:
     t_S1_max: float
     S2_max: float
     t_S2_max: float
-    KD1: float | None             # eq. (10), when the scene gives Ft1, Ft2
-    KD2: float | None
     status: str
-    message: str
     t_stop: float
     n_steps: int
     n_rejected: int
     nfev: int
     njev: int
-    model: dict = field(default_factory=dict)    # equations, states, param_units, fixed_params, mode_regime
-    extras: dict = field(default_factory=dict)
+    record: RunRecord | None = field(default=None, repr=False, compare=False)  # None once pickled
+
+    @cached_property
+    def params(self) -> dict:
+        """The free parameters of the run by name (SI)."""
+        return dict(zip(self.record.module.PARAM_NAMES, self.record.p.tolist()))
+
+    @cached_property
+    def model(self) -> dict:
+        """equations, states, param_units, fixed_params, mode_regime of the scene's module."""
+        module = self.record.module
+        return {"equations": module.EQUATIONS, "states": tuple(module.STATES),
+                "param_units": dict(zip(module.PARAM_NAMES, module.PARAM_UNITS)),
+                "fixed_params": dict(module.FIXED), "mode_regime": tuple(module.MODE_REGIME)}
+
+    @cached_property
+    def mode_names(self) -> tuple[str, ...]:
+        return tuple(self.record.module.MODES)
+
+    @cached_property
+    def events(self) -> list[Event]:
+        """The run's events in order, from its EventLog."""
+        record = self.record
+        return _events(record.module, record.log, record.n_events)
+
+    @cached_property
+    def phases(self) -> list[Phase]:
+        return _phases(self.record.module, self.record.first_mode, self.events, self.t_stop)
+
+    @cached_property
+    def KD1(self) -> float | None:
+        """eq. (10), when the scene gives Ft1, Ft2."""
+        return self._load_factors()[0]
+
+    @cached_property
+    def KD2(self) -> float | None:
+        return self._load_factors()[1]
+
+    def _load_factors(self) -> tuple:
+        module, mon = self.record.module, self.record.mon
+        return module.load_factors(mon[0, 1], mon[1, 1], self.record.p) if module.HAS_LOAD_FACTORS else (None, None)
+
+    @cached_property
+    def message(self) -> str:
+        """How the run ended (``status_message``)."""
+        r = self.record
+        n = len(r.module.STATES)
+        y_stop = r.log.state[r.n_events - 1, :n].copy() if r.n_events else r.start
+        return status_message(r.module, r.code, self.t_stop, y_stop, r.last_mode, r.need, self.events, r.p,
+                              found=r.found, last_values=r.last_values)
+
+    @cached_property
+    def extras(self) -> dict:
+        """The latched values (a torque switch's trip time, ...) by name; piece indices left out."""
+        module, p = self.record.module, self.record.p
+        return {name: float(v) for name, v in zip(getattr(module, "LATCH_NAMES", ()), p[len(module.PARAM_NAMES):])
+                if not name.endswith("_piece")}
+
+    def __getstate__(self) -> dict:
+        """For pickling: every lazy part built, the record (which holds the module) left behind."""
+        for name in LAZY:
+            getattr(self, name)
+        return {**self.__dict__, "record": None}
 
     t = _series("t", "output times [s] up to t_stop")
     x1 = _series("x1", "x1 [m] per output point")
@@ -256,26 +338,30 @@ class Result:
         return y[:, [order[name] for name in self.sol_names]].T.copy()
 
     @classmethod
-    def build(cls, module: ModuleType, p: np.ndarray, run: dict, rows: Rows, final_state: dict, events, mon,
-              counters, *, hybrid_status: int, t_stop: float, first_mode: int, message: str) -> Result:
-        """Assemble the result; ``rows``: the series at the output points, evaluated when first read;
-        ``final_state``: the states (and x1) at t_stop."""
-        KD1 = KD2 = None
-        if module.HAS_LOAD_FACTORS:
-            KD1, KD2 = module.load_factors(mon[0, 1], mon[1, 1], p)
-        return cls(
-            scene=module.SCENE, params=dict(zip(module.PARAM_NAMES, p.tolist())), settings=dict(run),
-            rows=rows, final_state=final_state, mode_names=tuple(module.MODES), events=events,
-            phases=_phases(module, first_mode, events, t_stop),
-            S1_max=float(mon[0, 1]), t_S1_max=float(mon[0, 2]), S2_max=float(mon[1, 1]),
-            t_S2_max=float(mon[1, 2]), KD1=KD1, KD2=KD2, status=STATUS_NAMES[hybrid_status],
-            message=message, t_stop=float(t_stop), n_steps=int(counters[0]), n_rejected=int(counters[1]),
-            nfev=int(counters[2]), njev=int(counters[3]),
-            model={"equations": module.EQUATIONS, "states": tuple(module.STATES),
-                   "param_units": dict(zip(module.PARAM_NAMES, module.PARAM_UNITS)),
-                   "fixed_params": dict(module.FIXED), "mode_regime": tuple(module.MODE_REGIME)},
-            extras={name: float(v) for name, v in zip(getattr(module, "LATCH_NAMES", ()),
-                                                      p[len(module.PARAM_NAMES):]) if not name.endswith("_piece")})
+    def build(cls, record: RunRecord, run: dict, rows: Rows, final_state: dict, counters, *, t_stop: float) -> Result:
+        """Assemble the result: what a caller reads at once from the run (``final_state``: the states and
+        x1 at t_stop; the maxima from record.mon), the rest from ``record`` on first access."""
+        mon = record.mon.tolist()
+        counts = counters.tolist()
+        return cls(scene=record.module.SCENE, settings=dict(run), rows=rows, final_state=final_state,
+                   S1_max=mon[0][1], t_S1_max=mon[0][2], S2_max=mon[1][1], t_S2_max=mon[1][2],
+                   status=STATUS_NAMES[record.code], t_stop=float(t_stop), n_steps=counts[0], n_rejected=counts[1],
+                   nfev=counts[2], njev=counts[3], record=record)
+
+
+def _events(module: ModuleType, log: EventLog, n_events: int) -> list[Event]:
+    """The first ``n_events`` entries of an EventLog as Events."""
+    n = len(module.STATES)
+    at = 0 if module.STATES[0] == "x1" else n   # x1: state 0, or the integral of v1
+    events = []
+    for e in range(n_events):
+        guard, from_mode, to_mode, piece = log.index[e].tolist()
+        state = log.state[e].tolist()
+        jump = log.jump[e].tolist()
+        events.append(Event(float(log.t[e]), event_guard(module.GUARDS[guard], piece), module.MODES[from_mode],
+                            module.MODES[to_mode] if to_mode >= 0 else None, state[at], state[n - 1],
+                            None if math.isnan(jump[0]) else Jump(*jump), dict(zip(module.STATES, state[:n]))))
+    return events
 
 
 def _value(module: ModuleType, p: np.ndarray, name: str) -> float:

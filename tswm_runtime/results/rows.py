@@ -10,6 +10,7 @@ MAX_LOGGED_STEPS steps keeps only its last one and writes its rows at the output
 """
 from __future__ import annotations
 
+import functools
 import importlib
 import sys
 from types import ModuleType
@@ -29,12 +30,12 @@ def state_names(module: ModuleType, width: int) -> tuple[str, ...]:
     return (*module.STATES, "x1")[:width]
 
 
-def last_state(module: ModuleType, steps: StepLog, y0: np.ndarray) -> dict:
-    """The states (and x1) where the run stopped, its left limit at an event: the end of the last
-    step, or y0 if it took none."""
-    n_steps = min(int(steps.count[0]), steps.f.shape[0])
-    y = steps.y_hi[n_steps - 1] if n_steps else y0
-    return dict(zip(state_names(module, y.size), map(float, y)))
+@functools.lru_cache(maxsize=32)
+def output_times(t_end: float, points: int) -> np.ndarray:
+    """np.linspace(0, t_end, points), remembered and read-only (copy it to write or hand it on)."""
+    t = np.linspace(0.0, t_end, points)
+    t.setflags(write=False)
+    return t
 
 
 def states(steps: StepLog, n_states: int, t, side: int = 0) -> tuple[np.ndarray, np.ndarray]:
@@ -48,14 +49,20 @@ def states(steps: StepLog, n_states: int, t, side: int = 0) -> tuple[np.ndarray,
 
 
 class Rows:
-    """The series of a run at its output times, computed on first ``values()`` and kept. ``written``:
-    the rows the kernel wrote at t_out as it went, for a run too long to keep its steps (None: the
-    steps are kept)."""
+    """The series of a run at its output times (``points`` from 0 to ``t_end``), computed on first
+    ``values()`` and kept. ``written``: the rows the kernel wrote at t_out as it went, for a run too
+    long to keep its steps (None: the steps are kept)."""
 
-    def __init__(self, module: ModuleType, steps: StepLog, t_out: np.ndarray, p: np.ndarray,
+    def __init__(self, module: ModuleType, steps: StepLog, t_end: float, points: int, p: np.ndarray,
                  written: Outputs | None = None):
-        self.module, self.steps, self.t_out, self.p, self.written = module, steps, t_out, p, written
+        self.module, self.steps, self.p, self.written = module, steps, p, written
+        self.t_end, self.points = t_end, points
         self._values: dict | None = None
+
+    @property
+    def t_out(self) -> np.ndarray:
+        """The output times (read-only)."""
+        return output_times(self.t_end, self.points)
 
     @property
     def size(self) -> int:
@@ -64,13 +71,6 @@ class Rows:
             return int(np.count_nonzero(self.written.mode >= 0))
         n_steps = min(int(self.steps.count[0]), self.steps.f.shape[0])
         return int(np.searchsorted(self.t_out, self.steps.f[n_steps - 1, 2], side="right")) if n_steps else 0
-
-    def largest_states(self) -> np.ndarray:
-        """max |state| (and |integral|) over the ends of the steps (or the rows written): one row,
-        none for a run without steps."""
-        y = (self.written.y[self.written.mode >= 0] if self.written is not None
-             else self.steps.y_hi[:min(int(self.steps.count[0]), self.steps.f.shape[0])])
-        return np.abs(y).max(axis=0, keepdims=True) if y.shape[0] else y
 
     def __getstate__(self) -> dict:
         """For pickling (a Result that travels): the rows evaluated, the module by its import name."""
@@ -92,7 +92,7 @@ class Rows:
         module, steps = self.module, self.steps
         n = len(module.STATES)
         if self.written is None:
-            t = np.ascontiguousarray(self.t_out[:self.size])
+            t = self.t_out[:self.size].copy()
             y, segment = states(steps, n, t)
             mode, p_rows = steps.seg_mode[segment], steps.seg_p[segment]
         else:

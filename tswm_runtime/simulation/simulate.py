@@ -7,10 +7,10 @@ evaluates the states and a1, S1, S2, F1, F2 at the output times from them when f
 """
 from __future__ import annotations
 
-import functools
 import math
 import sys
 from types import ModuleType
+from typing import NamedTuple
 
 import numpy as np
 
@@ -26,8 +26,8 @@ from tswm_runtime.model import checks, modes  # noqa: E402
 from tswm_runtime.model.scenes import load_model  # noqa: E402
 from tswm_runtime.model.values import ValueInputError, si_value  # noqa: E402
 from tswm_runtime.hybrid.machine import INCONSISTENT, NOT_FINITE  # noqa: E402
-from tswm_runtime.results.result import Event, Jump, Result, first_non_finite, status_message  # noqa: E402
-from tswm_runtime.results.rows import MAX_LOGGED_STEPS, Rows, last_state  # noqa: E402
+from tswm_runtime.results.result import Result, RunRecord, first_non_finite  # noqa: E402
+from tswm_runtime.results.rows import MAX_LOGGED_STEPS, Rows, output_times, state_names  # noqa: E402
 
 coldstart.done()
 
@@ -107,22 +107,13 @@ def parameter_vector(module: ModuleType, params: dict | None) -> np.ndarray:
             value = si_value(module, name, value)
         except ValueInputError as error:
             raise SimulationInputError(str(error)) from None
-        values[name] = _finite(f"parameter {name}", value)
+        values[name] = value if type(value) is float and math.isfinite(value) else _finite(f"parameter {name}", value)
     row = tuple(values.values())
-    if (module, row) not in _VALID_ROWS:
-        problem = checks.violations(module, [list(row)])[0]
-        if problem:
-            raise SimulationInputError(problem)
-        if len(_VALID_ROWS) >= 1024:
-            _VALID_ROWS.clear()
-        _VALID_ROWS.add((module, row))
+    problem = checks.row_violation(module, row)
+    if problem:
+        raise SimulationInputError(problem)
     # = with_latches(module, [row])[0], built directly (one array instead of four)
     return np.array(row + (math.inf,) * len(getattr(module, "LATCH_NAMES", ())), dtype=np.float64)
-
-
-# (module, free values) that passed the scene file's rules: repeated calls with the same values
-# (the defaults, most often) skip re-checking them (numpy on one row costs ~15 us a call).
-_VALID_ROWS: set = set()
 
 
 def initial_state(module: ModuleType, run: dict) -> tuple[np.ndarray, np.ndarray]:
@@ -133,30 +124,44 @@ def initial_state(module: ModuleType, run: dict) -> tuple[np.ndarray, np.ndarray
     return y0, (np.array([run["x1"]]) if module.STATES == ("v1",) else np.empty(0))
 
 
-def x1_column(module: ModuleType) -> int:
-    """Where x1 is in a row of states (and their integral): state 0, or the integral of v1."""
-    return 0 if module.STATES[0] == "x1" else len(module.STATES)
+class Prepared(NamedTuple):
+    """What a run's settings alone decide, worked out once per module and settings (``prepared``): the
+    validated settings, the initial state and its integral (``initial_state``; the kernel never writes
+    them: shared by every run with these settings), and their width."""
+
+    run: dict
+    y0: np.ndarray
+    quad: np.ndarray
+    width: int
 
 
 def settings(module: ModuleType, overrides: dict) -> dict:
-    """The run settings: the scene's [run] table with ``overrides`` applied, validated (a new dict;
-    settings that passed are remembered per module, like ``_VALID_ROWS``: validating cost ~5 us)."""
+    """The run settings: the scene's [run] table with ``overrides`` applied, validated (a new dict)."""
+    return dict(prepared(module, overrides).run)
+
+
+def prepared(module: ModuleType, overrides: dict) -> Prepared:
+    """The Prepared run for ``overrides`` (validated: ``settings``), remembered per module and
+    overrides: validating and building the initial state cost ~8 us a call. Its run dict is shared:
+    copy it to change it."""
     try:  # the key tells 1 from True and 1.0, and 0.0 from -0.0 (equal in Python, not here)
         key = (module, tuple((k, type(v), float(v).hex() if isinstance(v, float) else v) for k, v in overrides.items()))
-        known = _VALID_SETTINGS.get(key)
+        known = _PREPARED_RUNS.get(key)
     except TypeError:  # an unhashable value: validated below, which names it
         key = known = None
     if known is not None:
-        return dict(known)
+        return known
     run = _validated(module, overrides)
+    y0, quad = initial_state(module, run)
+    known = Prepared(run, y0, quad, y0.size + quad.size)
     if key is not None:
-        if len(_VALID_SETTINGS) >= 1024:
-            _VALID_SETTINGS.clear()
-        _VALID_SETTINGS[key] = dict(run)
-    return run
+        if len(_PREPARED_RUNS) >= 1024:
+            _PREPARED_RUNS.clear()
+        _PREPARED_RUNS[key] = known
+    return known
 
 
-_VALID_SETTINGS: dict = {}
+_PREPARED_RUNS: dict = {}
 
 
 def _validated(module: ModuleType, overrides: dict) -> dict:
@@ -188,14 +193,15 @@ def _validated(module: ModuleType, overrides: dict) -> dict:
     return run
 
 
-def check_atol_scale(module: ModuleType, atol: float, y: np.ndarray) -> None:
-    """Refuse a run whose atol is loose against the states it reached (``y``: one row per point; the
-    integral of v1 last when x1 is no state): there the error control lets a step be off by more
-    than the loosest rtol allowed. A run whose states all stay 0 has nothing to judge."""
-    if y.size == 0:
+def check_atol_scale(module: ModuleType, atol: float, scales: list[float]) -> None:
+    """Refuse a run whose atol is loose against the states it reached (``scales``: the largest |value|
+    of each state over the run, the integral of v1 last when x1 is no state; ``entry.summarize``):
+    there the error control lets a step be off by more than the loosest rtol allowed. A run whose
+    states all stay 0, or one with a NaN among them, has nothing to judge."""
+    total = sum(scales)  # NaN if any is NaN (all are >= 0)
+    if not scales or total != total:
         return
-    scales = np.array([np.abs(column).max() for column in y.T])   # by column: 4x faster than axis=0 here
-    k = int(np.argmax(scales))
+    k = scales.index(max(scales))
     if 0.0 < scales[k] < math.inf and atol > ATOL_SCALE * scales[k]:
         name = (*module.STATES, "x1")[k]
         unit = "m/s" if name.startswith("v") or name.endswith("rate") else "m"
@@ -267,25 +273,14 @@ def _load(model: str):
     return module
 
 
-@functools.lru_cache(maxsize=32)
-def _time_grid(t_end: float, points: int) -> np.ndarray:
-    return np.linspace(0.0, t_end, points)
-
-
-def _output_times(t_end: float, points: int) -> np.ndarray:
-    """np.linspace(0, t_end, points) as a new array (a copy of a remembered one: the same values)."""
-    return _time_grid(t_end, points).copy()
-
-
-def method_step(method: str):
-    """The step of ``method`` (a METHODS name), ``segment.attempt_function``: on its first use in
-    this process it compiles, if not cached, after ``coldstart`` has said so."""
+def method_step(method: str) -> None:
+    """Make the step of ``method`` (a METHODS name, ``segment.attempt_function``) ready: on its first
+    use in this process it compiles, if not cached, after ``coldstart`` has said so."""
     if method not in _PREPARED:
         coldstart.announce((method,))
         segment.attempt_function(METHODS[method])
         coldstart.done()
         _PREPARED.add(method)
-    return segment.attempt_function(METHODS[method])
 
 
 _PREPARED: set = set()  # methods whose step is compiled or loaded in this process
@@ -324,43 +319,47 @@ def _first_non_finite(module: ModuleType, t: np.ndarray, values: dict, mon: np.n
     return first_non_finite(t, values) or next((m for m in maxima if not math.isfinite(m[2])), None)
 
 
-def _plan(module: ModuleType, run: dict, needed: tuple[int, int] | None = None) -> tuple[tuple, np.ndarray]:
+def _plan(run: dict, needed: tuple[int, int]) -> tuple[tuple, np.ndarray]:
     """(the step log's capacity (steps, segments), the output times the kernel writes rows at) for a
-    run that needs ``needed`` (None: guess twice what the module's last run with this method needed,
-    at least MIN_STEP_CAPACITY): all steps kept and no rows, or, beyond MAX_LOGGED_STEPS, the rows
-    written as the run goes and the last step kept."""
-    if needed is None:
-        last = _STEPS_NEEDED.get((module, run["method"]), (0, 0))
-        needed = tuple(max(MIN_STEP_CAPACITY, 2 * k) for k in last) if max(last) <= MAX_LOGGED_STEPS else last
-    if max(needed) <= MAX_LOGGED_STEPS:
-        return needed, _NO_TIMES
-    return (1, 1), _output_times(run["t_end"], run["points"])
+    run that needs ``needed`` steps and segments: twice that, at least MIN_STEP_CAPACITY, at most
+    MAX_LOGGED_STEPS, all steps kept and no rows; or, beyond MAX_LOGGED_STEPS, the rows written as
+    the run goes and the last step kept."""
+    steps, segments = needed
+    if steps <= MAX_LOGGED_STEPS and segments <= MAX_LOGGED_STEPS:
+        return (min(MAX_LOGGED_STEPS, max(MIN_STEP_CAPACITY, 2 * steps)),
+                min(MAX_LOGGED_STEPS, max(MIN_STEP_CAPACITY, 2 * segments))), _NO_TIMES
+    return (1, 1), output_times(run["t_end"], run["points"]).copy()
 
 
 MIN_STEP_CAPACITY = 256
-_STEPS_NEEDED: dict = {}  # (module, method): (steps, segments) of its last run
+# (module, method, rtol, atol, t_end, hmax): (steps, segments) of the last run with these settings (runs
+# with other tolerances in between, as in a work-precision benchmark, do not make it run twice)
+_STEPS_NEEDED: dict = {}
 
 
-def _integrate(module: ModuleType, p: np.ndarray, run: dict, y0: np.ndarray, quad: np.ndarray,
-               interruptible: bool) -> tuple:
+def _integrate(module: ModuleType, p: np.ndarray, ready: Prepared, interruptible: bool, summary: np.ndarray) -> tuple:
     """entry.integrate for ``simulate``: every step kept and no output rows (run again with a
     larger step log if it filled up), or, for a run of more than MAX_LOGGED_STEPS steps, run again
-    writing its rows at the output times, its log keeping the last step only. ``p`` is not written.
-    Returns entry.integrate's outcome, the run's p (latches set) and the rows written (or None)."""
-    capacity, t_out = _plan(module, run)
+    writing its rows at the output times, its log keeping the last step only. ``p``: the parameter
+    vector with its latches unset (inf), which the run sets. Fills ``summary`` (``entry.summarize``).
+    Returns entry.integrate's outcome and the rows written (or None)."""
+    run = ready.run
+    key = (module, run["method"], run["rtol"], run["atol"], run["t_end"], run["hmax"])
+    capacity, t_out = _plan(run, _STEPS_NEEDED.get(key, (0, 0)))
     while True:
-        p_run = p.copy()
         outcome = entry.integrate(
-            METHODS[run["method"]], module, p_run, modes.tables(module), y0, run["t_end"], rtol=run["rtol"],
-            atol=run["atol"], t_out=t_out, max_events=run["max_events"], quad=quad, hmax=run["hmax"],
-            max_steps=run["max_steps"], steps=capacity, call=_direct_in_a_thread if interruptible else _direct)
-        needed = tuple(int(c) for c in outcome[-1].count)
+            METHODS[run["method"]], module, p, modes.tables(module), ready.y0, run["t_end"], rtol=run["rtol"],
+            atol=run["atol"], t_out=t_out, max_events=run["max_events"], quad=ready.quad, hmax=run["hmax"],
+            max_steps=run["max_steps"], steps=capacity, summary=summary,
+            call=_direct_in_a_thread if interruptible else _direct)
+        needed = tuple(outcome[-1].count.tolist())
         if len(_STEPS_NEEDED) >= 256:
             _STEPS_NEEDED.clear()
-        _STEPS_NEEDED[(module, run["method"])] = needed
+        _STEPS_NEEDED[key] = needed
         if t_out.size or (needed[0] <= capacity[0] and needed[1] <= capacity[1]):
-            return (*outcome, p_run, outcome[6] if t_out.size else None)
-        capacity, t_out = _plan(module, run, needed)
+            return (*outcome, outcome[6] if t_out.size else None)
+        capacity, t_out = _plan(run, needed)
+        p[len(module.PARAM_NAMES):] = math.inf  # the latches unset again
 
 
 _NO_TIMES = np.empty(0)
@@ -376,35 +375,27 @@ def simulate(model: str | ModuleType, params: dict | None = None, *, interruptib
     The status, events, maxima, load factors and final state come from the run; the per-point
     series (``Result.t``, ``S1``, ...) are evaluated from its steps when first read."""
     module = model if isinstance(model, ModuleType) else _load(model)
-    p0 = parameter_vector(module, params)
-    run = settings(module, overrides)
-    n = len(module.STATES)
-    y0, quad = initial_state(module, run)
+    p = parameter_vector(module, params)
+    ready = prepared(module, overrides)
+    run, width = ready.run, ready.width
     method_step(run["method"])
-    status, t_stop, n_ev, last, need, first, _, log, mon, counters, steps, p, written = _integrate(
-        module, p0, run, y0, quad, interruptible)
-    rows = Rows(module, steps, _output_times(run["t_end"], run["points"]), p, written)
+    summary = np.empty(2 * width)
+    status, t_stop, n_ev, last, need, first, _, log, mon, counters, steps, written = _integrate(
+        module, p, ready, interruptible, summary)
+    rows = Rows(module, steps, run["t_end"], run["points"], p, written)
     found = last_point = None
     # (a run that stopped at its start, first < 0, integrated nothing: its maxima are NaN, no defect)
-    if status != INCONSISTENT and first >= 0 and (status == NOT_FINITE or not np.isfinite(mon[:, 1]).all()):
+    finite_maxima = all(map(math.isfinite, mon[:, 1].tolist()))
+    if status != INCONSISTENT and first >= 0 and (status == NOT_FINITE or not finite_maxima):
         values = {k: v for k, v in rows.values().items() if k not in ("mode", "p", "y", "x2", "v2")}
         t_kept = values.pop("t")
         found = _first_non_finite(module, t_kept, values, mon)
         last_point = (float(t_kept[-1]), {k: float(v[-1]) for k, v in values.items()}) if t_kept.size else None
+    largest_and_final = summary.tolist()
     if found is not None:
         status = NOT_FINITE
     else:
-        check_atol_scale(module, run["atol"], rows.largest_states())
-    y_stop = log.state[n_ev - 1, :n].copy() if n_ev else y0
-    at = x1_column(module)
-    events = [Event(float(log.t[e]), modes.event_guard(module.GUARDS[log.index[e, 0]], int(log.index[e, 3])),
-                    module.MODES[log.index[e, 1]],
-                    module.MODES[log.index[e, 2]] if log.index[e, 2] >= 0 else None,
-                    float(log.state[e, at]), float(log.state[e, n - 1]),
-                    None if math.isnan(log.jump[e, 0]) else Jump(*map(float, log.jump[e])),
-                    dict(zip(module.STATES, map(float, log.state[e, :n]))))
-              for e in range(n_ev)]
-    return Result.build(module, p, run, rows, last_state(module, steps, np.concatenate([y0, quad])), events, mon,
-                        counters, hybrid_status=status, t_stop=t_stop, first_mode=first,
-                        message=status_message(module, status, t_stop, y_stop, last, need, events, p, found=found,
-                                               last_values=last_point))
+        check_atol_scale(module, run["atol"], largest_and_final[:width])
+    record = RunRecord(module, p, mon, log, n_ev, first, last, status, need, ready.y0, found, last_point)
+    return Result.build(record, run, rows, dict(zip(state_names(module, width), largest_and_final[width:])),
+                        counters, t_stop=t_stop)
