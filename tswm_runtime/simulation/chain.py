@@ -81,12 +81,13 @@ def settings(module: ModuleType, overrides: dict) -> dict:
     return run
 
 
-def simulate_chain(module: ModuleType, **overrides) -> ChainResult:
-    """One run of a chain module (t_end, v0, rtol, atol, max_steps, points, max_events override the scene's)."""
+def simulate_chain(module: ModuleType, method: int = 0, **overrides) -> ChainResult:
+    """One run of a chain module by ``method`` (segment.DOPRI5 or ROSENBROCK23); t_end, v0, rtol, atol,
+    max_steps, points, max_events override the scene's."""
     run = settings(module, overrides)
     t_out = np.linspace(0.0, run["t_end"], run["points"])
     result = run_chain(module, t_end=run["t_end"], v0=run["v0"], rtol=run["rtol"], atol=run["atol"], t_out=t_out,
-                       max_steps=run["max_steps"], max_events=run["max_events"])
+                       method=method, max_steps=run["max_steps"], max_events=run["max_events"])
     return ChainResult(module.SCENE, result.status, result.message, result.t_stop,
                        tuple(_stage(module, result, k) for k in range(module.STAGES)), _events(module, result),
                        result.t, result.y[:, 0], result.y[:, 1], result.n_steps)
@@ -119,3 +120,28 @@ def _events(module: ModuleType, run: ChainRun) -> tuple[dict, ...]:
     return tuple({"t": e.t, "guard": e.guard, "from": name(e.from_mode) if e.guard != "start" else None,
                   "to": name(e.to_mode), "outcome": e.decision.outcome, "reason": e.decision.reason}
                  for e in run.events)
+
+
+UNITS = {"rotation": "N m", "translation": "N"}
+
+
+def summary(result: ChainResult, module: ModuleType) -> list[str]:
+    """The run at a glance, as printed by ``tswm simulate``: status, per stage its regimes, switch
+    times and force maxima, the events with the decisions' outcomes."""
+    lines = [f"  status: {result.status}" + (f": {result.message}" if result.message else ""),
+             f"  t_stop = {result.t_stop:.9g} s, steps {result.n_steps}"]
+    for k, stage in enumerate(result.stages):
+        lines.append(f"  stage {k + 1} ({stage.kind}, body {k} -> body {k + 1}):")
+        lines += [f"    {p.regime:<17} {p.flank or '-':<2} {p.t_start:.9g} s .. {p.t_end:.9g} s" for p in stage.phases]
+        lines.append("    switches at: " + (", ".join(f"{t:.9g} s" for t in stage.switches) or "none"))
+        units = (UNITS[module.BODY_MOTIONS[k]], UNITS[module.BODY_MOTIONS[k + 1]], "N")
+        for (name, peak), unit in zip(stage.peaks.items(), units):
+            shown = "- (never slid)" if peak is None else f"{peak.value:.6g} {unit} at t = {peak.t:.6g} s"
+            lines.append(f"    max |{name} force| while sliding: {shown}")
+    lines.append(f"  decisions ({len(result.events)}):")
+    for e in result.events:
+        lines.append(f"    t = {e['t']:.9g} s, {e['guard']}: {e['from'] or '(start)'} -> {e['to'] or '(stop)'} "
+                     f"[{e['outcome']}]")
+        if e["outcome"] != "unique" or (e["to"] == "resting" and module.STAGES > 1):
+            lines.append(f"      {e['reason']}")
+    return lines

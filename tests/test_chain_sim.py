@@ -1,0 +1,214 @@
+"""Simulated chains of wedge stages against references written here by hand: the one-stage model of the
+same numbers, and Newton per body with Coulomb per stage integrated by scipy's DOP853 at rtol 1e-12,
+its modes found by enumerating every flank combination at each event."""
+from __future__ import annotations
+
+import itertools
+import math
+
+import numpy as np
+import pytest
+from scipy.integrate import solve_ivp
+
+from derivation.chain.codegen import generate_chain_module
+from derivation.chain.scene import parse_chain
+from tswm_runtime.model.contract import load_module
+from tswm_runtime.simulation.chain import simulate_chain
+
+DEG = math.pi / 180
+TIGHT = {"rtol": 1e-11, "atol": 1e-13}
+
+
+@pytest.fixture(scope="session")
+def chain_module(tmp_path_factory):
+    """chain_module(toml_text) -> the generated, imported chain module."""
+    directory = tmp_path_factory.mktemp("chains")
+
+    def make(text: str):
+        chain = parse_chain(text, "test chain")
+        path = directory / f"{chain.name.replace('-', '_')}.py"
+        path.write_text(generate_chain_module(chain))
+        return load_module(path)
+    return make
+
+
+def wedges(name: str, gammas, mus, masses, forces, spring: float = 0.0, v0: float = 1.0, t_end: float = 0.5) -> str:
+    """A chain scene of plain wedges (levers 1), a spring on the last body."""
+    text = f'name = "{name}"\n'
+    for g, mu in zip(gammas, mus):
+        text += f'[[stage]]\nkind = "wedge"\ngamma = "{g!r} deg"\nmu = {mu!r}\n'
+    for j, (m, f) in enumerate(zip(masses, forces)):
+        text += f'[[body]]\nmass = "{m!r} kg"\nforce = "{f!r} N"\n'
+        if j == len(masses) - 1 and spring:
+            text += f'stiffness = "{spring!r} N/m"\n'
+    return text + f"[run]\nt_end = {t_end!r}\nv0 = {v0!r}\n"
+
+
+class HandChain:
+    """Plain wedges in series: body i-1 moves along x1, body i along x2 = tan(gamma_i) x1. Stage i's flank
+    has the normal n = (sin g, cos g) and the slip direction t = (-cos g, sin g) in (x1, x2); its force on
+    body i is sigma N n - mu N s t (sigma = +1 flank a, -1 flank b, N >= 0, s = sign of the slip = sign
+    v0), on body i-1 the opposite."""
+
+    def __init__(self, gammas, mus, masses, forces, spring=0.0):
+        self.g = np.radians(gammas)
+        self.mu, self.m, self.F = np.array(mus), np.array(masses), np.array(forces, dtype=float)
+        self.n = len(gammas)
+        self.c = np.cumprod([1.0, *np.tan(self.g)])       # v_j / v_0
+        self.k = np.zeros(self.n + 1)
+        self.k[-1] = spring
+
+    def solve(self, q0, s, sigma):
+        """(a_0, N_1..N_n): Newton for every body, with a_j = c_j a_0."""
+        A = np.zeros((self.n + 1, self.n + 1))
+        A[:, 0] = self.m * self.c
+        for i in range(self.n):
+            g, mu = self.g[i], self.mu[i]
+            A[i + 1, 1 + i] = -(sigma[i] * math.cos(g) - mu * s * math.sin(g))   # x2 part, on body i
+            A[i, 1 + i] = sigma[i] * math.sin(g) + mu * s * math.cos(g)          # minus the x1 part, on body i-1
+        x = np.linalg.solve(A, self.F - self.k * self.c * q0)
+        return x[0], x[1:]
+
+    def consistent(self, q0, s, at_rest, noise=1e-9):
+        """Flank combinations with every N >= 0, within ``noise`` [N] of the event's location (from rest:
+        leaving it in direction s)."""
+        found = []
+        for sigma in itertools.product((1, -1), repeat=self.n):
+            a, N = self.solve(q0, s, sigma)
+            if np.all(N >= -noise) and (not at_rest or s * a > 0):
+                found.append(sigma)
+        return found
+
+    def run(self, v0, t_end):
+        """[(t, s, sigma)] of each sliding phase, or (t, 0, None) for rest; and the final (t, y)."""
+        t, y, log = 0.0, np.array([0.0, v0]), []
+        while t < t_end:
+            if y[1] == 0.0:
+                moves = [(s, sg) for s in (1, -1) for sg in self.consistent(y[0], s, True)]
+                if not moves:
+                    log.append((t, 0, None))
+                    return log, t_end, y
+                assert len(moves) == 1, moves
+                s, sigma = moves[0]
+            else:
+                s = 1 if y[1] > 0 else -1
+                found = self.consistent(y[0], s, False)
+                sigma = found[0] if len(found) == 1 else [f for f in found if f != log[-1][2]][0]
+            log.append((t, s, sigma))
+            events = [self._normal(i, s, sigma) for i in range(self.n)] + [self._stop(s)]
+            sol = solve_ivp(lambda t, y: [y[1], self.solve(y[0], s, sigma)[0]], (t, t_end), y, method="DOP853",
+                            rtol=1e-12, atol=1e-14, events=events)
+            t, y = sol.t[-1], sol.y[:, -1].copy()
+            if sol.status == 1 and len(sol.t_events[-1]):
+                y[1] = 0.0
+        return log, t, y
+
+    def _normal(self, i, s, sigma):
+        def event(t, y):
+            return self.solve(y[0], s, sigma)[1][i]
+        event.terminal, event.direction = True, -1
+        return event
+
+    @staticmethod
+    def _stop(s):
+        def event(t, y):
+            return y[1]
+        event.terminal, event.direction = True, -s
+        return event
+
+
+def regimes(hand_log, stage):
+    """(t, regime, flank) of a stage from the hand log: tractive where sigma s = +1."""
+    out = []
+    for t, s, sigma in hand_log:
+        entry = ("resting", "") if sigma is None else (
+            "tractive" if sigma[stage] * s > 0 else "inverse-tractive", "a" if sigma[stage] > 0 else "b")
+        if not out or out[-1][1:] != entry:
+            out.append((t, *entry))
+    return out
+
+
+def assert_like_hand(result, hand: HandChain, v0: float, t_end: float, tol: float = 1e-9):
+    log, t_stop, y = hand.run(v0, t_end)
+    for k in range(hand.n):
+        expected = regimes(log, k)
+        got = [(p.t_start, p.regime, p.flank) for p in result.stages[k].phases]
+        assert [g[1:] for g in got] == [e[1:] for e in expected], (k, got, expected)
+        assert np.allclose([g[0] for g in got], [e[0] for e in expected], rtol=tol, atol=tol), (got, expected)
+    assert result.status == "finished"
+    assert result.q0[-1] == pytest.approx(y[0], rel=tol, abs=tol)
+    assert result.v0[-1] == pytest.approx(y[1], rel=tol, abs=tol)
+    return log
+
+
+SWITCHING = dict(gammas=(30.0, 25.0), mus=(0.1, 0.1), masses=(1.0, 1.0, 1.0), forces=(5.0, 0.0, 20.0), spring=1000.0)
+
+
+def test_two_stages_change_flank_one_after_the_other_as_the_hand_model(chain_module):
+    """The spring's push on the last body first drives the chain (both stages inverse-tractive), then
+    resists it: stage 1 changes flank at 35.05 ms, stage 2 at 60.61 ms, and the chain turns back at
+    276.7 ms; the switch times and the final state agree with the hand model to 1e-9."""
+    module = chain_module(wedges("two-switching", **SWITCHING))
+    result = simulate_chain(module, **TIGHT)
+    log = assert_like_hand(result, HandChain(**SWITCHING), 1.0, 0.5)
+    assert len(log) == 4 and [len(s.switches) for s in result.stages] == [2, 2]
+
+
+def test_the_normal_forces_at_the_turn_are_newtons(chain_module):
+    """The largest normal forces come at the turn (v0 = 0, the spring compressed most), where friction flips:
+    each stage's peak is the larger of Newton's N by hand sliding forward and backward there, on flank a."""
+    module = chain_module(wedges("two-switching", **SWITCHING))
+    result = simulate_chain(module, **TIGHT)
+    turn = next(e["t"] for e in result.events if e["guard"] == "v0")
+    hand = HandChain(**SWITCHING)
+    q_turn = hand.run(1.0, turn)[2][0]
+    forward, backward = hand.solve(q_turn, 1, (1, 1))[1], hand.solve(q_turn, -1, (1, 1))[1]
+    for k in range(2):
+        peak = result.stages[k].peaks["normal"]
+        assert peak.t == turn
+        assert peak.value == pytest.approx(max(forward[k], backward[k]), rel=1e-8)
+
+
+THREE = dict(gammas=(30.0, 25.0, 20.0), mus=(0.1, 0.1, 0.1), masses=(1.0, 1.0, 1.0, 1.0),
+             forces=(5.0, 0.0, 0.0, 20.0), spring=1000.0)
+
+
+def test_three_stages_as_the_hand_model(chain_module):
+    module = chain_module(wedges("three-switching", **THREE))
+    result = simulate_chain(module, **TIGHT)
+    log = assert_like_hand(result, HandChain(**THREE), 1.0, 0.5)
+    assert len(log) == 3 and [len(s.switches) for s in result.stages] == [0, 1, 1]
+
+
+HOLD = dict(gammas=(30.0, 5.0), mus=(0.1, 0.15), masses=(1.0, 1.0, 1.0), forces=(0.0, 0.0, -50.0))
+BACKDRIVE = dict(HOLD, mus=(0.1, 0.02))
+
+
+def test_a_self_locking_stage_holds_the_load(chain_module):
+    """Stage 2 self-locks (tan rho = 0.15 > tan 5 deg): the chain coasts to rest against the load and stays."""
+    module = chain_module(wedges("hold", **HOLD))
+    result = simulate_chain(module, **TIGHT)
+    assert_like_hand(result, HandChain(**HOLD), 1.0, 0.5)
+    assert [p.regime for p in result.stages[1].phases] == ["tractive", "resting"]
+    assert result.events[-1]["to"] == "resting" and "statically undetermined" in result.events[-1]["reason"]
+
+
+def test_the_load_back_drives_the_chain_when_no_stage_self_locks(chain_module):
+    module = chain_module(wedges("backdrive", **BACKDRIVE))
+    result = simulate_chain(module, **TIGHT)
+    assert_like_hand(result, HandChain(**BACKDRIVE), 1.0, 0.5)
+    assert [p.regime for p in result.stages[1].phases] == ["tractive", "inverse-tractive"]
+
+
+PAINLEVE = dict(gammas=(5.0,), mus=(math.tan(8 * DEG),), masses=(1.0, 1000.0), forces=(100.0, 0.0))
+
+
+def test_a_painleve_case_is_reported_not_integrated(chain_module):
+    """A light input drives a heavy output through a self-locking wedge: both flanks are consistent by hand
+    (a Painleve ambiguity); the run stops at once and says so."""
+    assert len(HandChain(**PAINLEVE).consistent(0.0, 1, False, noise=0.0)) == 2
+    module = chain_module(wedges("painleve", **PAINLEVE))
+    result = simulate_chain(module, **TIGHT)
+    assert result.status == "indeterminate" and result.t_stop == 0.0
+    assert "Painleve" in result.message and "D < 0" in result.message
+    assert result.events[0]["to"] is None
