@@ -212,3 +212,32 @@ def test_a_painleve_case_is_reported_not_integrated(chain_module):
     assert result.status == "indeterminate" and result.t_stop == 0.0
     assert "Painleve" in result.message and "D < 0" in result.message
     assert result.events[0]["to"] is None
+
+
+def one_stage(name: str, rho: float) -> str:
+    return (f'name = "{name}"\n[wedge]\nflanks = ["a", "b"]\ngamma = "20 deg"\nm1 = "3 kg"\nm2 = "5 kg"\n'
+            f'[friction]\nlaw = "constant"\nrho = {rho!r}\n[drive]\nlaw = "constant"\nF1 = "10 N"\n'
+            '[load]\nlaw = "constant"\nF2 = "-40 N"\n[modes]\ninclude = ["forward", "backward", "stick"]\n[run]\nt_end = "1 s"\nv1 = "2 m/s"\n')
+
+
+@pytest.mark.parametrize("rho, after_rest, single_after", [(0.1, "inverse-tractive", "backward on flank a"),
+                                                           (0.4, "resting", "stick")], ids=["back-driven", "self-locking"])
+def test_one_stage_chain_runs_as_the_one_stage_model(chain_module, scene_module, rho, after_rest, single_after):
+    """The wedge scene of the same numbers, run by the one-stage model: the same phases and switch time, the
+    same v1 and x1 at every output point, the same largest S1 and S2 while sliding."""
+    import tswm_runtime
+
+    single = tswm_runtime.simulate(scene_module(one_stage(f"one-stage-{after_rest}", rho)), **TIGHT)
+    chain = simulate_chain(chain_module(wedges(f"one-chain-{after_rest}", (20.0,), (math.tan(rho),), (3.0, 5.0),
+                                               (10.0, -40.0), v0=2.0, t_end=1.0)), **TIGHT)
+    assert single.status == chain.status == "finished"
+    stage = chain.stages[0]
+    assert [p.regime for p in stage.phases] == ["tractive", after_rest]
+    assert [p.regime for p in single.phases] == ["tractive", single_after]
+    assert stage.switches[0] == pytest.approx(single.phases[1].t_start, rel=1e-12)
+    assert np.allclose(chain.v0, single.v1, rtol=1e-9, atol=1e-11)
+    assert np.allclose(chain.q0, single.x1, rtol=1e-9, atol=1e-11)
+    sliding = np.array([single.mode_names[m] != "stick" for m in single.mode])
+    for name, series in (("input", single.S1), ("output", single.S2)):   # S = F - m a: what a body exerts on
+        k = np.argmax(np.abs(series[sliding]))                           # the wedge, the stage's force on it negated
+        assert stage.peaks[name].value == pytest.approx(-series[sliding][k], rel=1e-9), name
