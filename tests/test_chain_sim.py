@@ -241,3 +241,29 @@ def test_one_stage_chain_runs_as_the_one_stage_model(chain_module, scene_module,
     for name, series in (("input", single.S1), ("output", single.S2)):   # S = F - m a: what a body exerts on
         k = np.argmax(np.abs(series[sliding]))                           # the wedge, the stage's force on it negated
         assert stage.peaks[name].value == pytest.approx(-series[sliding][k], rel=1e-9), name
+
+
+def test_cli_simulates_a_chain_file(tmp_path, capsys, monkeypatch):
+    """tswm simulate CHAIN.toml: per stage regimes, switch times and maxima; exit 0 finished, 1 for a run that
+    stops at a Painleve case, 2 for bad input naming the option or key."""
+    from tswm_runtime.cli import main
+
+    monkeypatch.setenv("TSWM_CACHE", str(tmp_path / "cache"))
+    path = tmp_path / "hold.toml"
+    path.write_text(wedges("hold", **HOLD))
+    assert main(["simulate", str(path), "--rtol", "1e-10", "--atol", "1e-12", "-o", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    assert "status: finished" in out and "stage 2 (wedge, body 1 -> body 2):" in out
+    assert "resting" in out and "statically undetermined" in out and "max |normal force| while sliding" in out
+    assert (tmp_path / "hold-summary.json").exists()
+    painleve = tmp_path / "painleve.toml"
+    painleve.write_text(wedges("painleve", **PAINLEVE))
+    assert main(["simulate", str(painleve)]) == 1
+    assert "status: indeterminate" in capsys.readouterr().out
+    assert main(["simulate", str(path), "--rtol", "5"]) == 2
+    assert "--rtol: rtol = 5.0: must be in [1e-13, 0.01]" in capsys.readouterr().err
+    assert main(["simulate", str(path), "--set", "F2=1"]) == 2
+    assert "--set: a chain scene has no free parameters" in capsys.readouterr().err
+    path.write_text(wedges("hold", **HOLD).replace("v0 = 1.0", 'v0 = "fast"'))
+    assert main(["simulate", str(path)]) == 2
+    assert 'run.v0 = "fast"' in capsys.readouterr().err
