@@ -45,16 +45,18 @@ def wedges(name: str, gammas, mus, masses, forces, spring: float = 0.0, v0: floa
 
 
 class HandChain:
-    """Plain wedges in series: body i-1 moves along x1, body i along x2 = tan(gamma_i) x1. Stage i's flank
+    """Wedges in series: body i-1 moves x1 = r_in q_{i-1}, body i x2 = r_out q_i = tan(gamma_i) x1. Stage i's flank
     has the normal n = (sin g, cos g) and the slip direction t = (-cos g, sin g) in (x1, x2); its force on
     body i is sigma N n - mu N s t (sigma = +1 flank a, -1 flank b, N >= 0, s = sign of the slip = sign
-    v0), on body i-1 the opposite."""
+    v0), on body i-1 the opposite; a body feels the force along its motion times its lever. ``mus`` are
+    the coefficients in the wedge plane (a helical flank's mu / cos(alpha_n), typed in by the caller)."""
 
-    def __init__(self, gammas, mus, masses, forces, spring=0.0):
+    def __init__(self, gammas, mus, masses, forces, spring=0.0, levers=None):
         self.g = np.radians(gammas)
         self.mu, self.m, self.F = np.array(mus), np.array(masses), np.array(forces, dtype=float)
         self.n = len(gammas)
-        self.c = np.cumprod([1.0, *np.tan(self.g)])       # v_j / v_0
+        self.r_in, self.r_out = np.array(levers or [(1.0, 1.0)] * self.n).T   # x1 = r_in q_{i-1}, x2 = r_out q_i
+        self.c = np.cumprod([1.0, *(self.r_in * np.tan(self.g) / self.r_out)])   # v_j / v_0
         self.k = np.zeros(self.n + 1)
         self.k[-1] = spring
 
@@ -64,8 +66,8 @@ class HandChain:
         A[:, 0] = self.m * self.c
         for i in range(self.n):
             g, mu = self.g[i], self.mu[i]
-            A[i + 1, 1 + i] = -(sigma[i] * math.cos(g) - mu * s * math.sin(g))   # x2 part, on body i
-            A[i, 1 + i] = sigma[i] * math.sin(g) + mu * s * math.cos(g)          # minus the x1 part, on body i-1
+            A[i + 1, 1 + i] = -self.r_out[i] * (sigma[i] * math.cos(g) - mu * s * math.sin(g))   # x2 part, body i
+            A[i, 1 + i] = self.r_in[i] * (sigma[i] * math.sin(g) + mu * s * math.cos(g))   # minus the x1 part, i-1
         x = np.linalg.solve(A, self.F - self.k * self.c * q0)
         return x[0], x[1:]
 
@@ -267,3 +269,52 @@ def test_cli_simulates_a_chain_file(tmp_path, capsys, monkeypatch):
     path.write_text(wedges("hold", **HOLD).replace("v0 = 1.0", 'v0 = "fast"'))
     assert main(["simulate", str(path)]) == 2
     assert 'run.v0 = "fast"' in capsys.readouterr().err
+
+
+def valve(worm_mu: float, screw_mu: float) -> str:
+    name = f"valve-{worm_mu}-{screw_mu}".replace(".", "")
+    return f"""name = "{name}"
+[[stage]]
+kind = "worm_gear"
+lead_angle = "4.76 deg"
+pressure_angle = "20 deg"
+worm_radius = "25 mm"
+wheel_radius = "80 mm"
+mu = {worm_mu!r}
+[[stage]]
+kind = "power_screw"
+lead = "4 mm"
+flank_angle = "15 deg"
+mean_diameter = "18 mm"
+mu = {screw_mu!r}
+[[body]]
+inertia = "0.0069 kg m^2"
+[[body]]
+inertia = "0.02 kg m^2"
+[[body]]
+mass = "20 kg"
+force = "-20 kN"
+[run]
+t_end = 3.0
+v0 = 150.0
+"""
+
+
+def hand_valve(worm_mu: float, screw_mu: float) -> HandChain:
+    """The same chain from handbook formulas: the screw's lead angle tan(lambda) = L / (pi d_m), its flank's
+    normal angle tan(alpha_n) = tan(alpha) cos(lambda) (Shigley), mu' = mu / cos(alpha_n) on both stages."""
+    lam = math.atan(0.004 / (math.pi * 0.018))
+    alpha_n = math.atan(math.tan(15 * DEG) * math.cos(lam))
+    return HandChain((4.76, math.degrees(lam)), (worm_mu / math.cos(20 * DEG), screw_mu / math.cos(alpha_n)),
+                     (0.0069, 0.02, 20.0), (0.0, 0.0, -20000.0), levers=[(0.025, 0.08), (0.009, 1.0)])
+
+
+@pytest.mark.parametrize("worm_mu, screw_mu, after", [(0.05, 0.15, "resting"), (0.02, 0.02, "inverse-tractive")],
+                         ids=["screw-self-locks", "back-driven"])
+def test_worm_and_stem_nut_as_the_hand_model(chain_module, worm_mu, screw_mu, after):
+    """Motor -> worm gear -> stem nut -> stem coasting at 150 rad/s against 20 kN: the self-locking nut
+    (rho' 8.8 deg > lambda 4.05 deg) holds the stem when the chain stops; with mu 0.02 on both stages
+    none self-locks and the load drives the chain back. Stop time and final state as the hand model's."""
+    result = simulate_chain(chain_module(valve(worm_mu, screw_mu)), **TIGHT)
+    assert_like_hand(result, hand_valve(worm_mu, screw_mu), 150.0, 3.0)
+    assert [p.regime for p in result.stages[1].phases] == ["tractive", after]
