@@ -51,7 +51,7 @@ class HandChain:
     v0), on body i-1 the opposite; a body feels the force along its motion times its lever. ``mus`` are
     the coefficients in the wedge plane (a helical flank's mu / cos(alpha_n), typed in by the caller)."""
 
-    def __init__(self, gammas, mus, masses, forces, spring=0.0, levers=None):
+    def __init__(self, gammas, mus, masses, forces, spring=0.0, levers=None, motor=None):
         self.g = np.radians(gammas)
         self.mu, self.m, self.F = np.array(mus), np.array(masses), np.array(forces, dtype=float)
         self.n = len(gammas)
@@ -59,8 +59,16 @@ class HandChain:
         self.c = np.cumprod([1.0, *(self.r_in * np.tan(self.g) / self.r_out)])   # v_j / v_0
         self.k = np.zeros(self.n + 1)
         self.k[-1] = spring
+        self.motor = motor            # (speeds, torques, U / U_n) on body 0: np.interp of the table times (U/U_n)^2
 
-    def solve(self, q0, s, sigma):
+    def forces(self, q0, v0):
+        F = self.F - self.k * self.c * q0
+        if self.motor:
+            speeds, torques, voltage = self.motor
+            F[0] += voltage**2 * np.interp(v0, speeds, torques)
+        return F
+
+    def solve(self, q0, s, sigma, v0=0.0):
         """(a_0, N_1..N_n): Newton for every body, with a_j = c_j a_0."""
         A = np.zeros((self.n + 1, self.n + 1))
         A[:, 0] = self.m * self.c
@@ -68,15 +76,15 @@ class HandChain:
             g, mu = self.g[i], self.mu[i]
             A[i + 1, 1 + i] = -self.r_out[i] * (sigma[i] * math.cos(g) - mu * s * math.sin(g))   # x2 part, body i
             A[i, 1 + i] = self.r_in[i] * (sigma[i] * math.sin(g) + mu * s * math.cos(g))   # minus the x1 part, i-1
-        x = np.linalg.solve(A, self.F - self.k * self.c * q0)
+        x = np.linalg.solve(A, self.forces(q0, v0))
         return x[0], x[1:]
 
-    def consistent(self, q0, s, at_rest, noise=1e-9):
+    def consistent(self, q0, s, at_rest, noise=1e-9, v0=0.0):
         """Flank combinations with every N >= 0, within ``noise`` [N] of the event's location (from rest:
         leaving it in direction s)."""
         found = []
         for sigma in itertools.product((1, -1), repeat=self.n):
-            a, N = self.solve(q0, s, sigma)
+            a, N = self.solve(q0, s, sigma, v0)
             if np.all(N >= -noise) and (not at_rest or s * a > 0):
                 found.append(sigma)
         return found
@@ -94,11 +102,11 @@ class HandChain:
                 s, sigma = moves[0]
             else:
                 s = 1 if y[1] > 0 else -1
-                found = self.consistent(y[0], s, False)
+                found = self.consistent(y[0], s, False, v0=y[1])
                 sigma = found[0] if len(found) == 1 else [f for f in found if f != log[-1][2]][0]
             log.append((t, s, sigma))
             events = [self._normal(i, s, sigma) for i in range(self.n)] + [self._stop(s)]
-            sol = solve_ivp(lambda t, y: [y[1], self.solve(y[0], s, sigma)[0]], (t, t_end), y, method="DOP853",
+            sol = solve_ivp(lambda t, y: [y[1], self.solve(y[0], s, sigma, y[1])[0]], (t, t_end), y, method="DOP853",
                             rtol=1e-12, atol=1e-14, events=events)
             t, y = sol.t[-1], sol.y[:, -1].copy()
             if sol.status == 1 and len(sol.t_events[-1]):
@@ -107,7 +115,7 @@ class HandChain:
 
     def _normal(self, i, s, sigma):
         def event(t, y):
-            return self.solve(y[0], s, sigma)[1][i]
+            return self.solve(y[0], s, sigma, y[1])[1][i]
         event.terminal, event.direction = True, -1
         return event
 
@@ -318,3 +326,41 @@ def test_worm_and_stem_nut_as_the_hand_model(chain_module, worm_mu, screw_mu, af
     result = simulate_chain(chain_module(valve(worm_mu, screw_mu)), **TIGHT)
     assert_like_hand(result, hand_valve(worm_mu, screw_mu), 150.0, 3.0)
     assert [p.regime for p in result.stages[1].phases] == ["tractive", after]
+
+
+MOTOR = ((0.0, 1.0, 2.0, 3.0), (30.0, 32.0, 20.0, 0.0), 0.9)
+
+
+def test_a_motor_table_drives_the_chain_as_the_hand_model(chain_module):
+    """A motor on body 0 (its table at 0.9 U_n: torque x 0.81) starts the chain from rest against a spring,
+    which stops it at 0.7378 s, where the stall torque no longer breaks it away: it rests. The table's
+    kinks lie inside steps of both integrators, so the agreement is 1e-7, not 1e-9."""
+    motor = "motor = { speed = [0.0, 1.0, 2.0, 3.0], torque = [30.0, 32.0, 20.0, 0.0], voltage = 0.9 }\n"
+    text = wedges("motor", (30.0, 25.0), (0.1, 0.1), (1.0, 1.0, 1.0), (0.0, 0.0, 0.0), spring=300.0, v0=0.0, t_end=1.0)
+    text = text.replace('force = "0.0 N"\n', 'force = "0.0 N"\n' + motor, 1)
+    result = simulate_chain(chain_module(text), **TIGHT)
+    hand = HandChain((30.0, 25.0), (0.1, 0.1), (1.0, 1.0, 1.0), (0.0, 0.0, 0.0), spring=300.0, motor=MOTOR)
+    assert_like_hand(result, hand, 0.0, 1.0, tol=1e-7)
+    assert [p.regime for p in result.stages[0].phases] == ["tractive", "resting"]
+    assert result.t[500] == 0.5
+    assert result.v0[500] == pytest.approx(hand.run(0.0, 0.5)[2][1], rel=1e-7)   # mid-run, while it drives
+
+
+@pytest.mark.parametrize("motor, parts", [
+    ("{ speed = [0.0, 2.0, 1.0], torque = [1.0, 2.0, 3.0] }", ["body[0].motor.speed", "increase strictly"]),
+    ("{ speed = [0.0, 1.0], torque = [1.0] }", ["body[0].motor.torque", "2 to 100 values"]),
+    ("{ speed = [0.0, 1.0, 2.0], torque = [1.0, 2.0] }", ["body[0].motor.torque", "one value per speed (3)"]),
+    ('{ speed = [0.0, "1 rpm"], torque = [1.0, 2.0] }', ['body[0].motor.speed[1] = "1 rpm"', "plain number in SI"]),
+    ("{ speed = [0.0, 1.0], torque = [1.0, 2.0], voltage = 3.0 }", ["body[0].motor.voltage = 3", "(0, 2]"]),
+    ("{ speed = [0.0, 1.0], torque = [1.0, 2.0], volts = 1.0 }", ["body[0].motor.volts", "unknown key"]),
+    ("3.0", ["body[0].motor = 3", "expected a table"]),
+])
+def test_a_bad_motor_table_is_named(motor, parts):
+    from derivation.scene import SceneError
+
+    text = wedges("bad-motor", (30.0,), (0.1,), (1.0, 1.0), (0.0, 0.0)).replace(
+        'force = "0.0 N"\n', f'force = "0.0 N"\nmotor = {motor}\n', 1)
+    with pytest.raises(SceneError) as err:
+        parse_chain(text, "m.toml")
+    for part in parts:
+        assert part in str(err.value), str(err.value)

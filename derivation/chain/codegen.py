@@ -22,6 +22,7 @@ from derivation.chain.scene import ChainScene
 from derivation.codegen import GENERATOR_VERSION, GenerationError, _comment, _docstring, _Printer, inert, module_name
 
 q0 = sp.Symbol("q_0", real=True)          # body 0's coordinate (the state y[0]; v_0 is y[1])
+MOTOR = sp.Symbol("motor", real=True)     # the motor's torque (or force) on body 0 at v_0, from its table
 STATES = ("q0", "v0")
 GENERATOR_SOURCES = ("chain/codegen.py", "chain/dynamics.py", "chain/stages.py", "chain/scene.py",
                      "templates/chain_module.py.j2")
@@ -52,6 +53,8 @@ class _Code:
             lines.append(f"{', '.join(map(str, self.sym.force))} = body_forces(t, y, p)")
         if q0 in used:
             lines.append("q_0 = y[0]")
+        if MOTOR in used:
+            lines.append("motor = motor_torque(y[1])")
         replacements, reduced = sp.cse(exprs, symbols=sp.numbered_symbols("c"))
         lines += [f"{s} = {self.printer.doprint(e)}" for s, e in replacements]
         return lines, [self.printer.doprint(e) for e in reduced]
@@ -84,9 +87,9 @@ def _forces(chain: ChainScene, code: _Code) -> list[sp.Expr]:
     """The generalized force on each body: its force or torque, less a spring's stiffness times its
     coordinate q_j = (v_j / v_0) q_0 (q = 0 at the start)."""
     factors = dyn.speed_factors(code.sym)
-    return [sp.Symbol(b.force.name, real=True) - (sp.Symbol(b.stiffness.name, real=True) * factors[j] * q0
-                                                  if b.stiffness is not None and b.stiffness.value else 0)
-            for j, b in enumerate(chain.bodies)]
+    return [sp.Symbol(b.force.name, real=True) + (MOTOR if b.motor is not None else 0)
+            - (sp.Symbol(b.stiffness.name, real=True) * factors[j] * q0 if b.stiffness is not None and b.stiffness.value
+               else 0) for j, b in enumerate(chain.bodies)]
 
 
 def _jam(code: _Code, mode: dyn.SlidingMode) -> sp.Expr:
@@ -107,11 +110,11 @@ def _mode_functions(code: _Code, index: int, mode: dyn.SlidingMode) -> list[dict
                           f"force) in {name}", stage_forces)]
 
 
-def _jacobian(code: _Code, chain: ChainScene, mode: dyn.SlidingMode) -> str:
-    """d a_0 / d q_0 in a mode: the springs' share (the forces are the only state dependence)."""
-    forces = _forces(chain, code)
-    rate = sp.diff(mode.accel.subs(dict(zip(code.sym.force, forces))), q0)
-    return code.printer.doprint(rate)
+def _jacobian(code: _Code, chain: ChainScene, mode: dyn.SlidingMode) -> tuple[str, str]:
+    """(d a_0 / d q_0, d a_0 / d v_0) in a mode: the springs' and the motor's share (the forces are the only
+    state dependence; the motor's torque changes with v_0 by its table's slope, ``motor_slope``)."""
+    accel = mode.accel.subs(dict(zip(code.sym.force, _forces(chain, code))))
+    return code.printer.doprint(sp.diff(accel, q0)), code.printer.doprint(sp.diff(accel, MOTOR))
 
 
 def generate_chain_module(chain: ChainScene) -> str:
@@ -145,7 +148,11 @@ def generate_chain_module(chain: ChainScene) -> str:
         chain=chain, n=n, modes=modes, constants={k: inert(v, k) for k, v in constants.items()}, given=given,
         derived=derived, psi=psi, functions=functions, jacobians=[_jacobian(code, chain, m) for m in modes],
         factors=[code.printer.doprint(f) for f in dyn.speed_factors(code.sym)],
-        inertia=[str(s) for s in code.sym.inertia], lever_in=[str(s) for s in code.sym.lever_in],
+        inertia=[str(s) for s in code.sym.inertia], motor=chain.bodies[0].motor,
+        motor_arrays={name: inert(values, name) for name, values in (
+            ("MOTOR_SPEED", chain.bodies[0].motor.speed), ("MOTOR_TORQUE", chain.bodies[0].motor.torque))}
+        if chain.bodies[0].motor else {},
+        motor_voltage=inert(chain.bodies[0].motor.voltage, "voltage") if chain.bodies[0].motor else "", lever_in=[str(s) for s in code.sym.lever_in],
         lever_out=[str(s) for s in code.sym.lever_out], guards=guards,
         contact_targets=", ".join(f"g[{k}]" for k in range(n + 2)),
         force_targets=", ".join(f"out[{k}]" for k in range(3 * n)))

@@ -31,6 +31,8 @@ RULES = {"gamma": ANGLE, "lead_angle": ANGLE, "pressure_angle": TILT, "flank_ang
          "worm_radius": SIZE, "wheel_radius": SIZE, "lead": SIZE, "mean_diameter": SIZE, "mu": MU}
 BODY = {st.ROTATION: ("inertia", "torque"), st.TRANSLATION: ("mass", "force")}
 SPRING = Rule("stiffness", 0.0, lo_in=True, default=0.0)    # translating bodies: F = force - stiffness q
+MOTOR_POINTS = 100
+VOLTAGE = Rule("dimensionless", 0.0, 2.0, hi_in=True, default=1.0)   # U / U_n
 RUN = {"t_end": SCENE_RUN["t_end"], "v0": Rule("dimensionless", -1e12, 1e12, lo_in=True, hi_in=True, default=0.0),
        "rtol": SCENE_RUN["rtol"], "atol": SCENE_RUN["atol"], "max_steps": SCENE_RUN["max_steps"]}
 
@@ -51,6 +53,16 @@ class Body:
     inertia: Param
     force: Param
     stiffness: Param | None = None
+    motor: Motor | None = None
+
+
+@dataclass(frozen=True)
+class Motor:
+    """A motor on body 0: its torque (or force) over its speed as a datasheet table in SI, linear between
+    the points and the end values beyond them, scaled by voltage^2 (voltage = U / U_n)."""
+    speed: tuple[float, ...]
+    torque: tuple[float, ...]
+    voltage: float
 
 
 @dataclass(frozen=True)
@@ -149,7 +161,7 @@ class _ChainReader(_Reader):
                 self.fail(f"{path}.{key}", f"body {j} {'rotates' if motion == st.ROTATION else 'translates'} "
                           f"(set by the stages it joins): give {inertia_key} and {force_key}")
         spring = ("stiffness",) if motion == st.TRANSLATION else ()
-        self.keys(table, path, (inertia_key, force_key, *spring))
+        self.keys(table, path, (inertia_key, force_key, *spring, *(("motor",) if j == 0 else ())))
         quantity = "mass" if motion == st.TRANSLATION else "inertia"
         rules = {inertia_key: Rule(quantity, 0.0), force_key: Rule(force_key if force_key == "torque" else "force",
                                                                    default=0.0), **{key: SPRING for key in spring}}
@@ -157,7 +169,27 @@ class _ChainReader(_Reader):
         for param in params.values():
             if param.free:
                 self.fail(param.key, "free parameters of a chain are not supported yet: give a plain value")
-        return Body(motion, params[inertia_key], params[force_key], params.get("stiffness"))
+        motor = self.motor(table["motor"], f"{path}.motor") if "motor" in table else None
+        return Body(motion, params[inertia_key], params[force_key], params.get("stiffness"), motor)
+
+    def motor(self, table: object, path: str) -> Motor:
+        """speed (SI, increasing from >= 0), torque (SI) of 2 to MOTOR_POINTS points; voltage = U / U_n."""
+        if not isinstance(table, dict):
+            self.fail(path, "expected a table {speed = [...], torque = [...], voltage = ...}", _toml(table)[:80])
+        self.keys(table, path, ("speed", "torque", "voltage"))
+        speed, torque = (self.array(table, key, path, 2, MOTOR_POINTS) for key in ("speed", "torque"))
+        numbers = []
+        for key, values in (("speed", speed), ("torque", torque)):
+            for i, v in enumerate(values):
+                if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or abs(v) > 1e12:
+                    self.fail(f"{path}.{key}[{i}]", "expected a finite plain number in SI, |x| <= 1e12", _toml(v))
+            numbers.append(tuple(float(v) for v in values))
+        if len(speed) != len(torque):
+            self.fail(f"{path}.torque", f"needs one value per speed ({len(speed)}), has {len(torque)}")
+        if numbers[0][0] < 0 or any(b <= a for a, b in zip(numbers[0], numbers[0][1:])):
+            self.fail(f"{path}.speed", "must increase strictly from a value >= 0", _toml(speed)[:200])
+        voltage = self.number(table, "voltage", path, VOLTAGE, free_ok=False)[0]
+        return Motor(*numbers, voltage)
 
     def chain_run(self, doc: dict) -> ChainRun:
         table = self.table(doc, "run", required=False) or {}

@@ -11,10 +11,11 @@ logic the derivation uses (tswm_common/chain_decision.py), with the module's num
 a flank change, breakaway or rest; no mode or several (a Painleve-type case) stop the run with the
 reason. So a chain needs no kernel of its own: the one compiled for every scene runs it.
 
-A resting chain stays at rest: its forces depend on q0 only (springs), which rests with it. While
-sliding, every stage force is affine in the bodies' forces, which are affine in q0, and q0 is
-monotone in a sliding phase: a stage force's extreme over a phase lies at one of its ends, so the
-maxima are taken there exactly.
+A resting chain stays at rest: its forces depend on q0 (springs) and v0 (a motor's table), which
+rest with it. While sliding, every stage force is affine in the bodies' forces; each phase keeps
+the stage forces at its ends and at the output points inside it. Without a motor the bodies'
+forces are affine in q0, which is monotone in a sliding phase, so a stage force's extreme lies
+at a phase end and the maxima taken from these samples are exact.
 """
 from __future__ import annotations
 
@@ -47,12 +48,12 @@ def tables(module) -> ModeTables:
 
 @dataclass
 class Phase:
-    """A stretch of the run in one mode (RESTING: at rest), with each stage's force at its ends."""
+    """A stretch of the run in one mode (RESTING: at rest), with the stage forces sampled in it."""
 
     mode: int
     t_start: float
     t_end: float
-    forces: list = field(default_factory=list)   # stage_forces at its start and end (sliding phases)
+    forces: list = field(default_factory=list)   # (t, stage_forces) at its ends and output points (sliding)
 
 
 @dataclass
@@ -143,25 +144,26 @@ def run_chain(module, *, t_end: float, v0: float, rtol: float, atol: float, t_ou
             status, message = "too-many-events", f"{max_events} events"
             break
         first = int(np.searchsorted(t_out, t))
-        phase = Phase(mode, t, t, [_forces(module, mode, t, y)])
+        phase = Phase(mode, t, t, [(t, _forces(module, mode, t, y))])
         code, t_stop, n_ev, _, _, _, out, log, _, counters, _ = entry.integrate(
             method, module, p, modes, y, t_end, rtol=rtol, atol=atol, t_out=t_out[first:], max_events=1, t0=t,
             mode0=mode, max_steps=max(max_steps - steps, 1))
         steps += int(counters[0] + counters[1])
         done = out.mode >= 0
         rows[first:][done] = out.y[done]
+        phase.forces += [(t_i, _forces(module, mode, t_i, y_i)) for t_i, y_i in zip(out.t[done], out.y[done])]
         same = same + 1 if t_stop == t else 0
         t = t_stop
         if n_ev == 0:
-            y = rows[first:][done][-1] if done.any() else y
-            phase.t_end, phase.forces = t, phase.forces + [_forces(module, mode, t, y)]
+            phase.t_end = t
             phases.append(phase)
             if code != hybrid.FINISHED:
                 status, message = STATUS.get(code, f"status {code}"), f"the integrator stopped at t = {t:.9g} s"
             break
         y = log.state[0, :2].copy()
         guard = module.GUARDS[log.index[0, 0]]
-        phase.t_end, phase.forces = t, phase.forces + [_forces(module, mode, t, y)]
+        phase.t_end = t
+        phase.forces.append((t, _forces(module, mode, t, y)))
         phases.append(phase)
         if guard in ("D", "jam"):
             status = "inconsistent"

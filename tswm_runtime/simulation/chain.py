@@ -106,7 +106,7 @@ def _stage(module: ModuleType, run: ChainRun, k: int) -> StageSummary:
             phases[-1] = StagePhase(regime, flank, phases[-1].t_start, phase.t_end)
         else:
             phases.append(StagePhase(regime, flank, phase.t_start, phase.t_end))
-        for t, forces in zip((phase.t_start, phase.t_end), phase.forces):
+        for t, forces in phase.forces:
             for j, name in enumerate(FORCES):
                 value = float(forces[3 * k + j])
                 if peaks[name] is None or abs(value) > abs(peaks[name].value):
