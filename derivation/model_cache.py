@@ -3,7 +3,7 @@
 ``module_for_scene(path)`` derives and generates the module of a scene file into
 ``$TSWM_CACHE`` (default ``$XDG_CACHE_HOME/tswm`` or ``~/.cache/tswm``), under a name
 keyed by the scene file's and the generator's sha256, and reuses it while both are
-unchanged. generated/ (the shipped scenes) is never touched.
+unchanged; ``module_for_chain(path)`` does the same for a chain scene ([[stage]] tables). generated/ (the shipped scenes) is never touched.
 """
 from __future__ import annotations
 
@@ -14,6 +14,7 @@ from pathlib import Path
 from derivation.codegen import body_is_intact, generator_digest, module_name, write_module
 from derivation.model import build_model
 from derivation.scene import load_scene
+from tswm_common.files import write_atomic
 
 
 def cache_dir() -> Path:
@@ -33,3 +34,17 @@ def module_for_scene(path: str | os.PathLike) -> Path:
     if target.exists() and body_is_intact(target.read_text()):
         return target
     return write_module(build_model(scene), directory, force=True)
+
+
+def module_for_chain(path: str | os.PathLike) -> Path:
+    """The generated module (.py) of the chain scene file at ``path``: from the cache, or made now."""
+    from derivation.chain.codegen import generate_chain_module, generator_digest as chain_digest
+    from derivation.chain.scene import load_chain
+
+    chain = load_chain(Path(path))
+    key = hashlib.sha256(f"{chain.digest} {chain_digest()}".encode()).hexdigest()[:16]
+    directory = cache_dir() / f"{module_name(chain.name)}_{key}"
+    target = directory / f"{module_name(chain.name)}.py"
+    if target.exists() and body_is_intact(target.read_text()):
+        return target
+    return write_atomic(target, generate_chain_module(chain))

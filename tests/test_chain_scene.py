@@ -139,7 +139,7 @@ def test_cli_derive_of_a_chain_writes_its_document(tmp_path, capsys):
     path.write_text(VALVE.replace('name = "valve-chain"', 'name = "valve-chain"\ndescription = "\\\\input{x} $y$ 50%"'))
     assert main(["derive", str(path), "--markdown", str(tmp_path / "v.md"), "--latex", str(tmp_path / "v.tex")]) == 0
     out = capsys.readouterr().out
-    assert "2 stages, derivation only (not yet simulated)" in out
+    assert "2 stages (tswm simulate runs it)" in out
     assert "stage 2: power_screw, gamma 4.04611 deg, rho' 8.82559 deg, self-locking" in out
     assert "8 sliding modes" in out and "unique: forward: tractive (a), tractive (a)" in out
     md, tex = (tmp_path / "v.md").read_text(), (tmp_path / "v.tex").read_text()

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
+from types import ModuleType
 
 from tswm_runtime.sweeps import DEFAULT_CHUNK, DEFAULT_WAIT_FOR_WORKERS
 
@@ -54,9 +55,14 @@ def simulate(scene, params: dict | None = None, *, t_end=None, rtol=None, atol=N
              points=None, max_steps=None, max_events=None, output=None, plot: bool = True):
     """One run of ``scene`` (``tswm simulate``): ``params`` {name: value} sets free parameters
     (``--set``); ``output``: a directory for SCENE.csv, .npz, -summary.json and (with ``plot``)
-    .png. Returns the ``Result`` (arrays, phases, events, maxima, status; ``to_dict``)."""
+    .png. Returns the ``Result`` (arrays, phases, events, maxima, status; ``to_dict``). A chain scene
+    file ([[stage]] tables) returns a ``ChainResult`` (per stage regimes, switch times, force maxima;
+    no free parameters, no output files yet)."""
+    from tswm_runtime.model.scenes import is_chain
     from tswm_runtime.simulation.simulate import simulate as run
 
+    if not isinstance(scene, ModuleType) and is_chain(scene):
+        return _chain(scene, params, _settings(t_end, rtol, atol, method, max_steps, max_events, points), output)
     module = _model(scene)
     result = run(module, params, **_settings(t_end, rtol, atol, method, max_steps, max_events, points))
     if output is not None:
@@ -64,6 +70,20 @@ def simulate(scene, params: dict | None = None, *, t_end=None, rtol=None, atol=N
 
         write_outputs(result, module, output, plot=plot)
     return result
+
+
+def _chain(scene, params, settings: dict, output):
+    from tswm_runtime.model.scenes import load_chain_model
+    from tswm_runtime.simulation.chain import simulate_chain
+    from tswm_runtime.simulation.simulate import METHODS, SimulationInputError
+
+    if params or output is not None:
+        raise SimulationInputError(f"{'params' if params else 'output'}: a chain scene takes neither free parameters "
+                                   "nor an output directory yet")
+    method = settings.pop("method", "dopri5")
+    if method not in METHODS:
+        raise SimulationInputError(f"method = {method!r}: must be one of {', '.join(METHODS)}")
+    return simulate_chain(load_chain_model(scene), method=METHODS[method], **settings)
 
 
 def sweep(scene, grid=None, *, samples: int | None = None, ranges=None, seed: int = 0, output=None,

@@ -1,7 +1,8 @@
 """Chain scene files: ``[[stage]]`` and ``[[body]]`` tables, read, checked and turned into numbers.
 
 Stage k (counted from 1) joins body k-1 and body k ([[body]] tables counted from 0). Messages name a
-key as stage[k].mu or body[k].inertia. Chains are derived, not yet simulated (docs/scene-format.md).
+key as stage[k].mu or body[k].inertia. A translating body may carry a spring (``stiffness``); the
+``[run]`` table gives the run (docs/scene-format.md, "Chains of stages").
 """
 from __future__ import annotations
 
@@ -17,10 +18,11 @@ from derivation.chain import stages as st
 from derivation.chain.dynamics import MAX_STAGES
 from derivation.chain.selector import ChainValues
 from derivation.scene import DEG, FLANKS, MAX_DESCRIPTION, NAME, Param, Rule, SceneError, _Reader, _toml, read_toml
+from derivation.scene import RUN as SCENE_RUN
 from tswm_common import units
 from tswm_common.text import printable
 
-TOP_KEYS = ("name", "description", "stage", "body")
+TOP_KEYS = ("name", "description", "stage", "body", "run")
 ANGLE = Rule("angle", 0.0, 90 * DEG)
 TILT = Rule("angle", 0.0, 90 * DEG, lo_in=True)      # 0: a flank square to the wedge plane
 SIZE = Rule("length", 0.0)
@@ -28,6 +30,11 @@ MU = Rule("dimensionless", 0.0, 10.0, lo_in=True)
 RULES = {"gamma": ANGLE, "lead_angle": ANGLE, "pressure_angle": TILT, "flank_angle": TILT,
          "worm_radius": SIZE, "wheel_radius": SIZE, "lead": SIZE, "mean_diameter": SIZE, "mu": MU}
 BODY = {st.ROTATION: ("inertia", "torque"), st.TRANSLATION: ("mass", "force")}
+SPRING = Rule("stiffness", 0.0, lo_in=True, default=0.0)    # translating bodies: F = force - stiffness q
+MOTOR_POINTS = 100
+VOLTAGE = Rule("dimensionless", 0.0, 2.0, hi_in=True, default=1.0)   # U / U_n
+RUN = {"t_end": SCENE_RUN["t_end"], "v0": Rule("dimensionless", -1e12, 1e12, lo_in=True, hi_in=True, default=0.0),
+       "rtol": SCENE_RUN["rtol"], "atol": SCENE_RUN["atol"], "max_steps": SCENE_RUN["max_steps"]}
 
 
 @dataclass(frozen=True)
@@ -40,10 +47,33 @@ class Stage:
 
 @dataclass(frozen=True)
 class Body:
-    """One body: rotating (inertia in kg m^2, torque in N m) or translating (mass in kg, force in N)."""
+    """One body: rotating (inertia in kg m^2, torque in N m) or translating (mass in kg, force in N,
+    a spring's stiffness in N/m: the force falls by stiffness q from q = 0 at the start)."""
     motion: str
     inertia: Param
     force: Param
+    stiffness: Param | None = None
+    motor: Motor | None = None
+
+
+@dataclass(frozen=True)
+class Motor:
+    """A motor on body 0: its torque (or force) over its speed as a datasheet table in SI, linear between
+    the points and the end values beyond them, scaled by voltage^2 (voltage = U / U_n)."""
+    speed: tuple[float, ...]
+    torque: tuple[float, ...]
+    voltage: float
+
+
+@dataclass(frozen=True)
+class ChainRun:
+    """The run: t_end [s], body 0's speed at t = 0 (rad/s rotating, m/s translating; q = 0 there),
+    tolerances and the step budget."""
+    t_end: float
+    v0: float
+    rtol: float
+    atol: float
+    max_steps: int
 
 
 @dataclass(frozen=True)
@@ -54,6 +84,7 @@ class ChainScene:
     bodies: tuple[Body, ...]
     source: str
     digest: str
+    run: ChainRun = ChainRun(1.0, 0.0, 1e-6, 1e-9, 100000)
 
     def values(self) -> ChainValues:
         """The equivalent wedges' numbers (slope, friction angle, levers) and the bodies', in SI."""
@@ -109,6 +140,9 @@ class _ChainReader(_Reader):
         keys = tuple(st.kinds()[kind].keys)
         self.keys(table, path, ("kind", "flanks", *keys))
         params = self.params(table, path, {key: RULES[key] for key in keys}, f"stage{k}_")
+        for param in params.values():
+            if param.free:
+                self.fail(param.key, "free parameters of a chain are not supported yet: give a plain value")
         flanks = self.subset(table, "flanks", path, FLANKS, default=list(FLANKS))
         stage = Stage(kind, params, flanks)
         gamma, rho, _, _ = _equivalent(stage)
@@ -126,12 +160,42 @@ class _ChainReader(_Reader):
             if key in table:
                 self.fail(f"{path}.{key}", f"body {j} {'rotates' if motion == st.ROTATION else 'translates'} "
                           f"(set by the stages it joins): give {inertia_key} and {force_key}")
-        self.keys(table, path, (inertia_key, force_key))
+        spring = ("stiffness",) if motion == st.TRANSLATION else ()
+        self.keys(table, path, (inertia_key, force_key, *spring, *(("motor",) if j == 0 else ())))
         quantity = "mass" if motion == st.TRANSLATION else "inertia"
-        params = self.params(table, path, {inertia_key: Rule(quantity, 0.0),
-                                           force_key: Rule(force_key if force_key == "torque" else "force",
-                                                           default=0.0)}, f"body{j}_")
-        return Body(motion, params[inertia_key], params[force_key])
+        rules = {inertia_key: Rule(quantity, 0.0), force_key: Rule(force_key if force_key == "torque" else "force",
+                                                                   default=0.0), **{key: SPRING for key in spring}}
+        params = self.params(table, path, rules, f"body{j}_")
+        for param in params.values():
+            if param.free:
+                self.fail(param.key, "free parameters of a chain are not supported yet: give a plain value")
+        motor = self.motor(table["motor"], f"{path}.motor") if "motor" in table else None
+        return Body(motion, params[inertia_key], params[force_key], params.get("stiffness"), motor)
+
+    def motor(self, table: object, path: str) -> Motor:
+        """speed (SI, increasing from >= 0), torque (SI) of 2 to MOTOR_POINTS points; voltage = U / U_n."""
+        if not isinstance(table, dict):
+            self.fail(path, "expected a table {speed = [...], torque = [...], voltage = ...}", _toml(table)[:80])
+        self.keys(table, path, ("speed", "torque", "voltage"))
+        speed, torque = (self.array(table, key, path, 2, MOTOR_POINTS) for key in ("speed", "torque"))
+        numbers = []
+        for key, values in (("speed", speed), ("torque", torque)):
+            for i, v in enumerate(values):
+                if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or abs(v) > 1e12:
+                    self.fail(f"{path}.{key}[{i}]", "expected a finite plain number in SI, |x| <= 1e12", _toml(v))
+            numbers.append(tuple(float(v) for v in values))
+        if len(speed) != len(torque):
+            self.fail(f"{path}.torque", f"needs one value per speed ({len(speed)}), has {len(torque)}")
+        if numbers[0][0] < 0 or any(b <= a for a, b in zip(numbers[0], numbers[0][1:])):
+            self.fail(f"{path}.speed", "must increase strictly from a value >= 0", _toml(speed)[:200])
+        voltage = self.number(table, "voltage", path, VOLTAGE, free_ok=False)[0]
+        return Motor(*numbers, voltage)
+
+    def chain_run(self, doc: dict) -> ChainRun:
+        table = self.table(doc, "run", required=False) or {}
+        self.keys(table, "run", tuple(RUN))
+        value = {k: self.number(table, k, "run", rule, free_ok=False)[0] for k, rule in RUN.items()}
+        return ChainRun(**{**value, "max_steps": int(value["max_steps"])})
 
     def chain(self, doc: dict, digest: str) -> ChainScene:
         self.keys(doc, "", TOP_KEYS)
@@ -149,4 +213,4 @@ class _ChainReader(_Reader):
         tables = self.tables(doc, "body", len(stages) + 1, len(stages) + 1)
         motions = [kinds[0].motion_in, *(kind.motion_out for kind in kinds)]
         bodies = tuple(self.body(t, j, m) for j, (t, m) in enumerate(zip(tables, motions)))
-        return ChainScene(name, description, stages, bodies, self.source, digest)
+        return ChainScene(name, description, stages, bodies, self.source, digest, self.chain_run(doc))

@@ -36,7 +36,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _derive_chain(args: argparse.Namespace) -> int:
-    """A chain of stages: derivation only (its stages, its modes, the decision at rest, the document)."""
+    """A chain of stages: its stages, its modes, the decision at rest, the document."""
     import math
 
     from derivation.chain.document import write_chain_documents
@@ -46,7 +46,7 @@ def _derive_chain(args: argparse.Namespace) -> int:
 
     chain = load_chain(args.scene)
     values = chain.values()
-    print(f"chain {chain.name} ({chain.source}): {len(chain.stages)} stages, derivation only (not yet simulated)")
+    print(f"chain {chain.name} ({chain.source}): {len(chain.stages)} stages (tswm simulate runs it)")
     for k, stage in enumerate(chain.stages):
         locks = "self-locking" if values.rho[k] >= values.gamma[k] else "not self-locking"
         print(f"  stage {k + 1}: {stage.kind}, gamma {math.degrees(values.gamma[k]):.6g} deg, "

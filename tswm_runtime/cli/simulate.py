@@ -98,9 +98,43 @@ def _warn_if_edited(module) -> None:
               file=sys.stderr)
 
 
+def _run_chain(args: argparse.Namespace) -> int:
+    """A chain scene file ([[stage]] tables): its run, per stage regimes, switch times, force maxima."""
+    import json
+
+    from tswm_common.files import write_atomic
+    from tswm_runtime.model.scenes import load_chain_model
+    from tswm_runtime.simulation.chain import simulate_chain, summary
+    from tswm_runtime.simulation.simulate import METHODS, SimulationInputError
+
+    if args.set:
+        raise UsageError("--set: a chain scene has no free parameters; change its scene file")
+    module = load_chain_model(args.scene)
+    overrides = setting_overrides(args, SETTING_OPTIONS)
+    method = overrides.pop("method") or "dopri5"
+    if method not in METHODS:
+        raise UsageError(f"--method {method!r}: must be one of {', '.join(METHODS)}")
+    try:
+        result = simulate_chain(module, method=METHODS[method], **overrides)
+    except SimulationInputError as error:
+        raise setting_error(error, overrides) from None
+    print(f"chain {module.SCENE} ({module.STAGES} stages, {_origin(args.scene, module)})")
+    print(f"  run: t_end = {result.t[-1]:g} s, v0(0) = {module.RUN['v0']:g} (body 0, SI), {method}")
+    print("\n".join(summary(result, module)))
+    if args.output:
+        path = write_atomic(os.path.join(args.output, f"{module.SCENE}-summary.json"),
+                            json.dumps(result.to_dict(), indent=1, allow_nan=True))
+        print(f"  wrote {path}")
+    return 0 if result.status == "finished" else 1
+
+
 def run(args: argparse.Namespace) -> int:
     start = time.perf_counter()
     output_directory(args.output)
+    from tswm_runtime.model.scenes import is_chain
+
+    if is_chain(args.scene):
+        return _run_chain(args)
     spec, cold = prepare_kernels(args.scene, ("integrate",))
     from tswm_runtime.model.contract import ContractError
     from tswm_runtime.model.scenes import load_model

@@ -65,13 +65,36 @@ FUNCTIONS = {
 }
 
 
+# A chain module (derivation/chain/codegen.py, run by tswm_runtime/hybrid/chain.py) provides these instead.
+CHAIN_CONSTANTS = {
+    "SCENE": "scene name", "SCENE_DIGEST": "sha256 of the scene file", "DESCRIPTION": "the scene's description",
+    "STAGES": "number of stages N", "STATES": "('q0', 'v0'): body 0's coordinate and speed",
+    "MODES": "sliding mode names: direction and each stage's regime and flank",
+    "MODE_DIRECTION": "sign of v0 per mode", "MODE_REGIMES": "per mode, each stage's regime",
+    "MODE_FLANKS": "per mode, each stage's loaded flank", "STAGE_KINDS": "per stage its kind",
+    "BODY_MOTIONS": "per body 'rotation' or 'translation'",
+    "GUARDS": "('D', 'jam', 'N_1', ..., 'N_N', 'v0')", "GUARD_DIRECTIONS": "per mode, per guard",
+    "OBSERVABLES": "() (the stage forces come from stage_forces)", "RUN": "t_end, v0, rtol, atol, max_steps",
+    "PSI": "per stage (Psi_t, Psi_i) of forward sliding", "LEVER_IN": "per stage", "LEVER_OUT": "per stage",
+    "INERTIA": "per body", "SPEED_FACTORS": "v_j / v_0 per body",
+}
+CHAIN_FUNCTIONS = {
+    "rhs": "as above", "jac": "as above", "guards": "as above", "observe": "fills nothing",
+    "impact": "NaN: nothing collides", "accel": "accel(mode, t, y, p) -> a_0",
+    "body_forces": "body_forces(t, y, p) -> (F_0, ..., F_N)",
+    "stage_forces": "stage_forces(mode, t, y, p, out): per stage (on its input body, on its output body, N)",
+}
+
+
 class ContractError(ImportError):
     """A module that does not provide the generated-module contract."""
 
 
 def check_module(module: ModuleType) -> ModuleType:
-    """Return ``module`` if it has every contract name, else raise naming the missing ones."""
-    missing = [name for name in (*CONSTANTS, *FUNCTIONS) if not hasattr(module, name)]
+    """Return ``module`` if it has every contract name (a chain module's: CHAIN_*), else raise naming the
+    missing ones."""
+    names = (*CHAIN_CONSTANTS, *CHAIN_FUNCTIONS) if hasattr(module, "STAGES") else (*CONSTANTS, *FUNCTIONS)
+    missing = [name for name in names if not hasattr(module, name)]
     if getattr(module, "HAS_LOAD_FACTORS", False) and not hasattr(module, "load_factors"):
         missing.append("load_factors")
     if missing:

@@ -21,6 +21,25 @@ def shipped_scenes() -> list[str]:
     return sorted(m.name.replace("_", "-") for m in pkgutil.iter_modules(generated.__path__))
 
 
+def is_chain(scene: str | Path) -> bool:
+    """Whether ``scene`` is a chain scene file: a .toml with [[stage]] tables (read without SymPy)."""
+    import tomllib
+
+    if Path(str(scene)).suffix != ".toml":
+        return False
+    try:
+        return "stage" in tomllib.loads(Path(scene).read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError):
+        return False   # the scene reader reports it
+
+
+def load_chain_model(scene: str | Path) -> ModuleType:
+    """The generated module of a chain scene file, made into the user cache on first use (SymPy)."""
+    from derivation.model_cache import module_for_chain
+
+    return load_module(module_for_chain(scene))
+
+
 def model_spec(scene: str | Path) -> str:
     """A shipped scene name or a generated module's .py path, as ``load_module`` takes it; a scene
     file (.toml) is generated into the user cache first (this imports derivation/ and SymPy)."""

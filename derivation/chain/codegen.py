@@ -1,0 +1,176 @@
+"""Emit the numba module of a chain scene through a Jinja2 template (templates/chain_module.py.j2).
+
+Every formula comes from derivation/chain/: each stage's equivalent wedge (stages.py) and each
+sliding mode's reduced equation of motion, normal forces, denominator and stage forces
+(dynamics.py); the scene's values enter only as named module constants printed by ``inert``. The
+module's rhs, jac and guards take the runtime's explicit signatures, so the compiled step loop
+(tswm_runtime/integration/single.py) runs it; tswm_runtime/hybrid/chain.py decides its modes.
+"""
+from __future__ import annotations
+
+import hashlib
+import re
+from importlib import resources
+
+import jinja2
+import sympy as sp
+
+from derivation import mechanics as mech
+from derivation.chain import dynamics as dyn
+from derivation.chain import stages as st
+from derivation.chain.scene import ChainScene
+from derivation.codegen import GENERATOR_VERSION, GenerationError, _comment, _docstring, _Printer, inert, module_name
+
+q0 = sp.Symbol("q_0", real=True)          # body 0's coordinate (the state y[0]; v_0 is y[1])
+MOTOR = sp.Symbol("motor", real=True)     # the motor's torque (or force) on body 0 at v_0, from its table
+STATES = ("q0", "v0")
+GENERATOR_SOURCES = ("chain/codegen.py", "chain/dynamics.py", "chain/stages.py", "chain/scene.py",
+                     "templates/chain_module.py.j2")
+
+
+def generator_digest() -> str:
+    """sha256 over the chain generator's sources."""
+    h = hashlib.sha256()
+    root = resources.files("derivation")
+    for name in GENERATOR_SOURCES:
+        h.update(name.encode() + root.joinpath(*name.split("/")).read_bytes())
+    return h.hexdigest()
+
+
+class _Code:
+    """Python source of expressions in the chain's symbols: one CSE per function, the body forces
+    from ``body_forces`` where an expression uses them."""
+
+    def __init__(self, stages: int):
+        self.sym = dyn.symbols(stages)
+        self.printer = _Printer()
+
+    def body(self, exprs: list[sp.Expr]) -> tuple[list[str], list[str]]:
+        exprs = [sp.sympify(e) for e in exprs]
+        used = set().union(*(e.free_symbols for e in exprs))
+        lines = []
+        if used & set(self.sym.force):
+            lines.append(f"{', '.join(map(str, self.sym.force))} = body_forces(t, y, p)")
+        if q0 in used:
+            lines.append("q_0 = y[0]")
+        if MOTOR in used:
+            lines.append("motor = motor_torque(y[1])")
+        replacements, reduced = sp.cse(exprs, symbols=sp.numbered_symbols("c"))
+        lines += [f"{s} = {self.printer.doprint(e)}" for s, e in replacements]
+        return lines, [self.printer.doprint(e) for e in reduced]
+
+    def function(self, name: str, doc: str, exprs: list[sp.Expr], args: str = "t, y, p") -> dict:
+        lines, results = self.body(exprs)
+        return {"name": name, "args": args, "doc": doc, "lines": lines, "result": ", ".join(results)}
+
+
+def _constants(chain: ChainScene, code: _Code) -> tuple[list[tuple[str, str, str]], list[tuple[str, str]]]:
+    """(name, value, scene key) of the scene's values and (name, formula) of the chain's symbols from them."""
+    given, derived = [], []
+    sym = code.sym
+    for k, stage in enumerate(chain.stages):
+        kind, wedge = st.kinds()[stage.kind], st.equivalent_wedge(stage.kind)
+        names = {symbol: sp.Symbol(stage.params[key].name, real=True) for key, symbol in kind.keys.items()}
+        given += [(p.name, inert(p.value, p.name), p.key) for p in stage.params.values()]
+        for target, expr in ((sym.gamma[k], sp.atan(wedge.tan_gamma)), (sym.rho[k], sp.atan(wedge.tan_rho)),
+                             (sym.lever_in[k], wedge.lever_in), (sym.lever_out[k], wedge.lever_out)):
+            derived.append((str(target), code.printer.doprint(sp.sympify(expr).subs(names))))
+    for j, body in enumerate(chain.bodies):
+        for param in (body.inertia, body.force, body.stiffness):
+            if param is not None:
+                given.append((param.name, inert(param.value, param.name), param.key))
+        derived.append((str(sym.inertia[j]), body.inertia.name))
+    return given, derived
+
+
+def _forces(chain: ChainScene, code: _Code) -> list[sp.Expr]:
+    """The generalized force on each body: its force or torque, less a spring's stiffness times its
+    coordinate q_j = (v_j / v_0) q_0 (q = 0 at the start)."""
+    factors = dyn.speed_factors(code.sym)
+    return [sp.Symbol(b.force.name, real=True) + (MOTOR if b.motor is not None else 0)
+            - (sp.Symbol(b.stiffness.name, real=True) * factors[j] * q0 if b.stiffness is not None and b.stiffness.value
+               else 0) for j, b in enumerate(chain.bodies)]
+
+
+def _jam(code: _Code, mode: dyn.SlidingMode) -> sp.Expr:
+    """The product of the stages' jam factors cos(gamma_k + f s rho_k), from mechanics: > 0 unless one jams."""
+    return sp.Mul(*(mech.sliding(f, mode.direction).jam_factor.subs({mech.gamma: code.sym.gamma[k],
+                                                                       mech.rho: code.sym.rho[k]})
+                    for k, f in enumerate(mode.flanks)))
+
+
+def _mode_functions(code: _Code, index: int, mode: dyn.SlidingMode) -> list[dict]:
+    name = f"mode {index}: {mode.name}"
+    stage_forces = [e for pair in zip(mode.on_input, mode.on_output, mode.normal) for e in pair]
+    return [code.function(f"accel_{index}", f"a_0 in {name}", [mode.accel]),
+            code.function(f"contact_{index}", f"(D, jam, N_1, ..., N_N) in {name}: the denominator, the "
+                          "stages' jam factors' product and each stage's normal force; the mode holds while "
+                          "each is >= 0 (D, jam > 0)", [mode.denominator, _jam(code, mode), *mode.normal]),
+            code.function(f"stage_forces_{index}", f"per stage (on its input body, on its output body, normal "
+                          f"force) in {name}", stage_forces)]
+
+
+def _jacobian(code: _Code, chain: ChainScene, mode: dyn.SlidingMode) -> tuple[str, str]:
+    """(d a_0 / d q_0, d a_0 / d v_0) in a mode: the springs' and the motor's share (the forces are the only
+    state dependence; the motor's torque changes with v_0 by its table's slope, ``motor_slope``)."""
+    accel = mode.accel.subs(dict(zip(code.sym.force, _forces(chain, code))))
+    return code.printer.doprint(sp.diff(accel, q0)), code.printer.doprint(sp.diff(accel, MOTOR))
+
+
+def generate_chain_module(chain: ChainScene) -> str:
+    """Source of the chain scene's module."""
+    values = chain.values()
+    n = len(chain.stages)
+    code = _Code(n)
+    reachable = dyn.reachable(values.flanks)
+    modes = [dyn.sliding(direction, regimes) for direction, regimes in reachable]
+    given, derived = _constants(chain, code)
+    psi = [tuple(code.printer.doprint(p) for p in _psi(code.sym, k)) for k in range(n)]
+    functions = [code.function("body_forces", "(F_0, ..., F_N): each body's force or torque, a spring's part "
+                               "-stiffness q_j with q_j = (v_j/v_0) q_0", _forces(chain, code))]
+    for index, mode in enumerate(modes):
+        functions += _mode_functions(code, index, mode)
+    guards = ("D", "jam", *(f"N_{k + 1}" for k in range(n)), "v0")
+    directions = [tuple([-1] * (n + 2) + [-mode.direction]) for mode in modes]
+    constants = {
+        "SCENE": chain.name, "DESCRIPTION": chain.description, "SCENE_DIGEST": chain.digest, "STAGES": n,
+        "STATES": STATES, "MODES": tuple(m.name for m in modes), "MODE_DIRECTION": tuple(m.direction for m in modes),
+        "MODE_REGIMES": tuple(m.regimes for m in modes), "MODE_FLANKS": tuple(m.flanks for m in modes),
+        "STAGE_KINDS": tuple(s.kind for s in chain.stages),
+        "BODY_MOTIONS": tuple(b.motion for b in chain.bodies), "GUARDS": guards,
+        "GUARD_DIRECTIONS": tuple(directions), "OBSERVABLES": (), "RUN": dict(vars(chain.run)),
+    }
+    env = jinja2.Environment(loader=jinja2.FileSystemLoader(str(resources.files("derivation") / "templates")),
+                             trim_blocks=True, lstrip_blocks=True, keep_trailing_newline=True)
+    env.filters["docstring"] = _docstring
+    env.filters["comment"] = _comment
+    body = env.get_template("chain_module.py.j2").render(
+        chain=chain, n=n, modes=modes, constants={k: inert(v, k) for k, v in constants.items()}, given=given,
+        derived=derived, psi=psi, functions=functions, jacobians=[_jacobian(code, chain, m) for m in modes],
+        factors=[code.printer.doprint(f) for f in dyn.speed_factors(code.sym)],
+        inertia=[str(s) for s in code.sym.inertia], motor=chain.bodies[0].motor,
+        motor_arrays={name: inert(values, name) for name, values in (
+            ("MOTOR_SPEED", chain.bodies[0].motor.speed), ("MOTOR_TORQUE", chain.bodies[0].motor.torque))}
+        if chain.bodies[0].motor else {},
+        motor_voltage=inert(chain.bodies[0].motor.voltage, "voltage") if chain.bodies[0].motor else "", lever_in=[str(s) for s in code.sym.lever_in],
+        lever_out=[str(s) for s in code.sym.lever_out], guards=guards,
+        contact_targets=", ".join(f"g[{k}]" for k in range(n + 2)),
+        force_targets=", ".join(f"out[{k}]" for k in range(3 * n)))
+    body = re.sub(r"\n+@njit", "\n\n\n@njit", body)
+    header = (f"# Generated by tswm {GENERATOR_VERSION} from chain scene '{chain.name}'. DO NOT EDIT: regenerate "
+              "it from its scene file.\n"
+              f"# scene-sha256: {chain.digest}\n"
+              f"# generator-sha256: {generator_digest()}\n"
+              f"# generator-version: {GENERATOR_VERSION}\n"
+              f"# body-sha256: {hashlib.sha256(body.encode()).hexdigest()}\n")
+    source = header + body
+    try:
+        compile(source, f"{module_name(chain.name)}.py", "exec")
+    except SyntaxError as error:
+        raise GenerationError(f"{chain.source}: the generated chain module does not compile ({error})") from None
+    return source
+
+
+def _psi(sym: dyn.Symbols, k: int) -> tuple[sp.Expr, sp.Expr]:
+    """Stage k's FTFs of forward sliding, tractive (flank a) and inverse-tractive (flank b), from mechanics."""
+    return tuple(mech.sliding(f, 1).psi.subs({mech.gamma: sym.gamma[k], mech.rho: sym.rho[k]}) for f in "ab")

@@ -1,0 +1,147 @@
+"""Simulate a chain of wedge stages: settings checked, the chain run (``hybrid.chain``), and per stage
+its regimes, switch times and force maxima.
+
+``simulate_chain(module)`` takes a chain module (``model.scenes.load_chain_model``); its run starts
+at q0 = 0 with the scene's v0. A stage's regime in a phase is tractive or inverse-tractive on the
+flank it loads, or resting; its forces while the chain rests are statically undetermined for two
+stages or more (the decision gives their admissible intervals) and are not counted in the maxima.
+"""
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+from types import ModuleType
+
+import numpy as np
+
+from tswm_runtime.hybrid.chain import RESTING, ChainRun, run_chain
+from tswm_runtime.simulation.simulate import (ATOL_RANGE, DEFAULT_MAX_EVENTS, DEFAULT_POINTS, MAX_EVENTS, MAX_POINTS,
+                                              MAX_STEPS, RTOL_RANGE, _check, _finite)
+
+FORCES = ("input", "output", "normal")     # per stage: on its input body, on its output body, normal force
+
+
+@dataclass(frozen=True)
+class StagePhase:
+    regime: str                  # "tractive", "inverse-tractive" or "resting"
+    flank: str                   # "a", "b", or "" at rest
+    t_start: float
+    t_end: float
+
+
+@dataclass(frozen=True)
+class Peak:
+    value: float                 # signed, largest in magnitude
+    t: float
+
+
+@dataclass(frozen=True)
+class StageSummary:
+    kind: str
+    phases: tuple[StagePhase, ...]
+    switches: tuple[float, ...]  # times its regime or flank changes
+    peaks: dict                  # FORCES -> Peak over the sliding phases (None: it never slid)
+
+
+@dataclass(frozen=True)
+class ChainResult:
+    scene: str
+    status: str
+    message: str
+    t_stop: float
+    stages: tuple[StageSummary, ...]
+    events: tuple[dict, ...]     # t, guard, from, to (None: stop), outcome, reason
+    t: np.ndarray
+    q0: np.ndarray
+    v0: np.ndarray
+    n_steps: int
+
+    def to_dict(self) -> dict:
+        """The summary as plain data (no arrays)."""
+        return {"scene": self.scene, "status": self.status, "message": self.message, "t_stop": self.t_stop,
+                "stages": [asdict(s) for s in self.stages], "events": list(self.events), "n_steps": self.n_steps}
+
+
+def settings(module: ModuleType, overrides: dict) -> dict:
+    """The chain scene's run settings with ``overrides`` applied, validated, naming a bad one."""
+    run = {**module.RUN, "points": DEFAULT_POINTS, "max_events": DEFAULT_MAX_EVENTS}
+    for key, value in overrides.items():
+        _check(key in run, "setting", key, lambda: f"one of {', '.join(run)}")
+        if value is not None:
+            run[key] = value
+    for key in ("t_end", "v0", "rtol", "atol"):
+        run[key] = _finite(key, run[key])
+    _check(run["t_end"] > 0.0, "t_end", run["t_end"], "> t0 = 0 s")
+    _check(RTOL_RANGE[0] <= run["rtol"] <= RTOL_RANGE[1], "rtol", run["rtol"], f"in [{RTOL_RANGE[0]:g}, "
+           f"{RTOL_RANGE[1]:g}]")
+    _check(ATOL_RANGE[0] <= run["atol"] <= ATOL_RANGE[1], "atol", run["atol"], f"in [{ATOL_RANGE[0]:g}, "
+           f"{ATOL_RANGE[1]:g}]")
+    for key, top in (("max_steps", MAX_STEPS), ("points", MAX_POINTS), ("max_events", MAX_EVENTS)):
+        _check(isinstance(run[key], int) and not isinstance(run[key], bool) and 1 <= run[key] <= top, key,
+               run[key], f"an integer in [1, {top:g}]")
+    return run
+
+
+def simulate_chain(module: ModuleType, method: int = 0, **overrides) -> ChainResult:
+    """One run of a chain module by ``method`` (segment.DOPRI5 or ROSENBROCK23); t_end, v0, rtol, atol,
+    max_steps, points, max_events override the scene's."""
+    run = settings(module, overrides)
+    t_out = np.linspace(0.0, run["t_end"], run["points"])
+    result = run_chain(module, t_end=run["t_end"], v0=run["v0"], rtol=run["rtol"], atol=run["atol"], t_out=t_out,
+                       method=method, max_steps=run["max_steps"], max_events=run["max_events"])
+    return ChainResult(module.SCENE, result.status, result.message, result.t_stop,
+                       tuple(_stage(module, result, k) for k in range(module.STAGES)), _events(module, result),
+                       result.t, result.y[:, 0], result.y[:, 1], result.n_steps)
+
+
+def _regime(module: ModuleType, mode: int, k: int) -> tuple[str, str]:
+    return ("resting", "") if mode == RESTING else (module.MODE_REGIMES[mode][k], module.MODE_FLANKS[mode][k])
+
+
+def _stage(module: ModuleType, run: ChainRun, k: int) -> StageSummary:
+    phases: list[StagePhase] = []
+    peaks: dict = {name: None for name in FORCES}
+    for phase in run.phases:
+        regime, flank = _regime(module, phase.mode, k)
+        if phases and (phases[-1].regime, phases[-1].flank) == (regime, flank):
+            phases[-1] = StagePhase(regime, flank, phases[-1].t_start, phase.t_end)
+        else:
+            phases.append(StagePhase(regime, flank, phase.t_start, phase.t_end))
+        for t, forces in phase.forces:
+            for j, name in enumerate(FORCES):
+                value = float(forces[3 * k + j])
+                if peaks[name] is None or abs(value) > abs(peaks[name].value):
+                    peaks[name] = Peak(value, t)
+    return StageSummary(module.STAGE_KINDS[k], tuple(phases), tuple(p.t_start for p in phases[1:]), peaks)
+
+
+def _events(module: ModuleType, run: ChainRun) -> tuple[dict, ...]:
+    def name(mode):
+        return None if mode is None else ("resting" if mode == RESTING else module.MODES[mode])
+    return tuple({"t": e.t, "guard": e.guard, "from": name(e.from_mode) if e.guard != "start" else None,
+                  "to": name(e.to_mode), "outcome": e.decision.outcome, "reason": e.decision.reason}
+                 for e in run.events)
+
+
+UNITS = {"rotation": "N m", "translation": "N"}
+
+
+def summary(result: ChainResult, module: ModuleType) -> list[str]:
+    """The run at a glance, as printed by ``tswm simulate``: status, per stage its regimes, switch
+    times and force maxima, the events with the decisions' outcomes."""
+    lines = [f"  status: {result.status}" + (f": {result.message}" if result.message else ""),
+             f"  t_stop = {result.t_stop:.9g} s, steps {result.n_steps}"]
+    for k, stage in enumerate(result.stages):
+        lines.append(f"  stage {k + 1} ({stage.kind}, body {k} -> body {k + 1}):")
+        lines += [f"    {p.regime:<17} {p.flank or '-':<2} {p.t_start:.9g} s .. {p.t_end:.9g} s" for p in stage.phases]
+        lines.append("    switches at: " + (", ".join(f"{t:.9g} s" for t in stage.switches) or "none"))
+        units = (UNITS[module.BODY_MOTIONS[k]], UNITS[module.BODY_MOTIONS[k + 1]], "N")
+        for (name, peak), unit in zip(stage.peaks.items(), units):
+            shown = "- (never slid)" if peak is None else f"{peak.value:.6g} {unit} at t = {peak.t:.6g} s"
+            lines.append(f"    max |{name} force| while sliding: {shown}")
+    lines.append(f"  decisions ({len(result.events)}):")
+    for e in result.events:
+        lines.append(f"    t = {e['t']:.9g} s, {e['guard']}: {e['from'] or '(start)'} -> {e['to'] or '(stop)'} "
+                     f"[{e['outcome']}]")
+        if e["outcome"] != "unique" or (e["to"] == "resting" and module.STAGES > 1):
+            lines.append(f"      {e['reason']}")
+    return lines
