@@ -1,7 +1,15 @@
-"""Shared fixtures: generate a model module from scene text, as a user's new scene would be."""
+"""Shared fixtures: generate a model module from scene text, as a user's new scene would be.
+
+A whole run on pytest-xdist workers first fills numba's cache once (``pytest_configure``):
+each worker imports the kernels while it collects, and with a cold cache every worker
+compiled the same integration kernels (about 100 s of CPU each) and shipped models.
+"""
 from __future__ import annotations
 
 import os
+import subprocess
+import sys
+from pathlib import Path
 
 import pytest
 
@@ -13,6 +21,37 @@ from tswm_runtime.model.contract import load_module
 # CLI commands run by the tests compile what they miss in the foreground, as the API does: no
 # background compiles outliving a test (tests/test_warmup.py sets the other modes itself).
 os.environ["TSWM_COLD_START"] = "foreground"
+
+ROOT = Path(__file__).parents[1]
+GENERATED = ROOT / "generated"
+KERNELS = ("import sys; from tswm_runtime.startup.warmup import compile_into_cache; "
+           "compile_into_cache(sys.argv[1:], None)")
+MODELS = "import importlib, sys; [importlib.import_module(name) for name in sys.argv[1:]]"   # generated.<scene>
+
+
+def _whole_run_on_workers(config) -> bool:
+    """The controller of an xdist run over the configured testpaths (not a run of a few files)."""
+    return (not hasattr(config, "workerinput") and config.getoption("dist", "no") != "no"
+            and config.args_source == pytest.Config.ArgsSource.TESTPATHS)
+
+
+def pytest_configure(config):
+    """Compile what numba's cache misses once, before the workers start: the kernels in one
+    process, the shipped models in another (the two cores), then every worker loads them."""
+    if not _whole_run_on_workers(config):
+        return
+    from tswm_runtime.jit import coldstart
+
+    groups = coldstart.cold_groups(list(coldstart.GROUPS))
+    sources = [coldstart.model_source(path.stem) for path in sorted(GENERATED.glob("[!_]*.py"))]
+    models = [module for source, module in filter(None, sources) if coldstart.model_cold(source, module)]
+    commands = [[sys.executable, "-c", code, *names] for code, names in ((KERNELS, groups), (MODELS, models)) if names]
+    jobs = [subprocess.Popen(argv, cwd=ROOT, text=True, stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
+            for argv in commands]
+    for job in jobs:
+        output = job.communicate()[0]
+        if job.returncode:   # the workers compile what is still missing; the tests report the error
+            print(f"conftest: compiling into numba's cache failed (exit {job.returncode}):\n{output}", file=sys.stderr)
 
 
 @pytest.fixture(scope="session")

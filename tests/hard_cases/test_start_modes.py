@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 from hard_cases.at_rest import DEG, expected, hand_start
+from subsets import slow_unless_kept
 from tswm_runtime.cli import main
 from tswm_runtime.simulation.simulate import simulate
 from tswm_runtime.sweeps.sweep import sweep, sweep_cases
@@ -87,6 +88,30 @@ LOADS = [2000.0, -5000.0]
 # where the run starts: on flank a, on flank b (both with a clearance), without a clearance
 STARTS = {"flank a": ([1], 0.0), "flank b": ([-1], CLEARANCE), "no clearance": ([1, -1], None)}
 GRID = list(itertools.product(STARTS, FRICTION, MASSES, DRIVES, LOADS))
+ONE_SIDED = list(itertools.product(FRICTION, MASSES, DRIVES, LOADS))
+
+
+def outcome(start, friction, masses, F1, F2) -> str:
+    """The start mode the hand solution finds, or the status when there is no single one."""
+    (gamma, rho), (m1, m2) = friction, masses
+    status, mode = expected(hand_start(gamma * DEG, rho * DEG, m1, m2, F1, F2, STARTS[start][0]))
+    return mode if status == "finished" else status
+
+
+def first_of_each(grid, kind) -> list:
+    """The first point of ``grid`` of each ``kind(point)``."""
+    firsts = {}
+    for point in grid:
+        firsts.setdefault(kind(point), point)
+    return list(firsts.values())
+
+
+# The default run: one start of each outcome (each branch of the start logic) for each start
+# and each friction pair (self-locking or not); the one-sided grid's first point of each
+# outcome and friction pair includes the self-locking light worm under an aiding load, one of
+# the two cases that failed before (they stuck; the hand solution slides fwd_a).
+KEPT = first_of_each(GRID, lambda point: (point[0], point[1], outcome(*point)))
+KEPT_ONE_SIDED = first_of_each(ONE_SIDED, lambda point: (point[0], outcome("flank a", *point)))
 
 
 @pytest.fixture(scope="module")
@@ -97,7 +122,7 @@ def models(scene_module):
                 'flanks = ["a", "b"]', 'flanks = ["a"]'))}
 
 
-@pytest.mark.parametrize("start, friction, masses, F1, F2", GRID)
+@pytest.mark.parametrize("start, friction, masses, F1, F2", slow_unless_kept(GRID, KEPT))
 def test_start_at_rest_by_the_contact_conditions(models, start, friction, masses, F1, F2):
     """At rest in contact, tswm starts in the mode the hand solution finds, with its a1 and S2."""
     (gamma, rho), (m1, m2) = friction, masses
@@ -121,7 +146,7 @@ def test_start_at_rest_by_the_contact_conditions(models, start, friction, masses
     assert r.S2[0] == pytest.approx(S2, rel=1e-12, abs=1e-9)
 
 
-@pytest.mark.parametrize("friction, masses, F1, F2", list(itertools.product(FRICTION, MASSES, DRIVES, LOADS)))
+@pytest.mark.parametrize("friction, masses, F1, F2", slow_unless_kept(ONE_SIDED, KEPT_ONE_SIDED))
 def test_one_sided_start_at_rest_by_the_contact_conditions(models, friction, masses, F1, F2):
     """Flank a only, no clearance: as with a clearance on flank a, except that parting is a lift-off
     the scene cannot model (undeclared-mode, naming the other flank)."""
@@ -142,12 +167,12 @@ def test_one_sided_start_at_rest_by_the_contact_conditions(models, friction, mas
 
 def test_the_grid_covers_every_kind_of_start():
     """The table above holds starts in stick, in sliding each way on each flank, parting, and
-    Painleve-type ones (several candidates), so each branch of the start logic is checked."""
-    kinds = set()
-    for start, (gamma, rho), (m1, m2), F1, F2 in GRID:
-        status, mode = expected(hand_start(gamma * DEG, rho * DEG, m1, m2, F1, F2, STARTS[start][0]))
-        kinds.add(mode if status == "finished" else status)
-    assert kinds >= {"stick", "fwd_a", "fwd_b", "bwd_a", "bwd_b", "free", "indeterminate"}
+    Painleve-type ones (several candidates), so each branch of the start logic is checked, and
+    so does the part of it the default run keeps."""
+    for points in (GRID, KEPT):
+        kinds = {outcome(*point) for point in points}
+        assert kinds >= {"stick", "fwd_a", "fwd_b", "bwd_a", "bwd_b", "free", "indeterminate"}
+    assert ((5.0, 12.0), (1.3, 1500.0), 200.0, 2000.0) in KEPT_ONE_SIDED   # failed before
 
 
 def test_an_indeterminate_start_reports_no_maxima_and_the_initial_state(models, capsys):
@@ -200,14 +225,15 @@ def test_light_worm_on_heavy_wheel_drives_flank_a_from_the_start(scene_module, m
     assert min(e.t for e in r.events) > 0.01
 
 
-def test_a_random_sweep_of_the_issue_scene_starts_every_case_by_hand(scene_module):
+@pytest.mark.parametrize("samples", [300, pytest.param(3000, marks=pytest.mark.slow)])
+def test_a_random_sweep_of_the_issue_scene_starts_every_case_by_hand(scene_module, samples):
     """3000 random cases of the issue's scene (F0, V0, m1, m2) through the sweep: before, 2106 of
     them (a heavy wheel) started in free flight and bounced until the event log was full; now
     every case finishes and starts where the hand solution does (fwd_a, or free flight where the
-    load runs the light wheel ahead of a heavy worm)."""
+    load runs the light wheel ahead of a heavy worm). The default run takes 300 of them."""
     module = scene_module(ISSUE.replace("start-light-worm", "start-light-worm-sweep")
                           .replace("MODES", '"forward", "backward", "stick"'))
-    P = sweep_cases(module, samples=3000, seed=1,
+    P = sweep_cases(module, samples=samples, seed=1,
                     ranges={"F0": "1000:10000", "V0": "0.5:3", "m1": "0.5:20", "m2": "10:3000"})
     table = sweep(module, P, {}).table
     assert set(table["status"]) == {"finished"}
