@@ -18,6 +18,7 @@ from tswm_runtime.hybrid.machine import HYBRID_SIG, INVALID_INPUT, integrate_hyb
 from tswm_runtime.jit import cache_guard
 from tswm_runtime.integration import segment
 from tswm_runtime.jit.addresses import function_at, guards_at, jac_at, rhs_at
+from tswm_runtime.jit.arrays import copy_into
 from tswm_runtime.jit.cache_guard import njit
 from tswm_runtime.jit.signatures import GUARDS_SIG, JAC_SIG, RHS_SIG, VECTOR, address, jit_address
 from tswm_runtime.jit.structures import (INDEX_WIDTH, JUMP_WIDTH, EventLog, Functions, Outputs, Record, Settings,
@@ -62,10 +63,10 @@ def summarize(start, record, summary):
             if summary[j] == summary[j] and not a <= summary[j]:  # a larger value or NaN; a NaN stays
                 summary[j] = a
     if n:
-        summary[w:] = steps.y_hi[n - 1]
+        copy_into(summary[w:], steps.y_hi[n - 1])
     else:
-        summary[w:w + start.y.size] = start.y
-        summary[w + start.y.size:] = start.quad
+        copy_into(summary[w:w + start.y.size], start.y)
+        copy_into(summary[w + start.y.size:], start.quad)
 
 
 @cache_guard.compile_cached(ENTRY_SIG, error_model="numpy", nogil=True)
