@@ -33,7 +33,7 @@ def reference(case):
     return dense.PaperGear(m2, list(schedule), v0, 1.0)
 
 
-@pytest.mark.parametrize("method", ["dopri5", "rosenbrock23"])
+@pytest.mark.parametrize("method", ["dopri5", "rosenbrock23", pytest.param("auto", marks=pytest.mark.slow)])
 @pytest.mark.parametrize("rtol", [1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8, 1e-9])
 @pytest.mark.parametrize("case", sorted(CASES))
 def test_every_output_row_is_within_ten_rtol_of_the_reference(case, rtol, method):

@@ -137,6 +137,7 @@ class Result:
     n_rejected: int
     nfev: int
     njev: int
+    n_switches: int = 0  # method "auto": switches between dopri5 and rosenbrock23
     model: dict = field(default_factory=dict)    # equations, states, param_units, fixed_params, mode_regime
     extras: dict = field(default_factory=dict)
 
@@ -212,7 +213,8 @@ class Result:
                        for ph in self.phases],
             "events": [e.to_dict() for e in self.events],
             "counts": {"n_steps": self.n_steps, "n_rejected": self.n_rejected, "nfev": self.nfev,
-                       "njev": self.njev, "n_events": len(self.events), "n_points": self.rows.size},
+                       "njev": self.njev, "n_switches": self.n_switches, "n_events": len(self.events),
+                       "n_points": self.rows.size},
             "extras": dict(self.extras), "units": dict(self.series),
         }
 
@@ -269,7 +271,7 @@ class Result:
             S1_max=float(mon[0, 1]), t_S1_max=float(mon[0, 2]), S2_max=float(mon[1, 1]),
             t_S2_max=float(mon[1, 2]), KD1=KD1, KD2=KD2, status=STATUS_NAMES[hybrid_status],
             message=message, t_stop=float(t_stop), n_steps=int(counters[0]), n_rejected=int(counters[1]),
-            nfev=int(counters[2]), njev=int(counters[3]),
+            nfev=int(counters[2]), njev=int(counters[3]), n_switches=int(counters[4]),
             model={"equations": module.EQUATIONS, "states": tuple(module.STATES),
                    "param_units": dict(zip(module.PARAM_NAMES, module.PARAM_UNITS)),
                    "fixed_params": dict(module.FIXED), "mode_regime": tuple(module.MODE_REGIME)},

@@ -31,7 +31,7 @@ from tswm_runtime.results.rows import MAX_LOGGED_STEPS, Rows, last_state  # noqa
 
 coldstart.done()
 
-METHODS = {"dopri5": segment.DOPRI5, "rosenbrock23": segment.ROSENBROCK23}
+METHODS = {"dopri5": segment.DOPRI5, "rosenbrock23": segment.ROSENBROCK23, "auto": segment.AUTO}
 # Below 1e-13 a step's error is rounding; above 1e-2 the error per step is not controlled any more
 # (paper-runup against rtol 1e-12: S1 max 0.24 % off at rtol 1e-2, 90 % off at rtol 0.1).
 RTOL_RANGE = (1e-13, 1e-2)
@@ -266,14 +266,14 @@ def _output_times(t_end: float, points: int) -> np.ndarray:
 
 
 def method_step(method: str):
-    """The step of ``method`` (a METHODS name), ``segment.attempt_function``: on its first use in
-    this process it compiles, if not cached, after ``coldstart`` has said so."""
+    """The steps of ``method`` (a METHODS name), ``segment.method_steps``: on their first use in
+    this process they compile, if not cached, after ``coldstart`` has said so."""
     if method not in _PREPARED:
-        coldstart.announce((method,))
-        segment.attempt_function(METHODS[method])
+        coldstart.announce(coldstart.STEP_GROUPS[method])
+        segment.method_steps(METHODS[method])
         coldstart.done()
         _PREPARED.add(method)
-    return segment.attempt_function(METHODS[method])
+    return segment.method_steps(METHODS[method])
 
 
 _PREPARED: set = set()  # methods whose step is compiled or loaded in this process
