@@ -39,17 +39,22 @@ def configurations(cases, tols, peers):
 
 
 def comparisons(rows):
-    """Per case, level and tswm method: its cost at that error, the fastest peer's, and the
-    fastest other tswm method's (``report.cost_at``: NaN where the front does not reach it)."""
+    """Per case and error level: the time each tswm method needs for that error and the fastest
+    peer's (``report.cost_at`` on each work-precision front: NaN where a front does not reach
+    it), and each other's time over auto's (> 1: auto is faster)."""
     out = []
-    for m in METHODS:
-        for v in report.speedup_verdicts(rows, tswm=f"tswm {m}", levels=LEVELS, target=1.0):
-            others = {o: report.cost_at([(r["err"], r["t_med"]) for r in rows
-                                         if r["case"] == v["case"] and r["solver"] == f"tswm {o}"], v["error"])
-                      for o in METHODS if o != m}
-            out.append({"case": v["case"], "error": v["error"], "method": m, "tswm_s": v["tswm_s"],
-                        "fastest_peer": v["fastest_peer"], "peer_s": v["peer_s"], "peer_over_tswm": v["factor"],
-                        **{f"{o}_over_{m}": c / v["tswm_s"] for o, c in others.items()}})
+    peers = [s for s in dict.fromkeys(r["solver"] for r in rows) if not s.startswith("tswm")]
+    for case in dict.fromkeys(r["case"] for r in rows):
+        for level in LEVELS:
+            def cost(solver):
+                return report.cost_at([(r["err"], r["t_med"]) for r in rows
+                                       if r["case"] == case and r["solver"] == solver], level)
+            row = {"case": case, "error": level} | {f"{m}_s": cost(f"tswm {m}") for m in METHODS}
+            peer_costs = {p: c for p in peers if not math.isnan(c := cost(p))}
+            best = min(peer_costs, key=peer_costs.get) if peer_costs else None
+            row |= {"fastest_peer": best, "peer_s": peer_costs.get(best, math.nan)}
+            row |= {f"{k}_over_auto": row[f"{k}_s"] / row["auto_s"] for k in ("dopri5", "rosenbrock23", "peer")}
+            out.append(row)
     return out
 
 
@@ -72,16 +77,17 @@ def main(argv=None) -> int:
     load_after = os.getloadavg()
     table = comparisons(rows)
     fmt = {"rtol": "{:.0e}", "err": "{:.2e}", "t_med": "{:.3e}", "t_min": "{:.3e}", "t_max": "{:.3e}"}
-    cfmt = {"error": "{:.0e}", "tswm_s": "{:.3e}", "peer_s": "{:.3e}"} | {
-        k: "{:.2f}" for k in table[0] if "_over_" in k}
+    cfmt = {"error": "{:.0e}"} | {k: ("{:.2f}" if "_over_" in k else "{:.3e}") for k in table[0] if k.endswith("_s")
+                                   or "_over_" in k}
     md = "\n".join([
         "# Method auto against dopri5, rosenbrock23 and the scipy peers", "",
         f"{args.repeats} shuffled rounds, medians of whole calls; load (1, 5, 15 min) before "
         f"{', '.join(f'{x:.1f}' for x in load_before)}, after {', '.join(f'{x:.1f}' for x in load_after)}.", "",
-        report.md_table(rows, ["case", "solver", "rtol", "err", "t_med", "t_min", "t_max", "nfev", "steps",
-                               "events", "status"], fmt), "",
-        "Cost at equal error (interpolated on each front; x_over_m: x's time over m's, > 1: m faster):", "",
-        report.md_table(table, [k for k in table[0] if k not in ("fastest_peer",)] + ["fastest_peer"], cfmt), ""])
+        report.md_table(rows, ["case", "solver", "rtol", "err", "err_S1", "err_v1", "err_x1", "err_t", "t_med",
+                               "t_min", "t_max", "nfev", "steps", "events", "status"],
+                        fmt | {k: "{:.2e}" for k in ("err_S1", "err_v1", "err_x1", "err_t")}), "",
+        "Seconds per call at equal error (interpolated on each front); x_over_auto: x's time over auto's "
+        "(> 1: auto faster):", "", report.md_table(table, list(table[0]), cfmt), ""])
     out = Path(args.output)
     out.mkdir(parents=True, exist_ok=True)
     (out / "auto.md").write_text(md)

@@ -51,7 +51,7 @@ def linear_loads(at, values) -> tuple:
 
 
 # slow-load.toml's schedule: nothing settles, so nothing is held (``integration.steady``)
-SLOW = linear_loads((0.05, 25.0, 50.0, 75.0, 100.0), (0.0, -8000.0, -3000.0, -10000.0, -5000.0))
+SLOW = linear_loads((0.05, 25.0, 50.0, 75.0, 125.0), (0.0, -8000.0, -3000.0, -10000.0, -5000.0))
 CASES = {c.name: c for c in (
     Case("run-up then load", "paper-runup", (), RUNUP),
     Case("stiff drive m1=0.05", "stiff-drive", (), RUNUP, m1=0.05),
@@ -68,13 +68,15 @@ REFERENCE_ATOL = 1e-15
 
 @lru_cache(maxsize=None)
 def reference(case: Case) -> Outcome:
-    """The quadrature reference (under a load linear in t, the DOP853 peer at REFERENCE_RTOL):
-    max |S1| (signed), v1(t_end), events (cached per case)."""
+    """The quadrature reference (under a load linear in t, the DOP853 peer at REFERENCE_RTOL,
+    without max |S1|: NaN): max |S1| (signed), v1(t_end), events (cached per case)."""
     from tswm_runtime.reference import quadrature as q
 
     if any(len(piece) > 2 and piece[2] != 0.0 for piece in case.loads):
-        return peer_run("DOP853", REFERENCE_RTOL, REFERENCE_ATOL, case.m2, list(case.loads), case.v0, case.t_end,
-                        m1=case.m1)
+        out = peer_run("DOP853", REFERENCE_RTOL, REFERENCE_ATOL, case.m2, list(case.loads), case.v0, case.t_end,
+                       m1=case.m1)
+        out.S1 = math.nan  # taken at the peer's steps only (S1 depends on t too): not compared
+        return out
     tr = q.solve(q.paper_wedge(case.m2, m1=case.m1), list(case.loads), case.v0, case.t_end)
     if tr.status != "finished":
         raise RuntimeError(f"reference for {case.name}: {tr.status}")
