@@ -135,8 +135,11 @@ def spectral_radius(J, A, B):
     log_rho = 0.0
     for k in range(SPECTRAL_SQUARINGS + 1):
         norm = 0.0
-        for i in range(A.shape[0]):
-            norm = max(norm, np.sum(np.abs(A[i])))
+        for i in range(A.shape[0]):  # rows summed by hand: np.sum would tie the cached kernels to numba's
+            row = 0.0                # array-math module, whose import pulls in scipy.linalg (a warm start)
+            for j in range(A.shape[1]):
+                row += abs(A[i, j])
+            norm = max(norm, row)
         if norm == 0.0 or not np.isfinite(norm):
             return norm
         log_rho += np.log(norm) / 2.0 ** k
