@@ -33,6 +33,18 @@ def test_each_peer_agrees_with_the_reference_at_its_tolerance(method, case):
     assert e["err"] <= 1e-5, e
 
 
+@pytest.mark.parametrize("method", ["RK45", "LSODA", "Radau"])
+def test_peers_under_a_load_linear_in_time_agree_with_the_reference(method):
+    """slow load T=10 (a load linear in t from 0.05 s): the peer splits at the breakpoint and
+    integrates the changing load; at rtol 1e-8 within 1e-5 of the DOP853 reference (rtol 1e-13),
+    and tswm's rows agree with it too (tests/test_auto.py)."""
+    case = CASES["slow load T=10"]
+    out = run_peer(case, method, 1e-8, 1e-11)
+    e = errors(out, reference(case))
+    assert [k for k, _ in out.events] == ["load"] and e["err"] <= 1e-5, e
+    assert out.steps > 0
+
+
 def test_free_run_up_does_not_chatter_at_synchronous_speed():
     """F2 = 0: phi -> 0 at V0 from above; the guarded peer logs no flank switch, at a loose
     and at a tight tolerance, and still finds the real one under an assisting load."""

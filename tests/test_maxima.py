@@ -8,7 +8,7 @@ from tswm_runtime.simulation.simulate import simulate
 from tswm_runtime.sweeps.sweep import grid_cases, parse_grid, sweep
 
 SHIPPED = ("asymmetric", "backlash", "load-schedule", "lost-motion", "mesh", "one-sided", "paper",
-           "paper-literal", "paper-lostmotion", "paper-runup", "seating", "stiff-drive", "valve-travel")
+           "paper-literal", "paper-lostmotion", "paper-runup", "seating", "slow-load", "stiff-drive", "valve-travel")
 
 
 @pytest.mark.parametrize("method", ["dopri5", "rosenbrock23"])

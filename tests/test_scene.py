@@ -58,8 +58,8 @@ def test_base_is_valid():
 
 def test_shipped_names():
     assert shipped_scenes() == ("asymmetric", "backlash", "load-schedule", "lost-motion", "mesh", "one-sided", "paper",
-                                "paper-literal", "paper-lostmotion", "paper-runup", "seating", "stiff-drive",
-                                "valve-travel")
+                                "paper-literal", "paper-lostmotion", "paper-runup", "seating", "slow-load",
+                                "stiff-drive", "valve-travel")
     for name in shipped_scenes():
         s = load_scene(name)
         assert s.name == name and s.source == f"shipped:{name}"

@@ -95,12 +95,12 @@ def measure(configs, repeats, log=print):
         if isinstance(out, Exception):
             row |= NO_ERRORS
             row |= {"t_med": math.nan, "t_min": math.nan, "t_max": math.nan, "repeats": 0, "events": -1,
-                    "nfev": -1, "status": f"failed: {out}"}
+                    "nfev": -1, "steps": -1, "status": f"failed: {out}"}
         else:
             row |= errors(out, reference(case)) if solver != report.TSWM_FIXED_COST else NO_ERRORS
             row |= {"t_med": statistics.median(ts), "t_min": min(ts), "t_max": max(ts), "repeats": len(ts),
                     "events": len(out.events) if out.events is not None else "n/a", "nfev": out.nfev,
-                    "status": "finished"}
+                    "steps": out.steps, "status": "finished"}
         rows.append(row)
     return rows
 

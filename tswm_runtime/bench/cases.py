@@ -1,10 +1,11 @@
 """The benchmark's cases, their independent reference, and how each solver is called.
 
-A case is one run of the paper gear under a piecewise-constant load, given twice: as a
-shipped tswm scene with parameters and run settings, and as the hand-formula data
-(m1, m2, loads, v1(0), t_end) that the peers and the quadrature reference read. The
-reference (``quadrature``: each load segment is v1' = A(v1), solved by quadrature in
-v1 at 34 digits) knows nothing of tswm; it is computed once per case and run.
+A case is one run of the paper gear under a piecewise-constant (or piecewise-linear) load,
+given twice: as a shipped tswm scene with parameters and run settings, and as the
+hand-formula data (m1, m2, loads, v1(0), t_end) that the peers and the reference read. The
+reference (``quadrature``: each load segment is v1' = A(v1), solved by quadrature in v1 at
+34 digits; under a load linear in t, which quadrature in v1 cannot follow, the DOP853 peer
+at rtol 1e-13) knows nothing of tswm; it is computed once per case and run.
 
 Every solver returns a ``bench_peers.Outcome`` (max |S1| signed, v1(t_end), events,
 x1(t_end)). Every timed call of simulate() and of a peer gets new parameters (``new_m2``).
@@ -27,7 +28,7 @@ class Case:
     name: str
     scene: str  # shipped tswm scene
     params: tuple  # ((name, value), ...) free parameters set (``--set``)
-    loads: tuple  # ((t_from, F2), ...) the same load for the peers and the reference
+    loads: tuple  # ((t_from, F2) or (t_from, F2, dF2/dt), ...) the same load for the peers and the reference
     v0: float = 0.0
     t_end: float = 1.0
     m1: float = M1
@@ -39,6 +40,19 @@ class Case:
 
 
 RUNUP = ((0.0, 0.0), (0.3, -15000.0))
+
+
+def linear_loads(at, values) -> tuple:
+    """A load linear in t between the breakpoints ``at`` through ``values`` (a schedule of shape
+    "linear"), constant outside them, as ``Case.loads``."""
+    pieces = [(0.0, values[0], 0.0)]
+    for k in range(len(at) - 1):
+        pieces.append((at[k], values[k], (values[k + 1] - values[k]) / (at[k + 1] - at[k])))
+    return (*pieces, (at[-1], values[-1], 0.0))
+
+
+# slow-load.toml's schedule: nothing settles, so nothing is held (``integration.steady``)
+SLOW = linear_loads((0.05, 25.0, 50.0, 75.0, 125.0), (0.0, -8000.0, -3000.0, -10000.0, -5000.0))
 CASES = {c.name: c for c in (
     Case("run-up then load", "paper-runup", (), RUNUP),
     Case("stiff drive m1=0.05", "stiff-drive", (), RUNUP, m1=0.05),
@@ -46,7 +60,11 @@ CASES = {c.name: c for c in (
     Case("decelerate-and-stick", "paper", (("F2", -15000.0),), ((0.0, -15000.0),), v0=2.0),
     Case("long run T=100", "paper-runup", (), RUNUP, t_end=100.0),
     Case("load schedule: stall, restart", "load-schedule", (), ((0.0, 0.0), (0.3, -30000.0), (0.6, -2000.0))),
+    *(Case(f"slow load T={t_end:g}", "slow-load", (), tuple(p for p in SLOW if p[0] < t_end), t_end=t_end)
+      for t_end in (1.0, 10.0, 100.0)),
 )}
+REFERENCE_RTOL = 1e-13  # the DOP853 reference under a load linear in t
+REFERENCE_ATOL = 1e-15
 
 
 _CALLS = itertools.count(1)
@@ -61,9 +79,15 @@ def new_m2(case: Case) -> float:
 
 @lru_cache(maxsize=None)
 def reference(case: Case) -> Outcome:
-    """The quadrature reference: max |S1| (signed), v1(t_end), events (cached per case)."""
+    """The quadrature reference (under a load linear in t, the DOP853 peer at REFERENCE_RTOL,
+    without max |S1|: NaN): max |S1| (signed), v1(t_end), events (cached per case)."""
     from tswm_runtime.reference import quadrature as q
 
+    if any(len(piece) > 2 and piece[2] != 0.0 for piece in case.loads):
+        out = peer_run("DOP853", REFERENCE_RTOL, REFERENCE_ATOL, case.m2, list(case.loads), case.v0, case.t_end,
+                       m1=case.m1)
+        out.S1 = math.nan  # taken at the peer's steps only (S1 depends on t too): not compared
+        return out
     tr = q.solve(q.paper_wedge(case.m2, m1=case.m1), list(case.loads), case.v0, case.t_end)
     if tr.status != "finished":
         raise RuntimeError(f"reference for {case.name}: {tr.status}")
@@ -92,7 +116,7 @@ def run_simulate(case: Case, rtol: float, atol: float, points: int | None = None
         raise RuntimeError(f"tswm: {r.status}: {r.message}")
     end = r.final_state  # at t_stop (= t_end: finished), from the run itself: reading it evaluates no rows
     return Outcome(r.S1_max, end["v1"], [(_tswm_kind(e.guard), e.t) for e in r.events], r.nfev,
-                   end["x1"] - r.settings["x1"])
+                   end["x1"] - r.settings["x1"], r.n_steps)
 
 
 FIXED_COST_T_END = 1e-6  # s: one step, no event (at 1e-9 s a run from rest is refused: v1 stays below 100 atol)

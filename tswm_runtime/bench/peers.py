@@ -4,8 +4,8 @@ scipy's solve_ivp (RK45, DOP853, Radau, BDF, LSODA) or SUNDIALS CVODE (scikit-su
 Hand formulas (``paper_gear``) for forward sliding and stick, nothing from tswm's
 derivation or runtime. What the careful user does:
 
-- splits the time span exactly at every scheduled load time (the load is constant on
-  each piece, so no step ever straddles a jump);
+- splits the time span exactly at every scheduled load time (the load is constant, or
+  linear in t, on each piece, so no step ever straddles a jump or a kink);
 - uses terminal events with directions: v1 = 0 falling, and phi = 0 falling on flank a
   (phi > 0) or rising on flank b (phi < 0); after each event restarts with the flank
   given by the sign of phi (or sticks at v1 = 0 while the static friction cone holds);
@@ -19,7 +19,9 @@ derivation or runtime. What the careful user does:
 - takes max |S1| over the accepted steps and one-sided at every event (at v1 = 0 the
   limit v1 -> 0+), refined around the largest: inside a phase S1 is a function of v1
   alone and v1 is monotone, so a bounded scalar maximisation over v1 between the
-  neighbouring steps needs no dense output (the same for every method, CVODE included).
+  neighbouring steps needs no dense output (the same for every method, CVODE included);
+  under a load linear in t, where S1 depends on t as well, at the accepted steps (its largest
+  value lies at a breakpoint, where every peer stops).
 
 The state is (x1, v1): x1(t_end) is part of what a user wants and what tswm returns.
 ``peer_run`` is one whole call: problem set-up, integration, max |S1|, v1(t_end),
@@ -52,6 +54,7 @@ class Outcome:
     events: list = field(default_factory=list)  # [(kind, t)], kind 'load', 'phi' or 'v1'
     nfev: int = 0
     x_end: float = math.nan  # x1(t_end) - x1(0)
+    steps: int = 0  # accepted steps
 
 
 def available_methods() -> tuple[str, ...]:
@@ -93,7 +96,7 @@ def _solve_scipy(method, rtol, atol, t, t_to, y, rhs, events):
     if sol.status == 1:
         which = next(i for i, te in enumerate(sol.t_events) if len(te))
         hit = (which, float(sol.t_events[which][0]), sol.y_events[which][0])
-    return sol.y, hit, sol.nfev
+    return sol.t, sol.y, hit, sol.nfev
 
 
 def _solve_cvode(rtol, atol, t, t_to, y, f_rhs, f_events, armed):
@@ -116,7 +119,7 @@ def _solve_cvode(rtol, atol, t, t_to, y, f_rhs, f_events, armed):
         hit = (which, float(sol.t_events[0]), np.asarray(sol.y_events)[0])
     elif sol.status < 0:
         raise PeerGaveUp(f"CVODE: {sol.message}")
-    return ys, hit, int(sol.nfev)
+    return np.asarray(sol.t), ys, hit, int(sol.nfev)
 
 
 def _refine_max(s1_of, vs, best: _Best) -> None:
@@ -139,17 +142,23 @@ def _refine_max(s1_of, vs, best: _Best) -> None:
 
 def peer_run(method: str, rtol: float, atol: float, m2: float, loads, v0: float, t_end: float,
              m1: float = M1) -> Outcome:
-    """One careful user's run. loads: [(t_from, F2), ...], piecewise constant, t_from of the
-    first 0. Returns max |S1| (signed), v1(t_end), x1(t_end), the events (load, phi, v1)
-    and the rhs calls."""
+    """One careful user's run. loads: [(t_from, F2) or (t_from, F2, dF2/dt), ...], piecewise
+    constant or linear in t (F2 + dF2/dt (t - t_from) on the piece), t_from of the first 0.
+    Returns max |S1| (signed), v1(t_end), x1(t_end), the events (load, phi, v1) and the rhs
+    calls."""
     best, out = _Best(), Outcome(0.0, math.nan)
     x, v, flank, switched = 0.0, v0, 1, False
-    bounds = [tf for tf, _ in loads[1:]] + [t_end]
-    for (t_from, F2), t_to in zip(loads, bounds):
+    bounds = [piece[0] for piece in loads[1:]] + [t_end]
+    for (t_from, F2_from, *slope), t_to in zip(loads, bounds):
         if t_from > 0.0:
             out.events.append(("load", t_from))
+        rate = slope[0] if slope else 0.0
         t = t_from
         while t < t_to:
+            F2 = F2_from + rate * (t - t_from)  # the load now: at the piece's start or after an event
+            F2_high = max(F2, F2_from + rate * (t_to - t_from))  # the largest load left on the piece
+            if v == 0.0 and sticks(F2) and rate != 0.0:
+                raise PeerGaveUp("sticking under a changing load is not modelled by the hand-written peer")
             if v == 0.0 and sticks(F2):
                 best.offer(kloss(0.0))  # at rest S1 = F1 (a1 = 0)
                 break
@@ -160,29 +169,37 @@ def peer_run(method: str, rtol: float, atol: float, m2: float, loads, v0: float,
                 flank = 1 if p > 0 else -1
             f, switched = flank, False
 
-            def rhs(_t, y, f=f, F2=F2):
-                return [y[1], accel(y[1], f, F2, m2, m1)]
+            def load(_t, t_from=t_from, F2_from=F2_from, rate=rate):
+                return F2_from + rate * (_t - t_from)
 
-            def ev_phi(_t, y, F2=F2):
-                return phi(y[1], F2, m2, m1)
+            def rhs(_t, y, f=f, load=load):
+                return [y[1], accel(y[1], f, load(_t), m2, m1)]
+
+            def ev_phi(_t, y, load=load):
+                return phi(y[1], load(_t), m2, m1)
 
             def ev_v(_t, y):
                 return y[1]
-            armed = phi_can_vanish(flank, F2, v)
+            armed = phi_can_vanish(flank, F2_high, v)
             ev_phi.terminal = ev_v.terminal = True
             ev_phi.direction, ev_v.direction = -flank, -1
             if method == "CVODE":
-                ys, hit, n = _solve_cvode(rtol, atol, t, t_to, [x, v], rhs, (ev_phi, ev_v), armed)
+                ts, ys, hit, n = _solve_cvode(rtol, atol, t, t_to, [x, v], rhs, (ev_phi, ev_v), armed)
             else:
                 events = [ev_phi, ev_v] if armed else [ev_v]
-                ys, hit, n = _solve_scipy(method, rtol, atol, t, t_to, [x, v], rhs, events)
+                ts, ys, hit, n = _solve_scipy(method, rtol, atol, t, t_to, [x, v], rhs, events)
                 if hit is not None and not armed:
                     hit = (1, *hit[1:])
             out.nfev += n
+            out.steps += len(ts) - 1
 
             def s1_of(speed, f=f, F2=F2):
                 return reactions(speed, f, F2, m2, m1)[0]
-            _refine_max(s1_of, ys[1], best)
+            if rate == 0.0:
+                _refine_max(s1_of, ys[1], best)
+            else:  # S1 depends on t too: its values at the steps (the largest lies at a breakpoint)
+                for t_i, v_i in zip(ts, ys[1]):
+                    best.offer(reactions(float(v_i), f, load(float(t_i)), m2, m1)[0])
             if hit is None:
                 t, x, v = t_to, float(ys[0][-1]), float(ys[1][-1])
                 break
@@ -193,9 +210,9 @@ def peer_run(method: str, rtol: float, atol: float, m2: float, loads, v0: float,
             if which == 0:
                 flank, switched = -flank, True
                 v = max(v, 0.0)
-                best.offer(reactions(v, flank, F2, m2, m1)[0])  # one-sided after the switch
+                best.offer(reactions(v, flank, load(t), m2, m1)[0])  # one-sided after the switch
             else:
                 v = 0.0
-                best.offer(s1_of(0.0))  # the limit v1 -> 0+ of the phase that stops
+                best.offer(reactions(0.0, f, load(t), m2, m1)[0])  # the limit v1 -> 0+ of the phase that stops
     out.S1, out.v_end, out.x_end = best.value, v, x
     return out

@@ -82,7 +82,8 @@ def _print_summary(result, module, origin: str, t_load: float, t_run: float) -> 
     if result.KD1 is not None or result.KD2 is not None:
         print(f"  KD1 = {result.KD1:.6g}, KD2 = {result.KD2:.6g}".replace("inf", "unbounded"))
     print(f"  steps {result.n_steps} (rejected {result.n_rejected}), rhs calls {result.nfev}, "
-          f"jacobian calls {result.njev}")
+          f"jacobian calls {result.njev}"
+          + (f", method switches {result.n_switches}" if result.settings.get("method") == "auto" else ""))
     print(f"  wall time {t_load + t_run:.3g} s (runtime and module load {t_load:.3g} s, simulation {t_run:.3g} s)")
 
 

@@ -1,7 +1,7 @@
 """The mode machine called from Python: ``integrate`` builds its arguments from plain values.
 
-``integrate_at`` is ``machine.integrate_hybrid`` with its six functions (the method's step,
-the model's rhs, jac, guards, observe, impact) given as addresses (``jit.addresses``;
+``integrate_at`` is ``machine.integrate_hybrid`` with its seven functions (the method's step,
+the model's rhs, jac, guards, observe, impact, the step method auto switches to) given as addresses (``jit.addresses``;
 ``model_functions`` turns them back into the Functions, here and in ``batch.run_batch``):
 numba unboxes a function-typed argument through Python, 1-2 us each and several times that
 right after other code has run, an address in nanoseconds. The machine itself is called
@@ -27,22 +27,22 @@ from tswm_runtime.jit.structures import (INDEX_WIDTH, JUMP_WIDTH, EventLog, Func
 _machine_at = function_at(types.FunctionType(HYBRID_SIG), raises=True)
 _attempt_at = function_at(segment.AttemptFunction)
 
-#: What ``functions`` gives: eight addresses.
-ADDRESSES = types.UniTuple(types.int64, 8)
+#: What ``functions`` gives: nine addresses.
+ADDRESSES = types.UniTuple(types.int64, 9)
 #: integrate_hybrid's signature with its functions replaced by their addresses, and the summary.
 ENTRY_SIG = HYBRID_SIG.return_type(ADDRESSES, *HYBRID_SIG.args[1:], VECTOR)
 
 
 @njit(error_model="numpy")
 def model_functions(functions):
-    """The Functions (the method's step, the model's rhs, jac, guards, observe, impact) at the
-    last six of the addresses ``functions``."""
-    _, _, attempt, rhs, jac, guards, observe, impact = functions
+    """The Functions (the method's step, the model's rhs, jac, guards, observe, impact, the
+    stiff step) at the last seven of the addresses ``functions``."""
+    _, _, attempt, rhs, jac, guards, observe, impact, stiff = functions
     return Functions(_attempt_at(attempt), rhs_at(rhs), jac_at(jac), guards_at(guards), guards_at(observe),
-                     guards_at(impact))
+                     guards_at(impact), _attempt_at(stiff))
 
 
-@njit(cache=True, error_model="numpy")
+@njit(error_model="numpy")
 def summarize(start, record, summary):
     """Fill ``summary`` (size 2 w for w states and integrals; size 0: nothing to fill): [:w] the
     largest |value| of each over the ends of the steps kept, or over the rows written when the run
@@ -82,17 +82,18 @@ def integrate_at(functions, tables, start, settings, record, summary):
 
 def functions(method: int, model) -> tuple:
     """The addresses ``integrate_at`` takes: the mode machine (C wrapper and numba ABI),
-    ``method``'s step, and the model's rhs, jac, guards, observe and impact (DOPRI5 calls jac
-    only to confirm an equilibrium before holding it, ``steady``). Remembered per method and
-    model functions."""
+    ``method``'s step, the model's rhs, jac, guards, observe and impact (DOPRI5 calls jac
+    only to confirm an equilibrium before holding it, ``steady``), and the step method auto
+    switches to (``segment.method_steps``). Remembered per method and model functions."""
     key = (method, model.rhs, model.jac, model.guards, model.observe, model.impact)
     known = _FUNCTIONS.get(key)
     if known is None:
-        attempt = segment.attempt_function(method)  # compiled, or loaded from the cache, on first use
+        attempt, stiff = segment.method_steps(method)  # compiled, or loaded from the cache, on first use
         known = (address(integrate_hybrid, HYBRID_SIG), jit_address(integrate_hybrid, HYBRID_SIG),
                  getattr(attempt, "address", attempt),  # jit off: the function itself
                  address(model.rhs, RHS_SIG), address(model.jac, JAC_SIG), address(model.guards, GUARDS_SIG),
-                 address(model.observe, GUARDS_SIG), address(model.impact, GUARDS_SIG))
+                 address(model.observe, GUARDS_SIG), address(model.impact, GUARDS_SIG),
+                 getattr(stiff, "address", stiff))
         if len(_FUNCTIONS) >= 256:
             _FUNCTIONS.clear()
         _FUNCTIONS[key] = known

@@ -818,7 +818,7 @@ def integrate_hybrid(fns, tables, start, settings, record):
         to-mode (-1: stop); state after the event; an impact's (P_n, P_t, energy lost,
         v1 before)), its capacity is log.t.size. mon: (K, 3) running max |observable k|
         as (|value|, value, t), K = number of observables; pass zeros. counters:
-        int64[4] as in segment (steps, rejected, rhs calls, jac calls).
+        int64[segment.N_COUNTERS] (steps, rejected, rhs calls, jac calls, method switches).
 
     A sequence of named steps: ``_first_mode``, then per segment ``_segment`` (the step
     loop, and the Painleve approach where D heads for 0: it locates D = 0, status

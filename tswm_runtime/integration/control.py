@@ -1,4 +1,5 @@
-"""Step-size control shared by both methods: error norm, step factor, initial step.
+"""Step-size control shared by both methods: error norm, step factor, initial step, and the
+spectral radius the auto method's switch back to the explicit method is judged by.
 
 The elementary controller of scipy's ``_ivp/rk.py`` (``step_factor``), scipy's RMS
 error norm, and Hairer's initial step selection ("Solving ODEs I", Sec. II.4, as
@@ -18,6 +19,7 @@ rejected):
   by 0.7 are rejected up to seven times in a row.
 """
 import numpy as np
+from tswm_runtime.jit.arrays import copy_rows
 from tswm_runtime.jit.cache_guard import njit
 
 # Hairer's initial step selection (Sec. II.4): thresholds of scipy's common.py.
@@ -120,3 +122,36 @@ def predictive_factor(h, err, h_prev, err_prev, error_order):
     """Gustafsson's predictive step factor after an accepted step h with error err, the one
     before being h_prev with err_prev: safety (h / h_prev) (err_prev / err^2)^(1/(q+1))."""
     return PREDICTIVE_SAFETY * (h / h_prev) * (err_prev / (err * err)) ** (1.0 / (error_order + 1))
+
+
+SPECTRAL_SQUARINGS = 5  # spectral_radius: ||J^32||^(1/32)
+
+
+@njit(error_model="numpy")
+def spectral_radius(J, A, B):
+    """An upper bound of the spectral radius of J: ||J^k||_inf^(1/k), k = 2^SPECTRAL_SQUARINGS
+    (Gelfand's formula; within a factor cond(V)^(1/k) of it for diagonalisable J = V D V^-1: far
+    closer than ||J|| itself where the states have mixed units). A and B: n x n scratch."""
+    copy_rows(A, J)
+    log_rho = 0.0
+    for k in range(SPECTRAL_SQUARINGS + 1):
+        norm = 0.0
+        for i in range(A.shape[0]):  # rows summed by hand: np.sum would tie the cached kernels to numba's
+            row = 0.0                # array-math module, whose import pulls in scipy.linalg (a warm start)
+            for j in range(A.shape[1]):
+                row += abs(A[i, j])
+            norm = max(norm, row)
+        if norm == 0.0 or not np.isfinite(norm):
+            return norm
+        log_rho += np.log(norm) / 2.0 ** k
+        if k == SPECTRAL_SQUARINGS:
+            break
+        n = A.shape[0]
+        for i in range(n):  # B = (A / norm)^2, A = B
+            for j in range(n):
+                acc = 0.0
+                for m in range(n):
+                    acc += A[i, m] * A[m, j]
+                B[i, j] = acc / (norm * norm)
+        copy_rows(A, B)
+    return np.exp(log_rho)

@@ -23,6 +23,7 @@ Step-size control, shared with the Rosenbrock method, is in ``control``; the
 constants below are this method's (scipy's ``_ivp/rk.py``).
 """
 import numpy as np
+from tswm_runtime.jit.arrays import copy_into
 from tswm_runtime.jit.cache_guard import njit
 
 # Step-size control (values of scipy's _ivp/rk.py).
@@ -31,6 +32,9 @@ MIN_FACTOR = 0.2  # Smallest allowed step decrease after a rejected step.
 MAX_FACTOR = 10.0  # Largest allowed step increase after an accepted step.
 ERROR_ORDER = 4  # The controlled error behaves like h^(ERROR_ORDER + 1).
 N_STAGES = 6  # Stages before the FSAL stage; K has N_STAGES + 1 rows.
+# Where the stability region meets the negative real axis, about (Hairer & Wanner's dopri5.f
+# stiffness test): a step with h rho > 3.25 is limited by stability, not by accuracy.
+STABILITY_LIMIT = 3.25
 
 C = np.array([0.0, 1 / 5, 3 / 10, 4 / 5, 8 / 9, 1.0])
 A = np.array([
@@ -56,11 +60,12 @@ P = np.array([
 
 
 @njit(error_model="numpy")
-def stages(rhs, mode, t, y, p, h, K, y_new):
+def stages(rhs, mode, t, y, p, h, K, y_new, y6):
     """One DOPRI5 step without its FSAL stage: y_new = y + h sum_s B_s K_s.
 
-    On entry K[0] = f(t, y); fills K[1..5] (5 rhs calls) and y_new. The caller
-    evaluates K[6] = f(t + h, y_new) when it needs the error estimate.
+    On entry K[0] = f(t, y); fills K[1..5] (5 rhs calls), y_new, and y6, the state of the
+    sixth stage (for ``stiffness``). The caller evaluates K[6] = f(t + h, y_new) when it
+    needs the error estimate.
     """
     n = y.size
     for s in range(1, N_STAGES):
@@ -70,11 +75,24 @@ def stages(rhs, mode, t, y, p, h, K, y_new):
                 acc += A[s, j] * K[j, i]
             y_new[i] = y[i] + h * acc
         rhs(mode, t + C[s] * h, y_new, p, K[s])
+    copy_into(y6, y_new)
     for i in range(n):
         acc = 0.0
         for j in range(N_STAGES):
             acc += B[j] * K[j, i]
         y_new[i] = y[i] + h * acc
+
+
+@njit(error_model="numpy")
+def stiffness(h, K, y_new, y6):
+    """h rho, rho = |K[6] - K[5]| / |y_new - y6| (Euclidean): the sixth and seventh stages are
+    both at t + h, so rho estimates the largest |eigenvalue| of the Jacobian along the step
+    (Hairer & Wanner, "Solving ODEs II", Sec. IV.2; dopri5.f). 0 when the two states agree."""
+    num, den = 0.0, 0.0
+    for i in range(y6.size):
+        num += (K[N_STAGES, i] - K[N_STAGES - 1, i]) ** 2
+        den += (y_new[i] - y6[i]) ** 2
+    return h * np.sqrt(num / den) if den > 0.0 else 0.0
 
 
 @njit(error_model="numpy")

@@ -7,7 +7,9 @@ types (see ``signatures``). The method is chosen by a code (``DOPRI5`` explicit,
 location below. Its step (``dopri5_attempt``, ``rosenbrock23_attempt``) is a
 first-class function argument too (``attempt_function``), so the step loop and the
 mode machine are compiled once for both methods and each method's step on its
-first use: a run never compiles the method it does not use (issue 13).
+first use: a run never compiles the method it does not use. ``AUTO`` takes both steps
+(``method_steps``) and exchanges them where DOPRI5's step is limited by stability and
+back (``_stiff``, ``_judge``); the state goes on, each side's controller starts afresh.
 
 Per accepted step [t_a, t_b]: guards are sampled on the dense output (unless their
 values and rates at both ends show that none can reach zero) and a crossing is
@@ -53,6 +55,7 @@ from tswm_runtime.jit.structures import INTS, STEP_WORK, TOLERANCES, Functions, 
 # Method codes.
 DOPRI5 = 0  # Dormand-Prince 5(4), explicit (dopri5.py).
 ROSENBROCK23 = 1  # Shampine-Reichelt ode23s Rosenbrock 2(3), stiff, uses jac (rosenbrock.py).
+AUTO = 2  # DOPRI5, switching to ROSENBROCK23 where its steps are limited by stability, and back.
 
 # Status codes of a segment.
 REACHED_END = 0  # Integrated up to t_end exactly.
@@ -68,9 +71,20 @@ N_STEPS = 0  # Accepted steps.
 N_REJECTED = 1  # Rejected step attempts.
 N_RHS = 2  # Calls of rhs.
 N_JAC = 3  # Calls of jac.
-N_COUNTERS = 4
+N_SWITCHES = 4  # Switches of an AUTO run between its methods (odd: it is on ROSENBROCK23 now).
+N_COUNTERS = 5
 
 MIN_STEP_ULPS = 10.0  # A step must exceed 10 ulp(t) to move t reliably (scipy's min_step).
+
+# AUTO's switch (Hairer & Wanner's DOPRI5 stiffness test, dopri5.f): STIFF_VERDICTS accepted steps
+# with h rho > dopri5.STABILITY_LIMIT (CALM_VERDICTS in a row below it reset the count) switch to
+# ROSENBROCK23; CALM_VERDICTS steps in a row whose next step DOPRI5 could take stably (h rho <= the
+# limit, rho from the Jacobian; the step no longer growing fast) switch back. Each return doubles
+# the stiff verdicts needed to leave again (at most STIFF_VERDICTS << MAX_BACKOFF): no flip-flopping.
+STIFF_VERDICTS = 15
+CALM_VERDICTS = 6
+MAX_BACKOFF = 6
+SETTLED_GROWTH = 2.0  # ROSENBROCK23's step grows by less than this: accuracy limits it
 
 
 
@@ -128,7 +142,7 @@ def dopri5_attempt(rhs, mode, t, y, p, h, f0, work, y_new, f_new, err, tol, coun
     f_new = f(t + h, y_new), the dense output work.Q, and returns (scaled error norm, step
     factor) for the controller (inf and the smallest factor when anything is not finite)."""
     copy_into(work.K[0], f0)
-    dopri5.stages(rhs, mode, t, y, p, h, work.K, y_new)
+    dopri5.stages(rhs, mode, t, y, p, h, work.K, y_new, work.y6)
     counters[N_RHS] += dopri5.N_STAGES - 1
     if not estimate:
         return np.inf, dopri5.MIN_FACTOR
@@ -170,7 +184,7 @@ ATTEMPT_SIG = types.UniTuple(types.float64, 2)(
 AttemptFunction = types.FunctionType(ATTEMPT_SIG)
 #: The numba type of ``structures.Functions``.
 FUNCTIONS = types.NamedTuple((AttemptFunction, RhsFunction, JacFunction, GuardsFunction, GuardsFunction,
-                              GuardsFunction), Functions)
+                              GuardsFunction, AttemptFunction), Functions)
 _ATTEMPTS = {DOPRI5: dopri5_attempt, ROSENBROCK23: rosenbrock23_attempt}
 
 
@@ -183,6 +197,22 @@ def attempt_function(method):
         raise ValueError(f"method {method!r}: expected {DOPRI5} (dopri5) or {ROSENBROCK23} (rosenbrock23)")
     cache_guard.check_kernel_caches()
     return compiled(_ATTEMPTS[method], ATTEMPT_SIG)
+
+
+def method_steps(method):
+    """(attempt, stiff): the steps of Functions for ``method``, ``attempt_function``'s values.
+    AUTO starts with DOPRI5's and switches to ROSENBROCK23's (both compiled or loaded); any
+    other method's step is both (it never switches)."""
+    if method == AUTO:
+        return attempt_function(DOPRI5), attempt_function(ROSENBROCK23)
+    attempt = attempt_function(method)
+    return attempt, attempt
+
+
+@njit(error_model="numpy", forceinline=True)  # a step of its caller: inlined by LLVM, typed once
+def _swapped(fns):
+    """``fns`` with its two steps exchanged: an AUTO run's switch of method."""
+    return Functions(fns.stiff, fns.rhs, fns.jac, fns.guards, fns.observe, fns.impact, fns.attempt)
 
 
 @njit(error_model="numpy", forceinline=True)  # a step of its caller: inlined by LLVM, typed once
@@ -401,7 +431,7 @@ def segment_work(n, m, n_quad, n_obs):
     """Scratch arrays for ``run``: n states, m guards, n_quad integrals, n_obs monitored observables."""
     return SegmentWork(
         StepWork(np.empty((dopri5.N_STAGES + 1, n)), np.zeros((n, 4)), np.empty((n, n)), np.empty(n),
-                 np.empty((n, n)), np.empty(n, np.int64)),
+                 np.empty((n, n)), np.empty(n, np.int64), np.empty(n), np.empty((n, n))),
         np.empty(n), np.empty(n), np.empty(n), np.empty(n), np.empty(n), np.empty(n), np.empty(n), np.empty(n),
         np.empty(n_quad), np.empty((events.GUARD_SUBINTERVALS + 1, m)), np.empty(m), np.zeros(m, np.int64),
         np.zeros(m, np.bool_), np.zeros(m, np.bool_), np.empty(m), np.empty(m), np.empty(n_obs),
@@ -416,10 +446,10 @@ _STEPPING = 3  # _start's code for a segment that has steps to take
 
 
 @njit(error_model="numpy")
-def _start(fns, settings, seg, state, record, s):
-    """Set up the segment at ``state``: the maxima there, f_a and the guards G[0] (armed), their
-    rates, the first step. Returns (_STEPPING, first step), or (REACHED_END or NOT_FINITE,
-    state.h) when there is nothing to step."""
+def _start(fns, settings, method, seg, state, record, s):
+    """Set up the segment at ``state`` for ``method`` (DOPRI5 or ROSENBROCK23): the maxima there,
+    f_a and the guards G[0] (armed), their rates, the first step. Returns (_STEPPING, first step),
+    or (REACHED_END or NOT_FINITE, state.h) when there is nothing to step."""
     t, y, counters = state.t, state.y, record.counters
     s.win.s[:] = 0
     if record.mon.shape[0] > 0:
@@ -435,8 +465,8 @@ def _start(fns, settings, seg, state, record, s):
     if h <= 0.0:
         tol = settings.tol
         h = control.select_initial_step(fns.rhs, seg.mode, t, y, seg.p, s.f_a, settings.t_end, tol.hmax,
-                                        _error_order(settings.method), tol.rtol, tol.atol, s.y_b, s.f_b)
-        h *= _step_tolerance(settings.method, tol.rtol) ** (1.0 / (_error_order(settings.method) + 1))
+                                        _error_order(method), tol.rtol, tol.atol, s.y_b, s.f_b)
+        h *= _step_tolerance(method, tol.rtol) ** (1.0 / (_error_order(method) + 1))
         counters[N_RHS] += 1
     events.guard_rates(fns.guards, seg.mode, t, y, s.f_a, seg.p, s.G[0], h, s.y_tmp, s.g_tmp, s.rate_a)
     return _STEPPING, h
@@ -548,6 +578,33 @@ def _hold(fns, seg, t_end, t, state, record, i, s):
 
 
 @njit(error_model="numpy", forceinline=True)  # a step of its caller: inlined by LLVM, typed once
+def _stiff(method, work, h, h_next, y_new):
+    """Whether DOPRI5's stability limits the step: after DOPRI5's step h, h rho from its last two
+    stages (``dopri5.stiffness``); after ROSENBROCK23's, the next step h_next times a bound of rho
+    from its Jacobian (``control.spectral_radius``), above ``dopri5.STABILITY_LIMIT``, or h_next
+    still growing by more than SETTLED_GROWTH (as after a restart: its size says nothing yet)."""
+    if method == DOPRI5:
+        return dopri5.stiffness(h, work.K, y_new, work.y6) > dopri5.STABILITY_LIMIT
+    if h_next > SETTLED_GROWTH * h:
+        return True
+    return h_next * control.spectral_radius(work.J, work.M, work.LU) > dopri5.STABILITY_LIMIT
+
+
+@njit(error_model="numpy", forceinline=True)  # a step of its caller: inlined by LLVM, typed once
+def _judge(method, stiff, verdicts, calm, switches):
+    """AUTO's hysteresis after an accepted step (``STIFF_VERDICTS``): (stiff verdicts, calm
+    verdicts in a row, whether to switch method now); ``switches`` made so far in the run."""
+    calm = 0 if stiff else calm + 1
+    if method == ROSENBROCK23:
+        return verdicts, calm, calm >= CALM_VERDICTS
+    if stiff:
+        verdicts += 1
+    elif calm >= CALM_VERDICTS:
+        verdicts = 0
+    return verdicts, calm, verdicts >= STIFF_VERDICTS << min(switches // 2, MAX_BACKOFF)
+
+
+@njit(error_model="numpy", forceinline=True)  # a step of its caller: inlined by LLVM, typed once
 def _next_step(s):
     """The end of the accepted step becomes the start of the next."""
     copy_into(s.f_a, s.f_b)
@@ -559,8 +616,9 @@ def _next_step(s):
 def run(fns, settings, seg, state, record, i, scratch):
     """The step loop of one segment from ``state``, whose y and quad are updated in place.
 
-    fns: Functions (fns.attempt: the method's step, ``attempt_function(settings.method)``;
-    fns.impact is not called). settings: Settings (max_steps: the step attempts allowed).
+    fns: Functions (fns.attempt, fns.stiff: ``method_steps(settings.method)``; fns.impact is not
+    called). settings: Settings (max_steps: the step attempts allowed; method AUTO starts on
+    the method the last segment ended with: counters[N_SWITCHES] odd, ROSENBROCK23).
     seg: Segment; seg.ev.singular: a guard (D) whose zero the model cannot be integrated to
     in t, the loop stops with APPROACH after a step that takes it towards 0 fast (-1: none).
     state: State; state.quad, the integral of y, is carried along if its size is y's.
@@ -574,16 +632,22 @@ def run(fns, settings, seg, state, record, i, scratch):
     settings, seg, state, record, scratch = borrowed((settings, seg, state, record, scratch))
     tol, t_end, counters, y, k_sing = settings.tol, settings.t_end, record.counters, state.y, seg.ev.singular
     work, G, g_b = scratch.work, scratch.G, scratch.G[events.GUARD_SUBINTERVALS]
-    status, h_prop = _start(fns, settings, seg, state, record, scratch)
+    auto, method = settings.method == AUTO, settings.method
+    if auto:  # on the method the run's last segment ended with
+        method = ROSENBROCK23 if counters[N_SWITCHES] % 2 == 1 else DOPRI5
+        if method == ROSENBROCK23:
+            fns = _swapped(fns)
+    status, h_prop = _start(fns, settings, method, seg, state, record, scratch)
     t = state.t
     if status != _STEPPING:
         return status, t, -1, i, h_prop
-    order = _error_order(settings.method)
+    order = _error_order(method)
     ctl = Control(False, 0.0, 0.0, 0.0, 0.0)
     jac_current = False
+    verdicts, calm, stiff = 0, 0, False  # AUTO's stiffness verdicts (``_judge``)
     status, k = MAX_STEPS, -1
     for _ in range(settings.max_steps):
-        if settings.method == ROSENBROCK23 and not jac_current:
+        if method == ROSENBROCK23 and not jac_current:
             jac_current = True
             if not _jacobian(fns, seg, t, y, work, counters):
                 status = NOT_FINITE
@@ -612,6 +676,8 @@ def run(fns, settings, seg, state, record, i, scratch):
                 break
             continue
         ctl, h_prop = _accepted(ctl, h, h_want, e, factor, order, counters)
+        if auto:  # before the event search, which may re-take (part of) the step
+            stiff = _stiff(method, work, h, min(h_prop, tol.hmax), scratch.y_b)
         if not guards_finite:
             status = NOT_FINITE
             break
@@ -638,6 +704,15 @@ def run(fns, settings, seg, state, record, i, scratch):
         _next_step(scratch)
         ctl = Control(False, ctl.h_rej, ctl.e_rej, ctl.h_acc, ctl.e_acc)
         jac_current = fresh_jac
+        if auto:
+            verdicts, calm, switch = _judge(method, stiff, verdicts, calm, counters[N_SWITCHES])
+            if switch:  # the state goes on; the new method's controller starts afresh from h_prop
+                counters[N_SWITCHES] += 1
+                fns = _swapped(fns)
+                method = ROSENBROCK23 if method == DOPRI5 else DOPRI5
+                order = _error_order(method)
+                ctl = Control(False, 0.0, 0.0, 0.0, 0.0)
+                verdicts, calm = 0, 0
         if t == t_end:
             status = REACHED_END
             break

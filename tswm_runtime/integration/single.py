@@ -69,7 +69,7 @@ def integrate_segment(method, attempt, rhs, jac, guards, mode, p, t0, y0, t_end,
     t_out, i_out, y_out: sorted output times; rows y_out[i_out:] are filled for the
         times t_out[i_out:] in [t0, t_stop] (t_out[i_out] >= t0 is assumed), from the
         dense output; a time equal to t_stop gets exactly y_stop.
-    y_stop: receives the state at the returned time. counters: int64[4], incremented
+    y_stop: receives the state at the returned time. counters: int64[N_COUNTERS], incremented
         (N_STEPS, N_REJECTED, N_RHS, N_JAC).
 
     Returns (status, t_stop, event guard index or -1, number of output rows written,
@@ -87,7 +87,7 @@ def integrate_segment(method, attempt, rhs, jac, guards, mode, p, t0, y0, t_end,
         i += 1
     scratch = segment_work(y0.size, ev.directions.size, 0, 0)
     log = EventLog(np.empty(0), np.empty((0, INDEX_WIDTH), np.int64), np.empty((0, 0)), np.empty((0, JUMP_WIDTH)))
-    status, t, k, i, h_next = run(Functions(attempt, rhs, jac, guards, guards, guards),
+    status, t, k, i, h_next = run(Functions(attempt, rhs, jac, guards, guards, guards, attempt),
                                   Settings(method, t_end, tol, max_steps), Segment(mode, p, ev),
                                   State(t0, y_stop, np.empty(0), h0),
                                   Record(out, log, np.empty((0, 3)), counters, no_steps(y0.size, p.size)), i, scratch)

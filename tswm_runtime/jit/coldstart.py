@@ -69,6 +69,8 @@ GROUPS = {
     "dopri5": ("the dopri5 step", [("integration/segment.py", "dopri5_attempt", True)]),
     "rosenbrock23": ("the rosenbrock23 step", [("integration/segment.py", "rosenbrock23_attempt", True)]),
 }
+#: The step groups each method (``simulate.METHODS``) compiles: auto switches between both steps.
+STEP_GROUPS = {"dopri5": ("dopri5",), "rosenbrock23": ("rosenbrock23",), "auto": ("dopri5", "rosenbrock23")}
 
 _announced: set = set()
 _lock = threading.Lock()

@@ -48,18 +48,20 @@ ModeTables = namedtuple("ModeTables", "kind flank direction declared guard_direc
 MODE_TABLES = types.NamedTuple((INTS, INTS, INTS, INTS, types.int64[:, ::1], INTS, INTS, INTS), ModeTables)
 
 #: Work arrays of one step of either method: stages K, dense-output coefficients Q, the
-#: Jacobian J and df/dt, the LU factors of W = I - h d J and their pivots (Rosenbrock).
-StepWork = namedtuple("StepWork", "K Q J dfdt LU piv")
-STEP_WORK = types.NamedTuple((MATRIX, MATRIX, MATRIX, VECTOR, MATRIX, INTS), StepWork)
+#: Jacobian J and df/dt, the LU factors of W = I - h d J and their pivots (Rosenbrock); for the
+#: stiffness test of method auto, DOPRI5's sixth-stage state y6 and an n x n scratch M.
+StepWork = namedtuple("StepWork", "K Q J dfdt LU piv y6 M")
+STEP_WORK = types.NamedTuple((MATRIX, MATRIX, MATRIX, VECTOR, MATRIX, INTS, VECTOR, MATRIX), StepWork)
 
 #: An accepted step [t_a, t_b = t_a + h]: its start state and derivative, its end state,
 #: and the dense output y(t_a + theta h) = y_a + h sum_j Q[:, j] theta^(j+1).
 Step = namedtuple("Step", "t_a y_a f_a h t_b y_b Q")
 
-#: The functions a kernel calls: the method's step (``segment.attempt_function``) and the
-#: model's rhs, jac, guards, observe and impact, as numba first-class functions (their numba
-#: type: ``segment.FUNCTIONS``).
-Functions = namedtuple("Functions", "attempt rhs jac guards observe impact")
+#: The functions a kernel calls: the method's step (``segment.attempt_function``), the
+#: model's rhs, jac, guards, observe and impact, and the step method auto switches to (for
+#: the others their own step again: ``segment.method_steps``), as numba first-class functions
+#: (their numba type: ``segment.FUNCTIONS``).
+Functions = namedtuple("Functions", "attempt rhs jac guards observe impact stiff")
 
 #: The settings of a run (and of each segment in it): the method's code, the end time, the
 #: Tolerances, and the number of step attempts allowed (a segment gets what is left).

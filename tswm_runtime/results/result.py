@@ -159,6 +159,7 @@ class Result:
     n_rejected: int
     nfev: int
     njev: int
+    n_switches: int = 0  # method "auto": switches between dopri5 and rosenbrock23
     record: RunRecord | None = field(default=None, repr=False, compare=False)  # None once pickled
 
     @cached_property
@@ -295,7 +296,8 @@ class Result:
                        for ph in self.phases],
             "events": [e.to_dict() for e in self.events],
             "counts": {"n_steps": self.n_steps, "n_rejected": self.n_rejected, "nfev": self.nfev,
-                       "njev": self.njev, "n_events": len(self.events), "n_points": self.rows.size},
+                       "njev": self.njev, "n_switches": self.n_switches, "n_events": len(self.events),
+                       "n_points": self.rows.size},
             "extras": dict(self.extras), "units": dict(self.series),
         }
 
@@ -346,7 +348,7 @@ class Result:
         return cls(scene=record.module.SCENE, settings=dict(run), rows=rows, final_state=final_state,
                    S1_max=mon[0][1], t_S1_max=mon[0][2], S2_max=mon[1][1], t_S2_max=mon[1][2],
                    status=STATUS_NAMES[record.code], t_stop=float(t_stop), n_steps=counts[0], n_rejected=counts[1],
-                   nfev=counts[2], njev=counts[3], record=record)
+                   nfev=counts[2], njev=counts[3], n_switches=counts[4], record=record)
 
 
 def _events(module: ModuleType, log: EventLog, n_events: int) -> list[Event]:

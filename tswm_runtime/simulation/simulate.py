@@ -31,7 +31,7 @@ from tswm_runtime.results.rows import MAX_LOGGED_STEPS, Rows, output_times, stat
 
 coldstart.done()
 
-METHODS = {"dopri5": segment.DOPRI5, "rosenbrock23": segment.ROSENBROCK23}
+METHODS = {"dopri5": segment.DOPRI5, "rosenbrock23": segment.ROSENBROCK23, "auto": segment.AUTO}
 # Below 1e-13 a step's error is rounding; above 1e-2 the error per step is not controlled any more
 # (paper-runup against rtol 1e-12: S1 max 0.24 % off at rtol 1e-2, 90 % off at rtol 0.1).
 RTOL_RANGE = (1e-13, 1e-2)
@@ -44,6 +44,8 @@ METHOD_RTOL_MIN = {
                       "1.7e-12)"),
     "rosenbrock23": (1e-9, "its step tolerance stops at 1e-12, so below 1e-9 its rows are about "
                            "1e-8/rtol rtol off (39 rtol at 1e-10); use dopri5 for a tighter rtol"),
+    "auto": (1e-9, "where it switches to rosenbrock23 it is bound as rosenbrock23 is: below 1e-9 those rows "
+                   "are about 1e-8/rtol rtol off; use dopri5 for a tighter rtol"),
 }
 # atol is absolute on x1 [m] and v1 [m/s]: below 1e-20 the error estimate underflows (NaN steps), above 1 m
 # it accepts any step and the answer is silently wrong. Within that range a run is judged after it ends:
@@ -274,11 +276,11 @@ def _load(model: str):
 
 
 def method_step(method: str) -> None:
-    """Make the step of ``method`` (a METHODS name, ``segment.attempt_function``) ready: on its first
-    use in this process it compiles, if not cached, after ``coldstart`` has said so."""
+    """Make the steps of ``method`` (a METHODS name, ``segment.method_steps``) ready: on their first
+    use in this process they compile, if not cached, after ``coldstart`` has said so."""
     if method not in _PREPARED:
-        coldstart.announce((method,))
-        segment.attempt_function(METHODS[method])
+        coldstart.announce(coldstart.STEP_GROUPS[method])
+        segment.method_steps(METHODS[method])
         coldstart.done()
         _PREPARED.add(method)
 

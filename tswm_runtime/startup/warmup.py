@@ -124,7 +124,7 @@ def wait() -> None:
 
 def _to_compile(cold: ColdStart, method: str | None) -> tuple[list[str], float]:
     """The groups to compile for ``cold`` and ``method``'s step, and the measured seconds for them."""
-    groups = [*cold.groups, *([method] if method in METHOD_GROUPS else [])]
+    groups = [*cold.groups, *coldstart.STEP_GROUPS.get(method, ())]
     return groups, coldstart.estimate(groups, cold.model_name)
 
 

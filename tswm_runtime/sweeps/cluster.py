@@ -161,7 +161,7 @@ class Watch:
 
     def __init__(self, client, pack: ModelPackage, method: str, wait_for_workers: float, notice):
         self.client, self.pack, self.wait, self.notice = client, pack, wait_for_workers, notice
-        self.groups = (*KERNEL_GROUPS, method)
+        self.groups = (*KERNEL_GROUPS, *coldstart.STEP_GROUPS.get(method, (method,)))
         self.here = expected(pack)
         self.known: set[str] = set()
         self.empty_since: float | None = None
