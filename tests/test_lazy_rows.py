@@ -79,10 +79,6 @@ def _row_tolerance(r):
     return 10 * r.settings["rtol"] * np.max(np.abs(r.v1))
 
 
-@pytest.mark.xfail(strict=True, reason="known since the lazy rows met the other kernel changes on main "
-                   "(step control, schedules, start modes): the last rows of the 1.35e-13 s long approach to D = 0 (v1 - v* ~ "
-                   "sqrt(t* - t)) are up to 1.1e-9 m/s (38 rtol of max|v1|) from the shifted reference, against "
-                   "9.3e-12 on the lazy-rows branch alone; cause not yet found")
 def test_rows_in_the_painleve_approach_follow_its_dense_output_in_sundman_time():
     """Rows inside the approach from the step log's dense output in sigma, against the reference;
     outside it bit for bit the rows written during the run. (Those written during the run in the
@@ -110,10 +106,6 @@ def test_sol_follows_the_quadrature_reference_at_random_times_and_across_the_loa
     assert np.isnan(r.sol([-1e-9, 1.0 + 1e-9])).all()
 
 
-@pytest.mark.xfail(strict=True, reason="known since the lazy rows met the other kernel changes on main "
-                   "(step control, schedules, start modes): the last rows of the 1.35e-13 s long approach to D = 0 (v1 - v* ~ "
-                   "sqrt(t* - t)) are up to 1.1e-9 m/s (38 rtol of max|v1|) from the shifted reference, against "
-                   "9.3e-12 on the lazy-rows branch alone; cause not yet found")
 def test_sol_covers_the_painleve_approach():
     r, v_ref, in_sigma = painleve_run()
     t = np.linspace(in_sigma[0, 0], r.t_stop, 50)[:-1]
