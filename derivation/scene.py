@@ -633,8 +633,8 @@ class _Reader:
     def scene(self, doc: dict, digest: str) -> Scene:
         if "stage" in doc:
             raise ChainSceneGiven(f"{printable(self.source)}: stage: a chain of stages ([[stage]] tables, "
-                                  "docs/scene-format.md, \"Chains\") is derivation only, not yet simulated: "
-                                  "derivation.chain.scene reads it")
+                                  "docs/scene-format.md, \"Chains\") is read by derivation.chain.scene: tswm derive "
+                                  "and tswm simulate take it, the one-stage commands do not")
         self.keys(doc, "", TOP_KEYS)
         name = self.text(doc, "name", "", pattern=NAME)
         description = self.text(doc, "description", "", default="")

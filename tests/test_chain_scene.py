@@ -79,7 +79,7 @@ force = "-5 kN"
 
 
 def test_the_one_stage_reader_points_to_the_chain_reader():
-    with pytest.raises(SceneError, match=r"v.toml: stage: a chain of stages .* derivation only, not yet simulated"):
+    with pytest.raises(SceneError, match=r"v.toml: stage: a chain of stages .* read by derivation.chain.scene: tswm derive and tswm simulate"):
         parse_scene(VALVE, "v.toml")
 
 

@@ -364,3 +364,23 @@ def test_a_bad_motor_table_is_named(motor, parts):
         parse_chain(text, "m.toml")
     for part in parts:
         assert part in str(err.value), str(err.value)
+
+
+def test_the_mov_example_settles_where_the_motor_meets_the_load_through_both_stages(chain_module):
+    """docs/examples/mov.toml: the motor starts the valve from rest against 15 kN and settles where its
+    table's torque equals the load's torque at the worm by handbook formulas, the screw's
+    F d_m/2 tan(lambda + rho_2') times the worm gear's r1/r2 tan(gamma + rho_1'): 1.2223 N m at
+    313.55681 rad/s (falling branch of the table); both stages stay tractive on flank a."""
+    from pathlib import Path
+
+    text = (Path(__file__).parent.parent / "docs" / "examples" / "mov.toml").read_text()
+    result = simulate_chain(chain_module(text), t_end=1.0)
+    lam = math.atan(0.004 / (math.pi * 0.016))
+    alpha_n = math.atan(math.tan(15 * DEG) * math.cos(lam))
+    at_worm = (15000 * 0.008 * math.tan(lam + math.atan(0.15 / math.cos(alpha_n)))
+               * 0.025 / 0.08 * math.tan(4.76 * DEG + math.atan(0.05 / math.cos(20 * DEG))))
+    speeds, torques = (260.75, 280.0, 300.0, 310.0, 314.16), (54.45, 49.43, 26.98, 8.43, 0.0)
+    steady = np.interp(-at_worm, [-x for x in torques], speeds)
+    assert result.status == "finished"
+    assert [(p.regime, p.flank) for s in result.stages for p in s.phases] == [("tractive", "a")] * 2
+    assert result.v0[-1] == pytest.approx(steady, rel=1e-7)
