@@ -95,10 +95,14 @@ def test_rows_in_the_painleve_approach_follow_its_dense_output_in_sundman_time()
     np.testing.assert_allclose(y[inside, 0], v_ref(t[inside]), rtol=0.0, atol=_row_tolerance(r))
 
 
-def test_sol_follows_the_quadrature_reference_at_random_times_and_across_the_load_step():
+@pytest.mark.parametrize("times", [20, pytest.param(200, marks=pytest.mark.slow)])
+def test_sol_follows_the_quadrature_reference_at_random_times_and_across_the_load_step(times):
+    """At random times and beside the load step. Each reference value inverts the 34-digit
+    quadrature, most of this test's time (323 s of 200 times in a run at load 8): the default
+    run takes 20 random times, -m slow all 200."""
     ref = q.solve(q.paper_wedge(200.0), [(0.0, 0.0), (0.3, -15000.0)], 0.0, 1.0)
     r = simulate("paper-runup", rtol=1e-10, atol=1e-13, points=11)   # few output points: sol does not use them
-    t = np.sort(np.r_[np.random.default_rng(3).uniform(0.0, 1.0, 200), 0.3 - 1e-9, 0.3, 0.3 + 1e-9, 1.0])
+    t = np.sort(np.r_[np.random.default_rng(3).uniform(0.0, 1.0, times), 0.3 - 1e-9, 0.3, 0.3 + 1e-9, 1.0])
     x, v = r.sol(t)
     np.testing.assert_allclose(v, [float(ref.v_at(s)) for s in t], rtol=1e-8, atol=1e-10)
     np.testing.assert_allclose(x, [float(ref.x_at(s)) for s in t], rtol=1e-8, atol=1e-12)

@@ -30,11 +30,15 @@ CASES = {  # scene, free parameters, v1(0); the reference's m2, load schedule
 METHODS = ("dopri5", "rosenbrock23", "auto")  # auto: slow run only
 RTOLS = (1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8, 1e-9)
 GRID = list(itertools.product(sorted(CASES), RTOLS, METHODS))
-# The default run: every case with each method, at a loose, a middle and the tightest rtol (each
-# method meets all three). rosenbrock23 at 1e-9 is where its global error was worst (382 rtol).
-KEPT = [("brake-to-stick", 1e-3, "dopri5"), ("runup-load-step", 1e-6, "dopri5"),
+# The default run: every case with each method, at rtol 1e-4 to 1e-9 (rosenbrock23 at 1e-9 is
+# where its global error was worst, 382 rtol). Each of these fails when its run is integrated at
+# 100 rtol and judged at rtol (worst ratio 27 to 345); judged at rtol 1e-3 and run at 0.01 (the
+# largest allowed), brake-to-stick (both methods) and runup-load-step (rosenbrock23) stayed within
+# 10, and brake-to-stick with dopri5 at 1e-4 and 1e-5 too: those are left to -m slow. Run on
+# commit 46b74eb (before the accuracy fix), 3 of the kept 6 fail (stall dopri5 1e-9: v1 103 rtol).
+KEPT = [("brake-to-stick", 1e-7, "dopri5"), ("runup-load-step", 1e-6, "dopri5"),
         ("stall-stick-breakaway", 1e-9, "dopri5"), ("brake-to-stick", 1e-9, "rosenbrock23"),
-        ("runup-load-step", 1e-3, "rosenbrock23"), ("stall-stick-breakaway", 1e-6, "rosenbrock23")]
+        ("runup-load-step", 1e-4, "rosenbrock23"), ("stall-stick-breakaway", 1e-6, "rosenbrock23")]
 
 
 @functools.lru_cache(maxsize=None)
