@@ -5,7 +5,7 @@ For shipped scenes of the paper gear, against the independent reference of
 them, on hand-written formulas), prints the worst sample error of x1, v1, S1, S2 in units
 of rtol, separately for samples within the first 5 ms after a segment boundary (t0, an
 event: "first") and all others ("ordinary"), for rtol 1e-3..1e-9 (atol = 1e-3 rtol) and
-both methods. Measure: |y(t_i) - y_ref(t_i)| / (rtol max_t |y_ref|) (``dense.worst_ratios``).
+each method (dopri5, rosenbrock23, auto). Measure: |y(t_i) - y_ref(t_i)| / (rtol max_t |y_ref|) (``dense.worst_ratios``).
 
 Run: ``python tools/sample_accuracy.py [--points N] [--case NAME ...]``
 """
@@ -14,7 +14,7 @@ import argparse
 from tswm_runtime.reference import dense
 from tswm_runtime.simulation.simulate import simulate
 
-METHODS = ("dopri5", "rosenbrock23")
+METHODS = ("dopri5", "rosenbrock23", "auto")
 RTOLS = tuple(10.0 ** -k for k in range(3, 10))
 # name: (scene, free parameters, m2, load schedule of the reference, v1 at t = 0)
 CASES = {
