@@ -94,6 +94,18 @@ def test_verdicts_report_the_measured_factor():
     assert bench_report.threshold_text(3.0, 2.0, "x", higher_is_better=False).startswith("missed: 3 x, 1.5x above")
 
 
+def test_each_tswm_method_is_timed_down_to_the_tightest_rtol_it_accepts():
+    """simulate() refuses an rtol below a method's bound (METHOD_RTOL_MIN): the bench does not ask
+    for it, and asks for every method at every rtol the method accepts (the full run failed on it)."""
+    from tswm_runtime.simulation.simulate import METHOD_RTOL_MIN
+
+    tols = (1e-6, 1e-9, 1e-11)
+    timed = {(solver, rtol) for _, solver, rtol, _, _ in bench.configurations([RUNUP], tols, (), 2)}
+    for method, (least, _) in METHOD_RTOL_MIN.items():
+        solver = "tswm simulate" if method == "dopri5" else f"tswm simulate {method}"
+        assert {rtol for s, rtol in timed if s == solver} == {t for t in tols if t >= least}, method
+
+
 def test_rounds_time_every_configuration_once_each_in_its_own_order():
     """No configuration always follows the same one (a call finds the caches its predecessor left)."""
     from tswm_runtime.bench.peers import Outcome

@@ -50,23 +50,27 @@ NO_ERRORS = dict.fromkeys(("err_S1", "err_v1", "err_x1", "err_t", "err"), math.n
 
 def configurations(cases, tols, peers, sweep_n):
     """[(case, solver, rtol, call, divisor)]: every solver at every tolerance on every case (tswm's
-    simulate() with the scene's method, "tswm simulate", and with each other method), and per case
-    tswm's fixed cost per call (``run_fixed_cost``, at rtol 1e-6)."""
+    simulate() with the scene's method, "tswm simulate", and with each other method, each down to
+    the tightest rtol it accepts, ``METHOD_RTOL_MIN``), and per case tswm's fixed cost per call
+    (``run_fixed_cost``, at rtol 1e-6)."""
     from tswm_runtime.model.scenes import load_model
-    from tswm_runtime.simulation.simulate import METHODS
+    from tswm_runtime.simulation.simulate import METHOD_RTOL_MIN, METHODS
 
     out = []
     for case in cases:
-        others = [m for m in METHODS if m != load_model(case.scene).RUN["method"]]
+        own = load_model(case.scene).RUN["method"]
+        others = [m for m in METHODS if m != own]
         out.append((case, report.TSWM_FIXED_COST, THROUGHPUT_RTOL,
                     partial(run_fixed_cost, case, THROUGHPUT_RTOL, THROUGHPUT_RTOL * ATOL_PER_RTOL), 1))
         for rtol in tols:
             atol = rtol * ATOL_PER_RTOL
-            out.append((case, report.TSWM_SIMULATE, rtol, partial(run_simulate, case, rtol, atol), 1))
+            if rtol >= METHOD_RTOL_MIN[own][0]:
+                out.append((case, report.TSWM_SIMULATE, rtol, partial(run_simulate, case, rtol, atol), 1))
+                out.append((case, "tswm simulate points=2", rtol, partial(run_simulate, case, rtol, atol, 2), 1))
+                out.append((case, "tswm sweep per case", rtol, partial(run_sweep, case, rtol, atol, sweep_n),
+                            sweep_n))
             out += [(case, f"tswm simulate {m}", rtol, partial(run_simulate, case, rtol, atol, method=m), 1)
-                    for m in others]
-            out.append((case, "tswm simulate points=2", rtol, partial(run_simulate, case, rtol, atol, 2), 1))
-            out.append((case, "tswm sweep per case", rtol, partial(run_sweep, case, rtol, atol, sweep_n), sweep_n))
+                    for m in others if rtol >= METHOD_RTOL_MIN[m][0]]
             out += [(case, p, rtol, partial(run_peer, case, p, rtol, atol), 1) for p in peers]
     return out
 
