@@ -8,6 +8,24 @@ import math
 import numpy as np
 
 DEG = math.pi / 180.0
+# The light worm on a heavy wheel, every value free: the scene text both test files start from
+# (format fields name and clearance; each adds its load, modes and run tables).
+WEDGE = """
+name = "{name}"
+equations = "consistent"
+[wedge]
+flanks = ["a", "b"]
+gamma = {{ value = "8 deg", free = true }}
+m1 = {{ value = "1.3 kg", free = true }}
+m2 = {{ value = "1500 kg", free = true }}
+{clearance}
+[friction]
+law = "constant"
+rho = {{ value = "6 deg", free = true }}
+[drive]
+law = "constant"
+F1 = {{ value = "8 kN", free = true }}
+"""
 
 
 def _bodies(gamma, m1, m2, F1, F2, force_on_2):

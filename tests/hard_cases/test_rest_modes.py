@@ -15,7 +15,7 @@ import math
 import numpy as np
 import pytest
 
-from hard_cases.at_rest import DEG, expected, hand_slide, hand_start
+from hard_cases.at_rest import DEG, WEDGE, expected, hand_slide, hand_start
 from tswm_runtime.simulation.simulate import simulate
 from tswm_runtime.sweeps.sweep import sweep
 
@@ -23,21 +23,7 @@ CLEARANCE = 5e-4
 T_REST = 5e-4  # a decelerating slide stops here
 T_STEPS = (1e-3, 2e-3)  # the load schedule's breakpoints
 
-SCENE = """
-name = "{name}"
-equations = "consistent"
-[wedge]
-flanks = ["a", "b"]
-gamma = {{ value = "8 deg", free = true }}
-m1 = {{ value = "1.3 kg", free = true }}
-m2 = {{ value = "1500 kg", free = true }}
-{clearance}
-[friction]
-law = "constant"
-rho = {{ value = "6 deg", free = true }}
-[drive]
-law = "constant"
-F1 = {{ value = "8 kN", free = true }}
+SCENE = WEDGE + """\
 [load]
 law = "schedule"
 variable = "t"

@@ -13,7 +13,7 @@ import math
 import numpy as np
 import pytest
 
-from hard_cases.at_rest import DEG, expected, hand_start
+from hard_cases.at_rest import DEG, WEDGE, expected, hand_start
 from subsets import slow_unless_kept
 from tswm_runtime.cli import main
 from tswm_runtime.simulation.simulate import simulate
@@ -21,21 +21,7 @@ from tswm_runtime.sweeps.sweep import sweep, sweep_cases
 
 CLEARANCE = 5e-4
 
-SCENE = """
-name = "{name}"
-equations = "consistent"
-[wedge]
-flanks = ["a", "b"]
-gamma = {{ value = "8 deg", free = true }}
-m1 = {{ value = "1.3 kg", free = true }}
-m2 = {{ value = "1500 kg", free = true }}
-{clearance}
-[friction]
-law = "constant"
-rho = {{ value = "6 deg", free = true }}
-[drive]
-law = "constant"
-F1 = {{ value = "8 kN", free = true }}
+SCENE = WEDGE + """\
 [load]
 law = "constant"
 F2 = {{ value = "2 kN", free = true }}
