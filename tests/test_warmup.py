@@ -111,6 +111,31 @@ def test_a_cold_cli_sweep_is_interpreted_and_gives_the_compiled_table(tmp_path):
         np.testing.assert_allclose(got[column], ref[column], rtol=1e-9, err_msg=column)
 
 
+def test_warm_kernels_and_a_cold_model_run_interpreted_together(tmp_path):
+    """The kernels in numba's cache, the model not (a copy of generated/paper.py elsewhere: its
+    cache is empty): checking the cache must not import the kernels compiled, or the compiled
+    batch kernel meets the interpreted model (TypeError: No matching definition ... pyobject).
+    The sweep runs interpreted, kernels and model alike, and gives the compiled table."""
+    from tswm_runtime.sweeps.sweep import read_table, sample_cases, sweep
+
+    import tswm_runtime.sweeps.rows  # noqa: F401  (the kernels compiled into the cache, if they were not)
+    model = tmp_path / "paper.py"
+    model.write_bytes((ROOT / "generated" / "paper.py").read_bytes())
+    out = tmp_path / "out"
+    env = {**os.environ, warmup.ENV: "interpret"}
+    run = subprocess.run([sys.executable, "-m", "tswm_runtime.cli", "sweep", str(model), "--samples", "20", "--range",
+                          "m2=100:300", "--no-progress", "-o", str(out)], capture_output=True, text=True, cwd=ROOT,
+                         env=env, timeout=300)
+    assert run.returncode == 0, run.stderr
+    assert run.stderr.startswith("tswm: the model `paper` not in numba's cache yet: this run is interpreted")
+    assert not list(tmp_path.rglob("*.nbi")), "an interpreted run compiled something"
+    P = sample_cases(load_module("paper"), 20, {"m2": (100.0, 300.0)}, 0)
+    got, ref = read_table(out / "paper-sweep.parquet"), sweep("paper", P).table
+    assert (got["status"] == ref["status"]).all() and (got["steps"] == ref["steps"]).all()
+    for column in ("S1m", "v1", "x1"):
+        np.testing.assert_allclose(got[column], ref[column], rtol=1e-9, err_msg=column)
+
+
 def test_an_unknown_cold_start_mode_is_refused_by_name(monkeypatch, capsys):
     monkeypatch.setenv(warmup.ENV, "later")
     assert main(["simulate", "paper", "--points", "2"]) == 2

@@ -37,9 +37,11 @@ numba that moved them), a timer says the same after WATCHDOG_S instead.
 from __future__ import annotations
 
 import importlib.util
+import io
 import json
 import logging
 import os
+import pickle
 import sys
 import threading
 import types
@@ -129,7 +131,35 @@ def is_cached(source: Path, name: str, module: str, guarded: bool = False, diges
     index = cache._cache_file  # numba has no public accessor for the index; see the module docstring
     magic = _magic_tuple()
     return any(key[1] == magic and os.path.exists(index._data_path(data))
-               for key, data in index._load_index().items())
+               for key, data in _index_entries(index).items())
+
+
+class _IndexReader(pickle.Unpickler):
+    """Unpickles numba's cache index without importing a module that is not imported yet: its
+    classes (the kernels' named tuples in a signature) come back as stand-ins. numba's own
+    ``_load_index`` imports them, and with them the kernel modules, compiled, before
+    ``warmup.interpret_if_cold`` could turn the jit off: compiled kernels then met an interpreted
+    model (TypeError: No matching definition for argument type(s) pyobject, ...)."""
+
+    def find_class(self, module, name):
+        if module in sys.modules or module.partition(".")[0] in ("numba", "numpy", "llvmlite"):
+            return super().find_class(module, name)
+        return type(name, (), {"__module__": module})
+
+
+def _index_entries(index) -> dict:
+    """numba's ``IndexDataCacheFile._load_index`` (key -> data file name; empty when the index is
+    missing, of another numba version or stale) through ``_IndexReader``."""
+    try:
+        with open(index._index_path, "rb") as handle:
+            version = pickle.load(handle)
+            data = handle.read()
+    except FileNotFoundError:
+        return {}
+    if version != index._version:
+        return {}
+    stamp, overloads = _IndexReader(io.BytesIO(data)).load()
+    return overloads if stamp == index._source_stamp else {}
 
 
 def _runtime_module(relative: str) -> str:
