@@ -359,7 +359,7 @@ def _end_to_end_markdown(ends) -> list[str]:
            report.md_table(dx["timings"], list(dx["timings"][0]),
                            {"diffrax_rtol": "{:.0e}", "diffrax_s_median": "{:.3f}", "diffrax_cpu_s_median": "{:.3f}",
                             "diffrax_cases_per_s": "{:.0f}",
-                            "tswm_over_diffrax": "{:.2f}"}), "",
+                            "tswm_over_diffrax": "{:.2f}", "tswm_over_diffrax_cpu": "{:.2f}"}), "",
            "Versions: " + ", ".join(f"{k} {v}" for k, v in dx["versions"].items()) + "; load "
            + ", ".join(f"{x:.1f}" for x in dx["load_1min"]) + ".", ""]
     return md
