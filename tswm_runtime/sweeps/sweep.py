@@ -58,7 +58,6 @@ from tswm_runtime.model.values import ValueInputError, si_value
 from tswm_common.files import write_atomic
 from tswm_runtime.simulation.simulate import settings, unknown_parameter
 from tswm_runtime.sweeps import chunks, cluster
-from tswm_runtime.sweeps.csvtext import csv_text
 from tswm_runtime.sweeps.rows import run_cases
 
 LOG = logging.getLogger("tswm_runtime.sweep")
@@ -373,7 +372,7 @@ def sweep(model: str | ModuleType, P: np.ndarray, overrides: dict | None = None,
         stem = module.SCENE
         written = outcome.table.rename(columns=written_names(module))
         outcome.parquet = write_atomic(out / f"{stem}-sweep.parquet", _parquet_bytes(written))
-        outcome.csv = write_atomic(out / f"{stem}-sweep.csv", csv_text(written))
+        outcome.csv = write_atomic(out / f"{stem}-sweep.csv", written.to_csv(index=False))
         write_atomic(out / f"{stem}-sweep.json", json.dumps({
             "scene": module.SCENE, "scene_digest": getattr(module, "SCENE_DIGEST", None),
             "model_digest": keys[0]["model_digest"] if keys else chunks.model_digest(module),
