@@ -52,7 +52,7 @@ def literal_jump() -> sp.Expr:
     """Jump of the printed eq. (6) across its own switching surface (printed phi = 0)."""
     on_surface = sp.solve(paper.EQ7_SWITCHING, M.F1)[0]
     jump = (paper.EQ6_ACCEL.subs(M.Psi, paper.PSI_TRACTIVE) - paper.EQ6_ACCEL.subs(M.Psi, paper.PSI_INVERSE))
-    return sp.simplify(jump.subs(M.F1, on_surface))
+    return sp.factor(jump.subs(M.F1, on_surface))     # the factor tan(gamma + rho) - tan(gamma - rho) shows it
 
 
 @lru_cache(maxsize=None)

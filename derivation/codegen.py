@@ -276,6 +276,7 @@ class _Emitter:
         self.fixed = {param_symbol(p): sp.Float(repr(p.value)) for p in fixed}
         self.fixed_params = {param_symbol(p): p for p in fixed}
         self.derived: dict[sp.Expr, sp.Symbol] = {}   # subexpression of fixed parameters -> its constant
+        self.finite: set[sp.Expr] = set()             # expressions fold() found finite with the fixed values
         self.law_functions = {q.symbol: law_function_name(q.symbol) for q in model.laws}
         self.inlined_laws = compose_laws(model)
         self.calls = mirror_calls(model)
@@ -315,8 +316,10 @@ class _Emitter:
     def fold(self, expr: sp.Expr) -> sp.Expr:
         """``expr``, checked: with the fixed parameters folded in it must stay finite (else
         refused, naming the keys). Returned as it is: the constants stay named."""
-        if _non_finite(expr.subs(self.fixed)):
-            raise self.refusal([expr])
+        if expr not in self.finite:
+            if _non_finite(expr.xreplace(self.fixed)):
+                raise self.refusal([expr])
+            self.finite.add(expr)
         return expr
 
     def _fixed_only(self, expr) -> bool:

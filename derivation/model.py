@@ -291,7 +291,7 @@ def _slide_mode(scene: Scene, switching: sp.Expr, composed: dict, fwd_a: Mode, f
     drift, gain, acc_a, acc_b = sp.symbols("drift gain acc_a acc_b", real=True)
     r_a, r_b = drift + gain * acc_a, drift + gain * acc_b
     lam = sp.factor(r_b / (r_b - r_a))
-    combined = sp.simplify(lam * acc_a + (1 - lam) * acc_b)      # -drift/gain: d phi/dt = 0
+    combined = sp.cancel(lam * acc_a + (1 - lam) * acc_b)        # -drift/gain: d phi/dt = 0
     values = {drift: rate.subs(a1, 0), gain: sp.diff(rate, a1), acc_a: fwd_a.accel, acc_b: fwd_b.accel}
     weight, accel = lam.subs(values), combined.subs(values)
     return Mode(name="slide_fwd", regime="sliding along phi = 0", flank="", direction=1, accel=accel,
@@ -309,17 +309,15 @@ def _with_clearance(scene: Scene, rho_of: dict[str, sp.Symbol], modes: list[Mode
     free = Mode(name="free", regime="free flight", flank="", direction=0, accel=ff.accel1.subs(sub),
                 S1=sp.Integer(0), S2=sp.Integer(0), gap_accel=ff.gap_accel.subs(sub))
     impacts = []
-    v2 = ff.v2_of
     for flank in scene.flanks:
         frame = mechanics.impact_frame(flank)
         f = mechanics.FLANK_SIGN[flank]
         sub_f = _specialise(scene, flank, rho_of)
-        slip = ff.slip.subs(mechanics.v2, v2)
         c_w, c_s = (sp.diff(frame.v1_of, mechanics.gap_rate), sp.diff(frame.v1_of, mechanics.slip_speed))
-        values = (f * mechanics.gap_rate, slip, frame.W[0, 0], frame.W[0, 1], frame.W[1, 1],
+        values = (f * mechanics.gap_rate, ff.slip_of, frame.W[0, 0], frame.W[0, 1], frame.W[1, 1],
                   sp.tan(mechanics.rho), mechanics.e_r, c_w, c_s)
         restitution = {mechanics.e_r: param_symbol(scene.restitution)}
-        impacts.append(Impact(flank, tuple(sp.simplify(v.subs(sub_f).subs(restitution)) for v in values)))
+        impacts.append(Impact(flank, tuple(v.subs(sub_f).subs(restitution) for v in values)))
     return [*contact, free], tuple(impacts)
 
 
@@ -334,12 +332,12 @@ def _mesh_modes(scene: Scene, rho_of: dict[str, sp.Symbol]) -> list[Mode]:
                   S1=sp.Integer(0), S2=sp.Integer(0), gap_accel=ff.gap_accel.subs(sub))]
     wanted = [(word, d) for word, (_, d) in DIRECTIONS.items() if word in scene.modes]
     wanted += [("stick", 0)] if "stick" in scene.modes else []
-    slip = ff.slip.subs(mechanics.v2, ff.v2_of).subs(sub)
+    slip = ff.slip_of.subs(sub)
     for word, direction in wanted:
         for flank in scene.flanks:
             c = mechanics.mesh_contact(flank, direction)
             sub_f = {**sub, mechanics.rho: rho_of[flank]}
-            accel, s1, s2, gap_accel = (e.subs(sub_f) for e in c.simplified)   # simplified once, in mechanics
+            accel, s1, s2, gap_accel = (e.subs(sub_f) for e in (c.accel1, c.S1, c.S2, c.gap_accel))
             prefix = DIRECTIONS[word][0] if direction else "stick"
             guards = (c.normal, slip) if direction else (c.normal, c.cone_forward, c.cone_backward)
             modes.append(Mode(name=f"mesh_{prefix}_{flank}", regime=REGIMES[direction, flank] if direction else "stick",

@@ -51,6 +51,31 @@ def test_sliding_mode_equals_hand_formulas(flank, s):
 
 
 @pytest.mark.parametrize("flank,s", MODES)
+def test_mirror_rule_of_the_contact_resultant(flank, s):
+    """The rule sliding() derives the other flanks and directions by: the resultant on flank f with
+    sign(v1) = s is f times flank a's forward one with f s rho for rho."""
+    f = M.FLANK_SIGN[flank]
+    mirrored = f * M._resultant(1, 1).subs(M.rho, f * s * M.rho)
+    assert (M._resultant(f, s) - mirrored).expand() == sp.zeros(2, 1)
+
+
+def test_on_circle_uses_sin2_plus_cos2_and_keeps_the_value():
+    """on_circle, the one trigonometric identity of the derivation: the result equals its input at
+    random points and is reduced by sin^2 + cos^2 = 1 where that shortens it."""
+    sn, cs = sp.sin(M.gamma), sp.cos(M.gamma)
+    assert M.on_circle((sn**2 + cs**2) / cs) == 1 / cs
+    assert M.on_circle(cs + sn * sp.tan(M.gamma)) == 1 / cs
+    exprs = [(M.F1 * sn - M.F2 * cs) * sn / (M.m1 * sn**2 + M.m2 * cs**2) + M.F1 * cs**2,
+             (M.v1 * cs**3 + M.v1 * sn**2 * cs - M.v2 * sn) / (sn**2 + cs**2) ** 2]
+    for expr in exprs:
+        reduced = M.on_circle(expr)
+        for point in random_points(5):
+            point.update({M.v1: 0.7, M.v2: -1.3})
+            assert float(reduced.subs(point)) == pytest.approx(float(expr.subs(point)), rel=1e-12)
+    assert sp.count_ops(M.on_circle(exprs[1])) < sp.count_ops(sp.cancel(exprs[1]))
+
+
+@pytest.mark.parametrize("flank,s", MODES)
 def test_ftf_route_equals_direct_solution(flank, s):
     """Eliminating N through the FTF and solving Newton for (a1, N) directly agree."""
     m = M.sliding(flank, s)
@@ -217,31 +242,3 @@ def test_pickup_stick_cone_is_self_locking_and_stem_force_by_hand():
     a2 = (M.F3 - M.S2) / (M.m2 + M.m3)
     assert zero(pk.stem_force - (M.m3 * a2 - M.F3))
     assert zero(pk.inertia - (M.m1 + M.m2 * sp.tan(M.gamma) ** 2))
-
-
-def test_shipped_derivations_are_current_and_what_the_derivation_gives(monkeypatch):
-    """derivation/mechanics.pickle (written by tools/regenerate.py) is keyed by this mechanics.py
-    and SymPy's version, holds every derivation a scene can ask for, and its entries equal the
-    derivation done afresh (the store switched off)."""
-    import pickle
-
-    key, entries = pickle.loads(M.STORE.read_bytes())
-    assert key == M.store_key(), "mechanics.py changed: run tools/regenerate.py"
-    assert set(entries) == {(fn.__name__, args) for fn, args in M.derivations()}
-    monkeypatch.setattr(M, "_store", lambda: {})
-    for fn, args in ((M.kinematics, ()), (M.stick, ()), (M.sliding, ("b", -1))):
-        assert entries[fn.__name__, args] == fn.__wrapped__(*args), fn.__name__
-
-
-def test_a_stale_store_is_not_read(tmp_path, monkeypatch):
-    """A store written from another mechanics.py (or SymPy) is ignored: the derivation runs."""
-    import pickle
-
-    stale = tmp_path / "mechanics.pickle"
-    stale.write_bytes(pickle.dumps(("0" * 64, {("stick", ()): "stale"})))
-    monkeypatch.setattr(M, "STORE", stale)
-    M._store.cache_clear()
-    try:
-        assert M._store() == {}
-    finally:
-        M._store.cache_clear()
