@@ -153,3 +153,23 @@ def test_an_empty_cache_run_completes_after_its_message(tmp_path):
     assert first.returncode == 0 and first.stderr.startswith("tswm: compiling "), first.stderr
     second = subprocess.run(argv, capture_output=True, text=True, cwd=ROOT, env=env, timeout=300)
     assert second.returncode == 0 and "compiling" not in second.stderr
+
+
+@pytest.mark.slow
+def test_a_forced_compile_leaves_a_cache_that_the_next_runs_find(tmp_path):
+    """TSWM_COLD_START=foreground on an empty cache compiles what a sweep needs (the integration
+    kernels with the segment kernel, the sweep kernel, the dopri5 step, the model); the next
+    simulate and sweep, in the default mode, which would say so and run interpreted if anything
+    were cold, find it all: nothing on stderr, and the sweep prints the forced run's table."""
+    sweep = [sys.executable, "-m", "tswm_runtime.cli", "sweep", "paper", "--samples", "4", "--range",
+             "F2=-20000:5000", "--no-progress"]
+    simulate = [sys.executable, "-m", "tswm_runtime.cli", "simulate", "paper", "--points", "2"]
+    forced = subprocess.run(sweep, capture_output=True, text=True, cwd=ROOT, timeout=1800,
+                            env={**_empty_cache(tmp_path), "TSWM_COLD_START": "foreground"})
+    assert forced.returncode == 0 and forced.stderr.startswith("tswm: compiling "), forced.stderr
+    later = {**_empty_cache(tmp_path), "TSWM_COLD_START": "background"}
+    for argv in (simulate, sweep):
+        run = subprocess.run(argv, capture_output=True, text=True, cwd=ROOT, env=later, timeout=300)
+        assert run.returncode == 0 and run.stderr == "", (argv[3], run.stderr)
+    table = [run.stdout.split(" in ")[0], *run.stdout.splitlines()[1:]]   # the seconds taken aside
+    assert table == [forced.stdout.split(" in ")[0], *forced.stdout.splitlines()[1:]] and "status:" in run.stdout

@@ -77,10 +77,12 @@ def test_stages_move_with_the_clock_inside_a_stage():
 def test_estimates_follow_what_is_cold():
     warm = plan.estimates({}, derivation=True)
     cold = plan.estimates({plan.KERNELS: 40.0, plan.MODELS: 16.0, plan.BATCH: 3.0}, derivation=True)
-    assert list(warm) == list(cold) == [plan.KERNELS, plan.MODELS, plan.BATCH, plan.FIT, plan.RUNS, plan.FIGURES,
+    assert list(warm) == list(cold) == [plan.KERNELS, plan.BATCH, plan.MODELS, plan.FIT, plan.RUNS, plan.FIGURES,
                                         plan.DOCUMENT, plan.WRITE]
     assert cold[plan.KERNELS] == 40.0 and cold[plan.BATCH] == 3.0
     assert cold[plan.MODELS] == plan.WARM[plan.MODELS]   # compiled meanwhile by the second process
+    longer = plan.estimates({plan.KERNELS: 20.0, plan.MODELS: 30.0, plan.BATCH: 3.0}, derivation=True)
+    assert longer[plan.MODELS] == 7.0   # what is left of the second process's part when this one is done
     assert warm[plan.KERNELS] == plan.WARM[plan.KERNELS]
     assert plan.estimates({}, derivation=False)[plan.DOCUMENT] == 0.0
 
@@ -91,9 +93,13 @@ def test_cold_parts_name_what_compiles(monkeypatch):
     seconds, text = cli_paper._cold_parts()
     assert text.startswith("compiling the integration kernels")
     assert all(f"`{scene}`" in text for scene in plan.SCENES.values())
-    assert seconds[plan.KERNELS] == coldstart.estimate(["integrate"], None)
-    assert seconds[plan.MODELS] == pytest.approx(coldstart.estimate(["dopri5"], None)
-                                                 + sum(coldstart.estimate((), m) for m in plan.SCENES.values()))
+    first, second = plan.first_process_scenes(), plan.BACKGROUND_SCENES
+    assert sorted([*first, *second]) == sorted(plan.SCENES.values()) and first and second
+    segment = coldstart.estimate(["segment"], None)   # in the group "integrate", compiled by the second process
+    assert seconds[plan.KERNELS] == pytest.approx(coldstart.estimate(["integrate"], None) - segment
+                                                  + sum(coldstart.estimate((), m) for m in first))
+    assert seconds[plan.MODELS] == pytest.approx(segment + coldstart.estimate(["dopri5"], None)
+                                                 + sum(coldstart.estimate((), m) for m in second))
     assert seconds[plan.BATCH] == coldstart.estimate(["batch"], None)
     monkeypatch.setattr(coldstart, "check", lambda groups=(), model=None: None)
     assert cli_paper._cold_parts() == ({}, None)
@@ -112,6 +118,7 @@ def test_cli_exits_1_naming_the_second_process_when_it_fails(tmp_path, monkeypat
     from tswm_runtime.cli import main
 
     monkeypatch.setattr(plan, "SCENES", {**plan.SCENES, "broken": "no-such-scene"})
+    monkeypatch.setattr(plan, "BACKGROUND_SCENES", (*plan.BACKGROUND_SCENES, "no-such-scene"))
     assert main(["paper", "-o", str(tmp_path), "--no-derivation", "--no-progress"]) == 1
     err = capsys.readouterr().err
     assert "tswm paper: error: the second process" in err and "no_such_scene" in err

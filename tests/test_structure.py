@@ -138,7 +138,7 @@ def test_every_runtime_room_is_in_the_order():
 # state, record, work arrays), not as long positional lists.
 CORE_KERNELS = {"tswm_runtime/integration/segment.py": "run", "tswm_runtime/integration/painleve.py": "approach",
                 "tswm_runtime/hybrid/machine.py": "integrate_hybrid", "tswm_runtime/hybrid/entry.py": "integrate_at",
-                "tswm_runtime/hybrid/batch.py": "run_batch"}
+                "tswm_runtime/hybrid/batch.py": "run_batch", "tswm_runtime/hybrid/segments.py": "run_segment"}
 MAX_KERNEL_PARAMETERS = 8
 
 

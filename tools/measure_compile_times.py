@@ -4,8 +4,10 @@ Writes tswm_runtime/jit/compile_times.json (read by ``tswm_runtime.jit.coldstart
 for each group of kernels and each shipped model, each measured in a fresh process with a
 fresh NUMBA_CACHE_DIR:
 
-    integrate     import hybrid.entry and hybrid.rows (compiles integrate_hybrid, integrate_at,
-                  fill_rows and no_jacobian), everything cold
+    segment       import hybrid.segments (the segment kernel run_segment, part of "integrate";
+                  ``tswm paper`` compiles it in its second process), everything cold
+    integrate     import hybrid.entry and hybrid.rows (compiles integrate_hybrid, run_segment,
+                  integrate_at, fill_rows, states_at and no_jacobian), everything cold
     batch         import hybrid.batch (run_batch, parallel) with the integrate group cached
     METHOD        segment.attempt_function(METHOD): the step of dopri5, rosenbrock23, with the
                   integrate group cached
@@ -54,6 +56,9 @@ def main() -> int:
     args = parser.parse_args()
     load_before = os.getloadavg()
     seconds = {}
+    with tempfile.TemporaryDirectory() as cache:   # its own cache: "integrate" below includes it
+        seconds["segment"] = timed("import tswm_runtime.hybrid.segments", cache, "import numpy, numba")
+        print(f"segment {seconds['segment']:.1f} s", flush=True)
     with tempfile.TemporaryDirectory() as cache:
         seconds["integrate"] = timed("import tswm_runtime.hybrid.entry, tswm_runtime.hybrid.rows", cache,
                                      "import numpy, numba")

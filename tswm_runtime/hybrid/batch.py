@@ -4,7 +4,7 @@
 ``hybrid.integrate_hybrid``, in a ``prange`` loop: every case has its own work
 arrays (parameter copy, event log, monitor, counters), one output point (t_end),
 and writes one row of results. The functions come as addresses (``entry.functions``:
-the mode machine, the method's step, the model's), so, like ``integrate_hybrid``, the
+the mode machine, the method's step, the model's, the segment kernel), so, like ``integrate_hybrid``, the
 batch function is compiled once with an explicit signature, cached on disk and reused
 for every model. Calling ``integrate_hybrid`` from Python costs about 20 us per call for
 unboxing its arguments (a run to t_end = 1e-9 s through its entry point, session 7);
@@ -29,7 +29,7 @@ from collections import namedtuple
 import numpy as np
 from numba import prange, types
 
-from tswm_runtime.hybrid import entry
+from tswm_runtime.hybrid import addressed
 from tswm_runtime.hybrid.machine import HYBRID_SIG
 from tswm_runtime.integration import segment
 from tswm_runtime.integration.steplog import no_steps
@@ -54,7 +54,7 @@ RESULTS = types.NamedTuple((MATRIX, types.int64[:, ::1], types.int64[:, ::1]), R
 _machine_at = function_at(types.FunctionType(HYBRID_SIG))
 
 BATCH_SIG = types.none(
-    entry.ADDRESSES, MODE_TABLES,  # functions: entry.functions(method, model); mode tables
+    addressed.ADDRESSES, MODE_TABLES,  # functions: entry.functions(method, model); mode tables
     MATRIX, START,  # P (cases x parameters, latches included); start (start.p is not used: a row of P is)
     SETTINGS, types.int64, types.int64,  # settings, max_events, number of observables
     RESULTS,
@@ -138,7 +138,8 @@ def run_batch(functions, tables, P, start, settings, max_events, n_obs, results)
         record = _case_record(t_end, width, P.shape[1], max_events, n_obs)
         case = Start(start.t, start.y, start.quad, start.mode, P[c].copy())
         integrate = _machine_at(functions[0])
-        status, t_stop, n_ev, last, need, first = integrate(entry.model_functions(functions), tables, case,
+        status, t_stop, n_ev, last, need, first = integrate(addressed.model_functions(functions),
+                                                            addressed.segment_function(functions), tables, case,
                                                             Settings(method, t_end, tol, max_steps), record)
         _write_floats(results.f[c], t_stop, n_ev, n, record, case)
         out_i = results.i[c]

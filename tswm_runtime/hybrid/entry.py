@@ -1,8 +1,9 @@
 """The mode machine called from Python: ``integrate`` builds its arguments from plain values.
 
 ``integrate_at`` is ``machine.integrate_hybrid`` with its seven functions (the method's step,
-the model's rhs, jac, guards, observe, impact, the step method auto switches to) given as addresses (``jit.addresses``;
-``model_functions`` turns them back into the Functions, here and in ``batch.run_batch``):
+the model's rhs, jac, guards, observe, impact, the step method auto switches to) and its segment
+kernel (``segments.run_segment``) given as addresses (``jit.addresses``; ``addressed`` turns them
+back into functions, here and in ``batch.run_batch``):
 numba unboxes a function-typed argument through Python, 1-2 us each and several times that
 right after other code has run, an address in nanoseconds. The machine itself is called
 through its addresses too, so its compiled code is not linked into this small kernel (as
@@ -14,32 +15,21 @@ caller reading only those needs no numpy pass over the step log.
 import numpy as np
 from numba import types
 
+from tswm_runtime.hybrid.addressed import ADDRESSES, model_functions, segment_function
 from tswm_runtime.hybrid.machine import HYBRID_SIG, INVALID_INPUT, integrate_hybrid
+from tswm_runtime.hybrid.segments import run_segment
 from tswm_runtime.jit import cache_guard
 from tswm_runtime.integration import segment
-from tswm_runtime.jit.addresses import function_at, guards_at, jac_at, rhs_at
+from tswm_runtime.jit.addresses import function_at
 from tswm_runtime.jit.arrays import copy_into
 from tswm_runtime.jit.cache_guard import njit
 from tswm_runtime.jit.signatures import GUARDS_SIG, JAC_SIG, RHS_SIG, VECTOR, address, jit_address
-from tswm_runtime.jit.structures import (INDEX_WIDTH, JUMP_WIDTH, EventLog, Functions, Outputs, Record, Settings,
-                                         Start, StepLog, Tolerances)
+from tswm_runtime.jit.structures import (INDEX_WIDTH, JUMP_WIDTH, EventLog, Outputs, Record, Settings, Start,
+                                         StepLog, Tolerances)
 
 _machine_at = function_at(types.FunctionType(HYBRID_SIG), raises=True)
-_attempt_at = function_at(segment.AttemptFunction)
-
-#: What ``functions`` gives: nine addresses.
-ADDRESSES = types.UniTuple(types.int64, 9)
 #: integrate_hybrid's signature with its functions replaced by their addresses, and the summary.
-ENTRY_SIG = HYBRID_SIG.return_type(ADDRESSES, *HYBRID_SIG.args[1:], VECTOR)
-
-
-@njit(error_model="numpy")
-def model_functions(functions):
-    """The Functions (the method's step, the model's rhs, jac, guards, observe, impact, the
-    stiff step) at the last seven of the addresses ``functions``."""
-    _, _, attempt, rhs, jac, guards, observe, impact, stiff = functions
-    return Functions(_attempt_at(attempt), rhs_at(rhs), jac_at(jac), guards_at(guards), guards_at(observe),
-                     guards_at(impact), _attempt_at(stiff))
+ENTRY_SIG = HYBRID_SIG.return_type(ADDRESSES, *HYBRID_SIG.args[2:], VECTOR)
 
 
 @njit(error_model="numpy")
@@ -74,7 +64,7 @@ def integrate_at(functions, tables, start, settings, record, summary):
     """``integrate_hybrid`` with its functions at the addresses ``functions`` (see ``functions``),
     then, unless its input was invalid, ``summarize`` into ``summary``."""
     integrate = _machine_at(functions[0], functions[1])
-    outcome = integrate(model_functions(functions), tables, start, settings, record)
+    outcome = integrate(model_functions(functions), segment_function(functions), tables, start, settings, record)
     if outcome[0] != INVALID_INPUT:  # the sizes agree
         summarize(start, record, summary)
     return outcome
@@ -83,8 +73,9 @@ def integrate_at(functions, tables, start, settings, record, summary):
 def functions(method: int, model) -> tuple:
     """The addresses ``integrate_at`` takes: the mode machine (C wrapper and numba ABI),
     ``method``'s step, the model's rhs, jac, guards, observe and impact (DOPRI5 calls jac
-    only to confirm an equilibrium before holding it, ``steady``), and the step method auto
-    switches to (``segment.method_steps``). Remembered per method and model functions."""
+    only to confirm an equilibrium before holding it, ``steady``), the step method auto
+    switches to (``segment.method_steps``) and the segment kernel (C wrapper and numba ABI).
+    Remembered per method and model functions."""
     key = (method, model.rhs, model.jac, model.guards, model.observe, model.impact)
     known = _FUNCTIONS.get(key)
     if known is None:
@@ -93,7 +84,8 @@ def functions(method: int, model) -> tuple:
                  getattr(attempt, "address", attempt),  # jit off: the function itself
                  address(model.rhs, RHS_SIG), address(model.jac, JAC_SIG), address(model.guards, GUARDS_SIG),
                  address(model.observe, GUARDS_SIG), address(model.impact, GUARDS_SIG),
-                 getattr(stiff, "address", stiff))
+                 getattr(stiff, "address", stiff),
+                 address(run_segment, segment.SEGMENT_SIG), jit_address(run_segment, segment.SEGMENT_SIG))
         if len(_FUNCTIONS) >= 256:
             _FUNCTIONS.clear()
         _FUNCTIONS[key] = known

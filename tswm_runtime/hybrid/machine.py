@@ -37,14 +37,13 @@ from numba import types
 
 from tswm_runtime.hybrid import impact as collision
 from tswm_runtime.jit import cache_guard
-from tswm_runtime.integration import painleve
 from tswm_runtime.integration import segment
 from tswm_runtime.integration import steplog
 from tswm_runtime.jit.arrays import copy_into
 from tswm_runtime.jit.borrow import borrowed
 from tswm_runtime.jit.cache_guard import njit
 from tswm_runtime.jit.structures import (JUMP_WIDTH, MODE_TABLES, RECORD, SETTINGS, START, EventSettings, Segment,
-                                         Settings, State)
+                                         State)
 
 # Guard kinds (modes.GUARD_KINDS maps the generated GUARDS names to these).
 (G_PHI, G_V1, G_D, G_JAM, G_CONE_F, G_CONE_B, G_FLANK_N, G_LAW, G_SLIDE_A, G_SLIDE_B, G_TRIP, G_GAP_A, G_GAP_B,
@@ -708,36 +707,11 @@ def _first_mode(fns, tables, start, y, p, tol, w):
 
 
 @njit(error_model="numpy")
-def _segment(fns, tables, settings, mode, p, state, record, i, scratch, singular):
-    """One segment in ``mode`` from ``state`` (``segment.run``), handed over to the Painleve
-    approach where D heads for 0 (``singular``) or where steps in t shrank to nothing near it.
-    Returns (status as segment's (APPROACH: back from the approach, on in t), t, guard, next
-    output row, next step, whether the next segment may hand over again)."""
-    counters = record.counters
-    steps = counters[segment.N_STEPS] + counters[segment.N_REJECTED]
-    k_d = _guard(G_D, tables.guard_kind)
+def _segment(tables, mode, p, k_d, singular):
+    """The Segment of ``mode``: its guards' directions; D's guard ``k_d`` as the one to hand over
+    to the Painleve approach at (``singular``, and where D can end the mode), else none."""
     k_singular = k_d if singular and k_d >= 0 and tables.guard_direction[mode, k_d] != 0 else -1
-    ev = EventSettings(tables.guard_direction[mode], 0.0, 0.0, True, k_singular, True)
-    budget = Settings(settings.method, settings.t_end, settings.tol, max(settings.max_steps - steps, 0))
-    seg_status, t_new, k, i, h = segment.run(fns, budget, Segment(mode, p, ev), state, record, i, scratch)
-    stalled = seg_status == segment.STEP_TOO_SMALL or seg_status == segment.NOT_FINITE
-    if k_singular >= 0 and stalled and counters[segment.N_STEPS] > 0:
-        seg_status = segment.APPROACH  # steps in t shrank to nothing: try Sundman's time
-    if seg_status != segment.APPROACH:
-        return seg_status, t_new, k, i, h, True
-    ev = EventSettings(tables.guard_direction[mode], 0.0, 0.0, True, k_d, False)
-    left = max(settings.max_steps - counters[segment.N_STEPS] - counters[segment.N_REJECTED], 0)
-    budget = Settings(settings.method, settings.t_end, settings.tol, left)
-    outcome, t_new, i = painleve.approach(fns, budget, Segment(mode, p, ev), State(t_new, state.y, state.quad, h),
-                                          record, i)
-    if outcome == painleve.ZERO:
-        return segment.EVENT, t_new, k_d, i, h, True
-    if outcome == painleve.END:
-        return segment.REACHED_END, t_new, k, i, h, True
-    if outcome == painleve.OTHER or outcome == painleve.CLEAR:
-        # go on in t (OTHER: locate that guard there first, without handing over again)
-        return segment.APPROACH, t_new, k, i, h, outcome == painleve.CLEAR
-    return outcome, t_new, k, i, h, True
+    return Segment(mode, p, EventSettings(tables.guard_direction[mode], 0.0, 0.0, True, k_singular, True))
 
 
 @njit(error_model="numpy")
@@ -789,18 +763,20 @@ def _checked(fns, tables, tol, mode, new, status, need, t, y, p, w):
     return new, status, need
 
 
-#: integrate_hybrid(functions, tables, start, settings, record) -> (status, t_stop, events, last mode, need, first mode)
+#: integrate_hybrid(functions, run_segment, tables, start, settings, record) -> (status, t_stop, events, last mode, need, first mode)
 HYBRID_SIG = types.Tuple((types.int64, types.float64, types.int64, types.int64, types.int64,
-                          types.int64))(segment.FUNCTIONS, MODE_TABLES, START, SETTINGS, RECORD)
+                          types.int64))(segment.FUNCTIONS, segment.SegmentFunction, MODE_TABLES, START, SETTINGS,
+                                        RECORD)
 
 
 @cache_guard.compile_cached(HYBRID_SIG, error_model="numpy", nogil=True)
-def integrate_hybrid(fns, tables, start, settings, record):
+def integrate_hybrid(fns, run_segment, tables, start, settings, record):
     """Integrate the model from ``start`` to settings.t_end through its mode changes.
 
     fns: the Functions (the method's step; the model's rhs, jac, guards, observe and impact:
         its impact frame, a collision when a gap closes with a clearance, the stem's pickup
-        with lost motion). tables: the ModeTables from ``modes.tables``.
+        with lost motion). run_segment: ``hybrid.segments.run_segment`` (a kernel of its own,
+        called through its address). tables: the ModeTables from ``modes.tables``.
     start: Start. start.p: parameters and latches; the runtime writes the latches (a
         torque switch's trip time, the piece of each piecewise law, set at the start and
         at every law event), so pass a copy. start.quad: the integral of the states at
@@ -820,7 +796,7 @@ def integrate_hybrid(fns, tables, start, settings, record):
         as (|value|, value, t), K = number of observables; pass zeros. counters:
         int64[segment.N_COUNTERS] (steps, rejected, rhs calls, jac calls, method switches).
 
-    A sequence of named steps: ``_first_mode``, then per segment ``_segment`` (the step
+    A sequence of named steps: ``_first_mode``, then per segment ``_segment`` and ``run_segment`` (the step
     loop, and the Painleve approach where D heads for 0: it locates D = 0, status
     INCONSISTENT, event guard D; the maxima in mon are then +-inf: the reactions grow without
     bound there) and at its event ``_latch``, ``_jump``, ``_checked`` (a mode or impact without
@@ -859,8 +835,8 @@ def integrate_hybrid(fns, tables, start, settings, record):
     singular = True  # hand over to the Painleve approach when D heads for 0
     while True:
         i0 = i
-        seg_status, t_new, k, i, h, singular = _segment(fns, tables, settings, mode, p, State(t, y, q, h), record, i,
-                                                        w.segment, singular)
+        seg_status, t_new, k, i, h, singular = run_segment(fns, settings, _segment(tables, mode, p, k_d, singular),
+                                                           State(t, y, q, h), record, i, w.segment)
         for r in range(i0, i):
             out.mode[r] = mode
             copy_into(out.p[r], p)

@@ -1,7 +1,7 @@
 """Integrate one segment of a hybrid trajectory: fixed mode, until t_end or an event.
 
-The step loop ``run`` is compiled into the mode machine (``hybrid.machine``),
-whose explicit signature takes the model functions as numba first-class function
+The step loop ``run`` is compiled into the mode machine's segment kernel
+(``hybrid.segments``, ``SEGMENT_SIG``), whose explicit signature takes the model functions as numba first-class function
 types (see ``signatures``). The method is chosen by a code (``DOPRI5`` explicit,
 ``ROSENBROCK23`` stiff); both share the step loop, step-size control and event
 location below. Its step (``dopri5_attempt``, ``rosenbrock23_attempt``) is a
@@ -35,6 +35,7 @@ is a sequence of named steps: ``_start``, then per step attempt ``_rejected`` or
 """
 from collections import namedtuple
 
+import numba
 import numpy as np
 from numba import types
 
@@ -50,7 +51,8 @@ from tswm_runtime.jit.arrays import copy_into, copy_rows
 from tswm_runtime.jit.borrow import borrowed
 from tswm_runtime.jit.cache_guard import njit
 from tswm_runtime.jit.signatures import JAC_SIG, VECTOR, GuardsFunction, JacFunction, RhsFunction, compiled
-from tswm_runtime.jit.structures import INTS, STEP_WORK, TOLERANCES, Functions, Step, StepWork
+from tswm_runtime.jit.structures import (EVENT_SETTINGS, INTS, RECORD, SETTINGS, STEP_WORK, TOLERANCES, Functions,
+                                         Segment, State, Step, StepWork)
 
 # Method codes.
 DOPRI5 = 0  # Dormand-Prince 5(4), explicit (dopri5.py).
@@ -438,6 +440,17 @@ def segment_work(n, m, n_quad, n_obs):
         MaxWindow(np.zeros((n_obs, 2, 3)), np.zeros((n_obs, 2, n)), np.zeros((n_obs, 2, n, 4)),
                   np.zeros(n_obs, np.int64)))
 
+
+#: The numba types of a ``Segment``, a ``State`` and ``segment_work``'s arrays (numba's type of its value).
+SEGMENT = types.NamedTuple((types.int64, VECTOR, EVENT_SETTINGS), Segment)
+STATE = types.NamedTuple((types.float64, VECTOR, VECTOR, types.float64), State)
+SEGMENT_WORK = numba.typeof(getattr(segment_work, "py_func", segment_work)(1, 1, 0, 0))
+#: The mode machine's segment (``hybrid.segments.run_segment``), a kernel of its own called through its
+#: address: (functions, settings, segment, state, record, next row, scratch) -> (status, t, guard, next row,
+#: next step, whether the next segment may hand over again).
+SEGMENT_SIG = types.Tuple((types.int64, types.float64, types.int64, types.int64, types.float64, types.boolean))(
+    FUNCTIONS, SETTINGS, SEGMENT, STATE, RECORD, types.int64, SEGMENT_WORK)
+SegmentFunction = types.FunctionType(SEGMENT_SIG)
 
 #: The step-size controller's memory in a segment: whether the last attempt at t was rejected,
 #: that rejected step and its error, and the last accepted step and its error.

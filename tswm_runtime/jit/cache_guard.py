@@ -28,7 +28,8 @@ from tswm_runtime.jit.linking import HelperCompiler
 KERNEL_SOURCES = ("jit/borrow.py", "jit/structures.py", "integration/control.py",
                   "integration/dopri5.py", "integration/rosenbrock.py", "integration/events.py", "integration/segment.py",
                   "integration/single.py", "integration/painleve.py", "integration/steplog.py", "integration/steady.py",
-                  "hybrid/machine.py", "hybrid/impact.py", "hybrid/batch.py", "hybrid/rows.py", "hybrid/entry.py",
+                  "hybrid/machine.py", "hybrid/segments.py", "hybrid/addressed.py", "hybrid/impact.py", "hybrid/batch.py",
+                  "hybrid/rows.py", "hybrid/entry.py",
                   "jit/addresses.py", "jit/linking.py", "jit/arrays.py")
 
 

@@ -64,6 +64,7 @@ GROUPS = {
     "integrate": ("the integration kernels (the hybrid mode machine, output rows)",
                   [("integration/segment.py", "no_jacobian", True),
                    ("hybrid/machine.py", "integrate_hybrid", True),
+                   ("hybrid/segments.py", "run_segment", True),
                    ("hybrid/entry.py", "integrate_at", True),
                    ("hybrid/rows.py", "fill_rows", True),
                    ("integration/steplog.py", "states_at", True)]),

@@ -1,12 +1,13 @@
 """What ``tswm paper`` does in a second process, on the second core, while the first process
-compiles the integration kernels: compile the readings' models and the dopri5 step into
-numba's cache (each a few seconds), then write the derivation document (SymPy and pdflatex,
-about 10 s). None of them needs the integration kernels, so on a cold cache the two
-processes overlap; on a warm one the document is written while the first process runs the fit.
+compiles the mode machine, the sweep kernel and most models: compile the segment kernel
+(``hybrid.segments``, more than half of the integration kernels), the dopri5 step and the
+models of ``plan.BACKGROUND_SCENES`` into numba's cache, then write the derivation document
+(SymPy and pdflatex, about 10 s). None of them needs the mode machine, so on a cold cache the
+two processes overlap; on a warm one the document is written while the first process runs the fit.
 
 Run as ``python -m tswm_runtime.paper.background DIR [--model SCENE ...] [--derivation]``: it
-prints ``models`` once the models and the step are in the cache, then the document's
-description as one line of JSON. ``Background`` starts it and reads those lines.
+prints ``models`` once the models, the segment kernel and the step are in the cache, then the
+document's description as one line of JSON. ``Background`` starts it and reads those lines.
 """
 from __future__ import annotations
 
@@ -69,7 +70,7 @@ class Background:
         return line.strip()
 
     def models(self) -> None:
-        """Return once the models and the dopri5 step are in numba's cache."""
+        """Return once the segment kernel, the dopri5 step and the models are in numba's cache."""
         if not self._models_read:
             line = self._line()
             if line != MODELS_DONE:
@@ -100,11 +101,13 @@ def main(argv=None) -> int:
     parser.add_argument("--model", action="append", default=[], help="a shipped scene name to compile")
     parser.add_argument("--derivation", action="store_true", help="write the derivation document")
     args = parser.parse_args(argv)
-    from tswm_runtime.integration import segment
     from tswm_runtime.model.contract import load_module
 
     for model in args.model:
         load_module(model)
+    import tswm_runtime.hybrid.segments  # noqa: F401  (the segment kernel: compiled on import, if not cached)
+    from tswm_runtime.integration import segment
+
     segment.attempt_function(segment.DOPRI5)   # the paper's scenes integrate with dopri5
     print(MODELS_DONE, flush=True)
     if args.derivation:
