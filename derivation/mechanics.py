@@ -181,8 +181,8 @@ def sliding(flank: str, direction: int) -> SlidingMode:
     return SlidingMode(
         flank="a", direction=1, R1=R1.subs(Q, N / sp.cos(rho)), R2=R2.subs(Q, N / sp.cos(rho)),
         psi=psi, accel_in_psi=accel_in_psi, accel=accel, accel_direct=direct[a1],
-        denominator=denominator.subs(Psi, psi), S1=sp.factor(sol[S1]).subs(Psi, psi),
-        S2=sp.factor(sol[S2]).subs(Psi, psi), switching=switching, normal=normal,
+        denominator=denominator.subs(Psi, psi), S1=sp.factor_terms(sp.cancel(sol[S1])).subs(Psi, psi),
+        S2=sp.factor_terms(sp.cancel(sol[S2])).subs(Psi, psi), switching=switching, normal=normal,
         jam_factor=lean_2, friction_power=power.subs(v1, sp.Abs(v1)),
         friction_power_coulomb=sp.tan(rho) * N * sp.Abs(v1) * kin.sliding_speed,
         efficiency=(-S2 * kin.ratio / S1).subs(S1, -psi * S2),
