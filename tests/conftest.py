@@ -6,6 +6,8 @@ compiled the same integration kernels (about 100 s of CPU each) and shipped mode
 """
 from __future__ import annotations
 
+import fcntl
+import hashlib
 import os
 import subprocess
 import sys
@@ -13,7 +15,7 @@ from pathlib import Path
 
 import pytest
 
-from derivation.codegen import module_name, write_module
+from derivation.codegen import write_module
 from derivation.model import build_model
 from derivation.scene import parse_scene
 from tswm_runtime.model.contract import load_module
@@ -55,15 +57,33 @@ def pytest_configure(config):
 
 
 @pytest.fixture(scope="session")
-def scene_module(tmp_path_factory):
-    """scene_module(toml_text) -> the generated, imported module (one per scene name)."""
-    directory = tmp_path_factory.mktemp("models")
+def module_once(tmp_path_factory):
+    """module_once(text, write) -> the module that ``write(folder)`` writes for ``text`` into an
+    empty folder and returns the path of, imported; one per text and test run. The folder is the
+    run's, named by the digest of ``text``, so every xdist worker finds it: the first writes the
+    module and compiles it into numba's cache beside it, holding the folder's lock; another waits
+    and loads the compiled code instead of compiling it again."""
+    base = tmp_path_factory.getbasetemp()
+    directory = (base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base) / "models"
+    directory.mkdir(exist_ok=True)
     loaded = {}
 
-    def make(text: str):
-        scene = parse_scene(text, "test scene")
-        if scene.name not in loaded:
-            write_module(build_model(scene), directory)
-            loaded[scene.name] = load_module(directory / f"{module_name(scene.name)}.py")
-        return loaded[scene.name]
-    return make
+    def load(text: str, write):
+        if text not in loaded:
+            folder = directory / hashlib.sha256(text.encode()).hexdigest()[:16]
+            folder.mkdir(exist_ok=True)
+            with open(folder / "lock", "w") as lock:
+                fcntl.flock(lock, fcntl.LOCK_EX)
+                written = folder / "module"
+                if not written.exists():
+                    written.write_text(write(folder).name)
+                loaded[text] = load_module(folder / written.read_text())
+        return loaded[text]
+    return load
+
+
+@pytest.fixture(scope="session")
+def scene_module(module_once):
+    """scene_module(toml_text) -> the generated, imported module (compiled once per test run)."""
+    return lambda text: module_once(text, lambda folder: write_module(build_model(parse_scene(text, "test scene")),
+                                                                      folder))

@@ -12,7 +12,6 @@ from scipy.integrate import solve_ivp
 
 from derivation.chain.codegen import generate_chain_module
 from derivation.chain.scene import parse_chain
-from tswm_runtime.model.contract import load_module
 from tswm_runtime.simulation.chain import simulate_chain
 
 DEG = math.pi / 180
@@ -20,16 +19,14 @@ TIGHT = {"rtol": 1e-11, "atol": 1e-13}
 
 
 @pytest.fixture(scope="session")
-def chain_module(tmp_path_factory):
-    """chain_module(toml_text) -> the generated, imported chain module."""
-    directory = tmp_path_factory.mktemp("chains")
-
-    def make(text: str):
+def chain_module(module_once):
+    """chain_module(toml_text) -> the generated, imported chain module (compiled once per test run)."""
+    def write(text, folder):
         chain = parse_chain(text, "test chain")
-        path = directory / f"{chain.name.replace('-', '_')}.py"
+        path = folder / f"{chain.name.replace('-', '_')}.py"
         path.write_text(generate_chain_module(chain))
-        return load_module(path)
-    return make
+        return path
+    return lambda text: module_once(text, lambda folder: write(text, folder))
 
 
 def wedges(name: str, gammas, mus, masses, forces, spring: float = 0.0, v0: float = 1.0, t_end: float = 0.5) -> str:
@@ -154,21 +151,25 @@ def assert_like_hand(result, hand: HandChain, v0: float, t_end: float, tol: floa
 SWITCHING = dict(gammas=(30.0, 25.0), mus=(0.1, 0.1), masses=(1.0, 1.0, 1.0), forces=(5.0, 0.0, 20.0), spring=1000.0)
 
 
-def test_two_stages_change_flank_one_after_the_other_as_the_hand_model(chain_module):
+@pytest.fixture(scope="module")
+def switching(chain_module):
+    """The run of the two-stage chain that changes flank (SWITCHING)."""
+    return simulate_chain(chain_module(wedges("two-switching", **SWITCHING)), **TIGHT)
+
+
+def test_two_stages_change_flank_one_after_the_other_as_the_hand_model(switching):
     """The spring's push on the last body first drives the chain (both stages inverse-tractive), then
     resists it: stage 1 changes flank at 35.05 ms, stage 2 at 60.61 ms, and the chain turns back at
     276.7 ms; the switch times and the final state agree with the hand model to 1e-9."""
-    module = chain_module(wedges("two-switching", **SWITCHING))
-    result = simulate_chain(module, **TIGHT)
+    result = switching
     log = assert_like_hand(result, HandChain(**SWITCHING), 1.0, 0.5)
     assert len(log) == 4 and [len(s.switches) for s in result.stages] == [2, 2]
 
 
-def test_the_normal_forces_at_the_turn_are_newtons(chain_module):
+def test_the_normal_forces_at_the_turn_are_newtons(switching):
     """The largest normal forces come at the turn (v0 = 0, the spring compressed most), where friction flips:
     each stage's peak is the larger of Newton's N by hand sliding forward and backward there, on flank a."""
-    module = chain_module(wedges("two-switching", **SWITCHING))
-    result = simulate_chain(module, **TIGHT)
+    result = switching
     turn = next(e["t"] for e in result.events if e["guard"] == "v0")
     hand = HandChain(**SWITCHING)
     q_turn = hand.run(1.0, turn)[2][0]

@@ -192,6 +192,12 @@ def test_an_open_gap_starts_in_free_flight(models):
         assert r.a1[0] == pytest.approx(F1 / 1.3, rel=1e-12)
 
 
+def issue_model(scene_module, modes: str):
+    """The issue's scene with ``modes`` included (one model per modes list)."""
+    return scene_module(ISSUE.replace("start-light-worm", f"start-light-worm-{modes.count(',')}")
+                        .replace("MODES", modes))
+
+
 @pytest.mark.parametrize("modes", ['"forward", "backward", "stick"', '"forward", "stick"'])
 def test_light_worm_on_heavy_wheel_drives_flank_a_from_the_start(scene_module, modes):
     """The issue's scene: the motor alone would accelerate the worm at F0 / m1 = 6154 m/s^2 into
@@ -201,8 +207,7 @@ def test_light_worm_on_heavy_wheel_drives_flank_a_from_the_start(scene_module, m
     no claim that the load drives the worm backward when backward is excluded."""
     [(mode, a1, S2, regular)] = hand_start(8.0 * DEG, 6.0 * DEG, 1.3, 1500.0, 8000.0, 2000.0, [1])
     assert (mode, regular) == ("fwd_a", True)
-    module = scene_module(ISSUE.replace("start-light-worm", f"start-light-worm-{modes.count(',')}")
-                          .replace("MODES", modes))
+    module = issue_model(scene_module, modes)
     r = simulate(module)
     assert r.status == "finished", r.message
     assert r.phases[0].mode == "fwd_a" and r.phases[0].t_end > 0.01
@@ -219,8 +224,7 @@ def test_a_random_sweep_of_the_issue_scene_starts_every_case_by_hand(scene_modul
     them (a heavy wheel) started in free flight and bounced until the event log was full; now
     every case finishes and starts where the hand solution does (fwd_a, or free flight where the
     load runs the light wheel ahead of a heavy worm). The default run takes 300 of them."""
-    module = scene_module(ISSUE.replace("start-light-worm", "start-light-worm-sweep")
-                          .replace("MODES", '"forward", "backward", "stick"'))
+    module = issue_model(scene_module, '"forward", "backward", "stick"')
     P = sweep_cases(module, samples=samples, seed=1,
                     ranges={"F0": "1000:10000", "V0": "0.5:3", "m1": "0.5:20", "m2": "10:3000"})
     table = sweep(module, P, {}).table
