@@ -307,3 +307,31 @@ def test_tswm_simulate_mov_prints_the_answers(tmp_path, capsys):
     assert answers["peak_after_trip"]["thrust"] > answers["trip"]["thrust"] >= 20e3 > 0 < answers["extra_travel"]
     assert answers["trip"]["travel"] >= 0.010 and answers["stall_margin"] > 1
     assert (tmp_path / "mov-stages.png").stat().st_size > 10_000
+
+
+def test_tswm_sweep_mov_gives_a_sizing_table_and_keeps_failed_cases(tmp_path, capsys, monkeypatch):
+    """`tswm sweep mov` over voltage and mu_2: one row per case; the scene's own case equals `tswm simulate
+    mov`'s answers; the stall margin times the trip thrust scales as (U/U_n)^2 (its definition: pull-out
+    torque over the torque the trip thrust needs); a case whose mu_2 is refused keeps its status and the
+    sweep goes on; a bad --grid exits 2 naming it."""
+    import pandas as pd
+
+    from tswm_runtime.cli import main
+    from tswm_runtime.model.contract import load_module
+
+    monkeypatch.setenv("TSWM_CACHE", str(tmp_path / "cache"))
+    assert main(["sweep", "mov", "--grid", "voltage=0.8,1.0", "--grid", "mu_2=0.15,11", "-o", str(tmp_path),
+                 "--no-progress"]) == 0
+    assert "chain mov: sizing table, 4 cases" in capsys.readouterr().out
+    table = pd.read_csv(tmp_path / "mov-sizing.csv")
+    assert list(table["status"]) == ["finished"] * 2 + ["error: mu_2 = 11.0: must be in [0, 10)"] * 2
+    low, nominal = table.iloc[0], table.iloc[1]
+    answers = simulate_chain(load_module("mov")).answers
+    assert nominal["thrust at trip [N]"] == pytest.approx(answers["trip"]["thrust"], rel=1e-12)
+    assert nominal["peak after trip [N]"] == pytest.approx(answers["peak_after_trip"]["thrust"], rel=1e-12)
+    assert nominal["stall margin"] == pytest.approx(answers["stall_margin"], rel=1e-12)
+    assert (low["stall margin"] * low["thrust at trip [N]"]) / (nominal["stall margin"] * nominal["thrust at trip [N]"]) \
+        == pytest.approx(0.64, rel=1e-12)
+    assert list(table["holds"][:2]) == ["holds", "holds"]
+    assert main(["sweep", "mov", "--grid", "mu_3=0.1"]) == 2
+    assert "--grid 'mu_3=0.1': a chain sweeps voltage and mu_1 .. mu_2" in capsys.readouterr().err
