@@ -60,6 +60,8 @@ class HandValve(HandChain):
         state, seated) at each phase's ends, and the trip (t, y, s, sigma, seated) (None: no trip)."""
         t, y, log, samples, trip = 0.0, np.array([0.0, v0]), [], [], None
         self.seated = self.c[-1] * y[0] >= self.seat
+        if self.on == 0 and self.measured(y[0], 0, None, y[1]) >= self.setting:   # already above it at the start
+            self.state, self.t_pick = PICKED, 0.0
         while t < t_end:
             if y[1] == 0.0:
                 moves = [(s, sg) for s in (1, -1) for sg in self.consistent(y[0], s, True)]
@@ -165,6 +167,27 @@ def test_the_switch_trips_on_the_stage_force_as_the_hand_model(chain_module):
     assert result.status == "finished"
     assert result.q0[-1] == pytest.approx(y[0], rel=1e-9)
     assert result.v0[-1] == pytest.approx(y[1], abs=1e-9)
+
+
+MOTOR_SWITCH = dict(on=0, setting=70.0, hysteresis=5.0, delay=0.005)
+RISING = dict(SPRING_TRIP, motor=((0.0, 2.0), (60.0, 100.0), 1.0))    # the drive force rises with speed
+
+
+@pytest.mark.parametrize("chain", [SPRING_TRIP, RISING], ids=["above-at-start", "crossing"])
+def test_the_switch_trips_on_the_motor_torque_as_the_hand_model(chain_module, chain):
+    """on = "motor": body 0's drive force (5 N and the table's) is above the 70 N setting at the start with
+    a falling table (picked up at t = 0, cut 5 ms later) and crosses it during the run-up with a rising
+    one; the cut, the drive force there and the final state agree with the hand model."""
+    module = chain_module(scene("motor-trip" if chain is SPRING_TRIP else "motor-rising", chain, MOTOR_SWITCH))
+    result = simulate_chain(module, **TIGHT)
+    hand = HandValve(**chain, **MOTOR_SWITCH)
+    log, t_stop, y, samples, trip = hand.run(0.0, 0.5)
+    assert result.status == "finished"
+    assert result.trip["t"] == pytest.approx(trip[0], rel=1e-9)
+    hand.state = PICKED
+    assert result.trip["drive"] == pytest.approx(hand.measured(trip[1][0], trip[2], trip[3], trip[1][1]), rel=1e-8)
+    assert result.q0[-1] == pytest.approx(y[0], rel=1e-9)
+    assert result.v0[-1] == pytest.approx(y[1], rel=1e-9)
 
 
 VALVE = dict(gammas=(30.0, 5.0), mus=(0.1, 0.15), masses=(1.0, 1.0, 1.0), forces=(0.0, 0.0, -5.0), motor=MOTOR)
