@@ -37,11 +37,18 @@ def module_for_scene(path: str | os.PathLike) -> Path:
 
 
 def module_for_chain(path: str | os.PathLike) -> Path:
-    """The generated module (.py) of the chain scene file at ``path``: from the cache, or made now."""
-    from derivation.chain.codegen import generate_chain_module, generator_digest as chain_digest
+    """The generated module (.py) of the chain scene file at ``path`` (or a shipped chain's name): from the
+    cache, or made now."""
     from derivation.chain.scene import load_chain
 
-    chain = load_chain(Path(path))
+    return module_for_chain_scene(load_chain(path if isinstance(path, str) else Path(path)))
+
+
+def module_for_chain_scene(chain) -> Path:
+    """The generated module (.py) of a chain scene (a ChainScene, e.g. a sweep's variant with its own
+    digest): from the cache, or made now."""
+    from derivation.chain.codegen import generate_chain_module, generator_digest as chain_digest
+
     key = hashlib.sha256(f"{chain.digest} {chain_digest()}".encode()).hexdigest()[:16]
     directory = cache_dir() / f"{module_name(chain.name)}_{key}"
     target = directory / f"{module_name(chain.name)}.py"

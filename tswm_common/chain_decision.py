@@ -45,12 +45,14 @@ class Candidate:
 @dataclass(frozen=True)
 class Statics:
     """What the resting chain's decision needs: each stage's FTFs of forward sliding (Psi_t, Psi_i),
-    its levers and the generalized force on every body."""
+    its levers, the generalized force on every body and the magnitude of a Coulomb friction on the last
+    body (a valve's packing), which at rest takes any value up to it."""
 
     psi: tuple[tuple[float, float], ...]
     lever_in: tuple[float, ...]
     lever_out: tuple[float, ...]
     force: tuple[float, ...]
+    slack: float = 0.0
 
 
 def decide_numbers(candidates: list[Candidate], velocity: float, statics: Statics) -> Decision:
@@ -107,8 +109,10 @@ def rest(statics: Statics) -> tuple[tuple[Intervals, ...], str]:
 
     Each stage holds while (p + Psi_t q)(p + Psi_i q) <= 0 for p, q its forces over its levers: for a
     given p, q lies in p T with a fixed set T (and for a given q, p in q [-Psi_t, -Psi_i]), so the
-    X_j each side of a body allows are propagated stage by stage from both ends and intersected."""
+    X_j each side of a body allows are propagated stage by stage from both ends and intersected. The last
+    body's friction widens what the last stage must exert on it to [-F_N - slack, -F_N + slack]."""
     psi, lever_in, lever_out, force = statics.psi, statics.lever_in, statics.lever_out, statics.force
+    load: Intervals = ((-force[-1] - statics.slack, -force[-1] + statics.slack),)
     stages = len(psi)
     forward: list[Intervals] = []
     p_set: Intervals = ((-force[0] / lever_in[0],) * 2,)
@@ -116,16 +120,15 @@ def rest(statics: Statics) -> tuple[tuple[Intervals, ...], str]:
         q_set = _scaled(p_set, _forward_cone(*psi[i]))
         w_set = _affine(q_set, 0.0, lever_out[i])
         if i == stages - 1:
-            last = -force[-1]
-            if not any(lo <= last <= hi for lo, hi in w_set):
-                return (), (f"holding body {stages}'s load needs stage {stages} to exert {last:.6g} on it, outside "
-                            f"what the stages can hold against the other forces: {show(w_set)}")
+            if not _intersect(w_set, load):
+                return (), (f"holding body {stages}'s load needs stage {stages} to exert {show(load)} on it, "
+                            f"outside what the stages can hold against the other forces: {show(w_set)}")
             break
         forward.append(w_set)
         # body i + 1: stage i + 2 pushes it with -F_{i+1} - X_{i+1}; its lever turns that into p
         p_set = _affine(w_set, -force[i + 1] / lever_in[i + 1], -1.0 / lever_in[i + 1])
     backward: list[Intervals] = [()] * (stages - 1)
-    q_set = ((-force[-1] / lever_out[-1],) * 2,)
+    q_set = _affine(load, 0.0, 1.0 / lever_out[-1])
     for i in range(stages - 1, 0, -1):
         p_set = _scaled(q_set, _backward_cone(*psi[i]))
         u_set = _affine(p_set, 0.0, lever_in[i])

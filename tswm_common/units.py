@@ -17,6 +17,8 @@ UNITS: dict[str, dict[str, float]] = {
     "damping": {"N s/m": 1.0, "kN s/m": 1e3},
     "inertia": {"kg m^2": 1.0, "g m^2": 1e-3},      # moment of inertia of a rotating body (chains)
     "torque": {"N m": 1.0, "kN m": 1e3},
+    "pressure": {"Pa": 1.0, "kPa": 1e3, "bar": 1e5, "MPa": 1e6},   # a valve's differential pressure (chains)
+    "area": {"m^2": 1.0, "cm^2": 1e-4, "mm^2": 1e-6},
     "dimensionless": {"": 1.0},
 }
 DISPLAY = {"angle": "deg"}  # unit used in messages where it is not the SI unit
@@ -35,6 +37,8 @@ LIMITS: dict[str, tuple[float | None, float]] = {
     "damping": (None, 1e12),
     "inertia": (1e-12, 1e9),
     "torque": (None, 1e12),
+    "pressure": (None, 1e12),
+    "area": (None, 1e6),
 }
 
 _QUANTITY = re.compile(r"\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*(.*?)\s*")

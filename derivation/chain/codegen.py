@@ -18,14 +18,17 @@ import sympy as sp
 from derivation import mechanics as mech
 from derivation.chain import dynamics as dyn
 from derivation.chain import stages as st
+from derivation.chain import valve as vl
 from derivation.chain.scene import ChainScene
 from derivation.codegen import GENERATOR_VERSION, GenerationError, _comment, _docstring, _Printer, inert, module_name
 
 q0 = sp.Symbol("q_0", real=True)          # body 0's coordinate (the state y[0]; v_0 is y[1])
 MOTOR = sp.Symbol("motor", real=True)     # the motor's torque (or force) on body 0 at v_0, from its table
+DIRECTION = sp.Symbol("direction", real=True)   # the sign of v_0 in a sliding mode, 0 at rest
 STATES = ("q0", "v0")
+SWITCHED_GUARDS = ("seat", "switch", "delay")   # the seat's contact, the switch picking up or dropping out, its delay
 GENERATOR_SOURCES = ("chain/codegen.py", "chain/dynamics.py", "chain/stages.py", "chain/scene.py",
-                     "templates/chain_module.py.j2")
+                     "chain/valve.py", "templates/chain_module.py.j2")
 
 
 def generator_digest() -> str:
@@ -45,22 +48,27 @@ class _Code:
         self.sym = dyn.symbols(stages)
         self.printer = _Printer()
 
-    def body(self, exprs: list[sp.Expr]) -> tuple[list[str], list[str]]:
+    def body(self, exprs: list[sp.Expr], direction: int = 0) -> tuple[list[str], list[str]]:
+        """Lines and results; the body forces of a sliding mode in its ``direction``."""
         exprs = [sp.sympify(e) for e in exprs]
         used = set().union(*(e.free_symbols for e in exprs))
         lines = []
         if used & set(self.sym.force):
-            lines.append(f"{', '.join(map(str, self.sym.force))} = body_forces(t, y, p)")
+            lines.append(f"{', '.join(map(str, self.sym.force))} = body_forces(t, y, p, {direction}.0)")
         if q0 in used:
             lines.append("q_0 = y[0]")
         if MOTOR in used:
-            lines.append("motor = motor_torque(y[1])")
+            lines.append("motor = motor_torque(y[1], p)")
+        if vl.POWERED in used:
+            lines.append("powered = motor_on(p)")
+        if vl.SEATED in used:
+            lines.append("seated = p[P_SEATED]")
         replacements, reduced = sp.cse(exprs, symbols=sp.numbered_symbols("c"))
         lines += [f"{s} = {self.printer.doprint(e)}" for s, e in replacements]
         return lines, [self.printer.doprint(e) for e in reduced]
 
-    def function(self, name: str, doc: str, exprs: list[sp.Expr], args: str = "t, y, p") -> dict:
-        lines, results = self.body(exprs)
+    def function(self, name: str, doc: str, exprs: list[sp.Expr], args: str = "t, y, p", direction: int = 0) -> dict:
+        lines, results = self.body(exprs, direction)
         return {"name": name, "args": args, "doc": doc, "lines": lines, "result": ", ".join(results)}
 
 
@@ -75,21 +83,39 @@ def _constants(chain: ChainScene, code: _Code) -> tuple[list[tuple[str, str, str
         for target, expr in ((sym.gamma[k], sp.atan(wedge.tan_gamma)), (sym.rho[k], sp.atan(wedge.tan_rho)),
                              (sym.lever_in[k], wedge.lever_in), (sym.lever_out[k], wedge.lever_out)):
             derived.append((str(target), code.printer.doprint(sp.sympify(expr).subs(names))))
+    valve = chain.bodies[-1].valve
     for j, body in enumerate(chain.bodies):
-        for param in (body.inertia, body.force, body.stiffness):
+        for param in (body.inertia, body.force, body.stiffness, *(vars(body.valve).values() if body.valve else ())):
             if param is not None:
                 given.append((param.name, inert(param.value, param.name), param.key))
         derived.append((str(sym.inertia[j]), body.inertia.name))
+    if chain.switch is not None:
+        given += [(p.name, inert(p.value, p.name), p.key) for p in (chain.switch.setting, chain.switch.hysteresis,
+                                                                    chain.switch.delay)]
+    derived.append(("LOAD_FRICTION", code.printer.doprint(vl.coulomb(valve)) if valve else "0.0"))
     return given, derived
 
 
-def _forces(chain: ChainScene, code: _Code) -> list[sp.Expr]:
-    """The generalized force on each body: its force or torque, less a spring's stiffness times its
-    coordinate q_j = (v_j / v_0) q_0 (q = 0 at the start)."""
+def _forces(chain: ChainScene, code: _Code, direction: sp.Expr) -> list[sp.Expr]:
+    """The generalized force on each body: its force or torque, the motor's while powered, less a spring's
+    stiffness times its coordinate q_j = (v_j / v_0) q_0 (q = 0 at the start), and the valve's force on the
+    last body moving in ``direction``."""
     factors = dyn.speed_factors(code.sym)
-    return [sp.Symbol(b.force.name, real=True) + (MOTOR if b.motor is not None else 0)
+    return [sp.Symbol(b.force.name, real=True) + (vl.drive(MOTOR) if b.motor is not None else 0)
             - (sp.Symbol(b.stiffness.name, real=True) * factors[j] * q0 if b.stiffness is not None and b.stiffness.value
-               else 0) for j, b in enumerate(chain.bodies)]
+               else 0) + (vl.valve_force(b.valve, factors[j] * q0, direction) if b.valve is not None else 0)
+            for j, b in enumerate(chain.bodies)]
+
+
+def _measured(chain: ChainScene, mode: dyn.SlidingMode) -> sp.Expr:
+    """What the torque switch measures in a mode: body 0's drive torque (its torque and the motor's) or
+    stage k's generalized force on its output body; 0 without a switch."""
+    if chain.switch is None:
+        return sp.Integer(0)
+    if chain.switch.stage == 0:
+        body = chain.bodies[0]
+        return sp.Symbol(body.force.name, real=True) + (MOTOR if body.motor is not None else 0)
+    return mode.on_output[chain.switch.stage - 1]
 
 
 def _jam(code: _Code, mode: dyn.SlidingMode) -> sp.Expr:
@@ -99,21 +125,23 @@ def _jam(code: _Code, mode: dyn.SlidingMode) -> sp.Expr:
                     for k, f in enumerate(mode.flanks)))
 
 
-def _mode_functions(code: _Code, index: int, mode: dyn.SlidingMode) -> list[dict]:
+def _mode_functions(chain: ChainScene, code: _Code, index: int, mode: dyn.SlidingMode) -> list[dict]:
     name = f"mode {index}: {mode.name}"
     stage_forces = [e for pair in zip(mode.on_input, mode.on_output, mode.normal) for e in pair]
-    return [code.function(f"accel_{index}", f"a_0 in {name}", [mode.accel]),
-            code.function(f"contact_{index}", f"(D, jam, N_1, ..., N_N) in {name}: the denominator, the "
+    s = mode.direction
+    return [code.function(f"accel_{index}", f"a_0 in {name}", [mode.accel], direction=s),
+            code.function(f"contact_{index}", f"(D, jam, N_1, ..., N_N, measured) in {name}: the denominator, the "
                           "stages' jam factors' product and each stage's normal force; the mode holds while "
-                          "each is >= 0 (D, jam > 0)", [mode.denominator, _jam(code, mode), *mode.normal]),
+                          "each is >= 0 (D, jam > 0); what the torque switch measures",
+                          [mode.denominator, _jam(code, mode), *mode.normal, _measured(chain, mode)], direction=s),
             code.function(f"stage_forces_{index}", f"per stage (on its input body, on its output body, normal "
-                          f"force) in {name}", stage_forces)]
+                          f"force) in {name}", stage_forces, direction=s)]
 
 
 def _jacobian(code: _Code, chain: ChainScene, mode: dyn.SlidingMode) -> tuple[str, str]:
     """(d a_0 / d q_0, d a_0 / d v_0) in a mode: the springs' and the motor's share (the forces are the only
     state dependence; the motor's torque changes with v_0 by its table's slope, ``motor_slope``)."""
-    accel = mode.accel.subs(dict(zip(code.sym.force, _forces(chain, code))))
+    accel = mode.accel.subs(dict(zip(code.sym.force, _forces(chain, code, mode.direction))))
     return code.printer.doprint(sp.diff(accel, q0)), code.printer.doprint(sp.diff(accel, MOTOR))
 
 
@@ -126,12 +154,16 @@ def generate_chain_module(chain: ChainScene) -> str:
     modes = [dyn.sliding(direction, regimes) for direction, regimes in reachable]
     given, derived = _constants(chain, code)
     psi = [tuple(code.printer.doprint(p) for p in _psi(code.sym, k)) for k in range(n)]
-    functions = [code.function("body_forces", "(F_0, ..., F_N): each body's force or torque, a spring's part "
-                               "-stiffness q_j with q_j = (v_j/v_0) q_0", _forces(chain, code))]
+    functions = [code.function("body_forces", "(F_0, ..., F_N): each body's force or torque (the motor's while "
+                               "powered), a spring's part -stiffness q_j with q_j = (v_j/v_0) q_0, the valve's force "
+                               "on the last body moving in `direction` (0: at rest, without its friction)",
+                               _forces(chain, code, DIRECTION), args="t, y, p, direction")]
     for index, mode in enumerate(modes):
-        functions += _mode_functions(code, index, mode)
-    guards = ("D", "jam", *(f"N_{k + 1}" for k in range(n)), "v0")
-    directions = [tuple([-1] * (n + 2) + [-mode.direction]) for mode in modes]
+        functions += _mode_functions(chain, code, index, mode)
+    guards = ("D", "jam", *(f"N_{k + 1}" for k in range(n)), "v0", *SWITCHED_GUARDS)
+    directions = [tuple([-1] * (n + 2) + [-mode.direction] + [-1] * len(SWITCHED_GUARDS)) for mode in modes]
+    switch, valve = chain.switch, chain.bodies[-1].valve
+    seat = valve.seat if valve is not None else None
     constants = {
         "SCENE": chain.name, "DESCRIPTION": chain.description, "SCENE_DIGEST": chain.digest, "STAGES": n,
         "STATES": STATES, "MODES": tuple(m.name for m in modes), "MODE_DIRECTION": tuple(m.direction for m in modes),
@@ -139,6 +171,10 @@ def generate_chain_module(chain: ChainScene) -> str:
         "STAGE_KINDS": tuple(s.kind for s in chain.stages),
         "BODY_MOTIONS": tuple(b.motion for b in chain.bodies), "GUARDS": guards,
         "GUARD_DIRECTIONS": tuple(directions), "OBSERVABLES": (), "RUN": dict(vars(chain.run)),
+        "P_NAMES": vl.P_NAMES, "P_SWITCH": vl.P_SWITCH, "P_PICK": vl.P_PICK, "P_SEATED": vl.P_SEATED,
+        "P_VOLTAGE": vl.P_VOLTAGE,
+        "ARMED": vl.ARMED, "PICKED": vl.PICKED, "TRIPPED": vl.TRIPPED,
+        "SWITCH_ON": -1 if switch is None else switch.stage, "HAS_SEAT": seat is not None,
     }
     env = jinja2.Environment(loader=jinja2.FileSystemLoader(str(resources.files("derivation") / "templates")),
                              trim_blocks=True, lstrip_blocks=True, keep_trailing_newline=True)
@@ -155,7 +191,11 @@ def generate_chain_module(chain: ChainScene) -> str:
         motor_voltage=inert(chain.bodies[0].motor.voltage, "voltage") if chain.bodies[0].motor else "", lever_in=[str(s) for s in code.sym.lever_in],
         lever_out=[str(s) for s in code.sym.lever_out], guards=guards,
         contact_targets=", ".join(f"g[{k}]" for k in range(n + 2)),
-        force_targets=", ".join(f"out[{k}]" for k in range(3 * n)))
+        force_targets=", ".join(f"out[{k}]" for k in range(3 * n)),
+        switch={"SWITCH_SETTING": switch.setting.name, "SWITCH_HYSTERESIS": switch.hysteresis.name,
+                "SWITCH_DELAY": switch.delay.name} if switch else {"SWITCH_SETTING": "math.inf",
+                                                                  "SWITCH_HYSTERESIS": "0.0", "SWITCH_DELAY": "0.0"},
+        seat=seat.name if seat is not None else "math.nan")
     body = re.sub(r"\n+@njit", "\n\n\n@njit", body)
     header = (f"# Generated by tswm {GENERATOR_VERSION} from chain scene '{chain.name}'. DO NOT EDIT: regenerate "
               "it from its scene file.\n"

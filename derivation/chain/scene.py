@@ -22,7 +22,7 @@ from derivation.scene import RUN as SCENE_RUN
 from tswm_common import units
 from tswm_common.text import printable
 
-TOP_KEYS = ("name", "description", "stage", "body", "run")
+TOP_KEYS = ("name", "description", "stage", "body", "switch", "run")
 ANGLE = Rule("angle", 0.0, 90 * DEG)
 TILT = Rule("angle", 0.0, 90 * DEG, lo_in=True)      # 0: a flank square to the wedge plane
 SIZE = Rule("length", 0.0)
@@ -32,6 +32,11 @@ RULES = {"gamma": ANGLE, "lead_angle": ANGLE, "pressure_angle": TILT, "flank_ang
 BODY = {st.ROTATION: ("inertia", "torque"), st.TRANSLATION: ("mass", "force")}
 SPRING = Rule("stiffness", 0.0, lo_in=True, default=0.0)    # translating bodies: F = force - stiffness q
 MOTOR_POINTS = 100
+VALVE = {"packing": Rule("force", 0.0, lo_in=True, default=0.0), "dp": Rule("pressure", 0.0, lo_in=True, default=0.0),
+         "area": Rule("area", 0.0, lo_in=True, default=0.0),
+         "valve_factor": Rule("dimensionless", 0.0, 10.0, lo_in=True, hi_in=True, default=1.0)}
+SEAT = {"seat": Rule("length"), "seat_stiffness": Rule("stiffness", 0.0)}
+SWITCH_TIMES = {"delay": Rule("time", 0.0, lo_in=True, default=0.0)}
 VOLTAGE = Rule("dimensionless", 0.0, 2.0, hi_in=True, default=1.0)   # U / U_n
 RUN = {"t_end": SCENE_RUN["t_end"], "v0": Rule("dimensionless", -1e12, 1e12, lo_in=True, hi_in=True, default=0.0),
        "rtol": SCENE_RUN["rtol"], "atol": SCENE_RUN["atol"], "max_steps": SCENE_RUN["max_steps"]}
@@ -54,6 +59,31 @@ class Body:
     force: Param
     stiffness: Param | None = None
     motor: Motor | None = None
+    valve: Valve | None = None
+
+
+@dataclass(frozen=True)
+class Valve:
+    """The valve side of the last (translating) body: a Coulomb friction of constant magnitude
+    packing + valve_factor dp area against its motion, and a seat at travel ``seat`` (a spring of
+    ``seat_stiffness`` beyond it; None: no seat)."""
+    packing: Param
+    dp: Param
+    area: Param
+    valve_factor: Param
+    seat: Param | None
+    seat_stiffness: Param | None
+
+
+@dataclass(frozen=True)
+class Switch:
+    """A torque switch: on body 0's drive torque (stage 0) or on stage k's force on its output body,
+    picking up at ``setting``, dropping out below setting - hysteresis, cutting the motor ``delay``
+    after it picked up (unless it dropped out before)."""
+    stage: int
+    setting: Param
+    hysteresis: Param
+    delay: Param
 
 
 @dataclass(frozen=True)
@@ -85,6 +115,24 @@ class ChainScene:
     source: str
     digest: str
     run: ChainRun = ChainRun(1.0, 0.0, 1e-6, 1e-9, 100000)
+    switch: Switch | None = None
+
+    def with_friction(self, mu: dict[int, float]) -> ChainScene:
+        """This chain with stage k's mu replaced by mu[k] (k from 1), checked as the scene file's would be,
+        under a digest of its own."""
+        stages = list(self.stages)
+        for k, value in mu.items():
+            old = stages[k - 1].params["mu"]
+            if not (MU.lo <= value < MU.hi) or not math.isfinite(value):
+                raise SceneError(f"mu_{k} = {value!r}: must be in [0, 10)")
+            stages[k - 1] = Stage(stages[k - 1].kind, {**stages[k - 1].params, "mu": Param(old.name, float(value),
+                                  old.unit, False, old.key)}, stages[k - 1].flanks)
+            gamma, rho, _, _ = _equivalent(stages[k - 1])
+            if gamma + rho >= 90 * DEG:
+                raise SceneError(f"mu_{k} = {value!r}: the stage jams (slope + friction angle >= 90 deg)")
+        digest = hashlib.sha256(f"{self.digest} mu {sorted(mu.items())!r}".encode()).hexdigest()
+        return ChainScene(self.name, self.description, tuple(stages), self.bodies, self.source, digest, self.run,
+                          self.switch)
 
     def values(self) -> ChainValues:
         """The equivalent wedges' numbers (slope, friction angle, levers) and the bodies', in SI."""
@@ -103,8 +151,18 @@ def _equivalent(stage: Stage) -> tuple[float, float, float, float]:
             number(wedge.lever_in), number(wedge.lever_out))
 
 
+SCENES = Path(__file__).resolve().parent / "scenes"
+
+
+def shipped_chains() -> tuple[str, ...]:
+    """Names of the chain scenes shipped in derivation/chain/scenes/."""
+    return tuple(sorted(f.name.removesuffix(".toml") for f in SCENES.iterdir() if f.name.endswith(".toml")))
+
+
 def load_chain(path: str | os.PathLike) -> ChainScene:
-    """Read a chain scene file."""
+    """Read a chain scene file, or a shipped chain scene by name ("mov")."""
+    if isinstance(path, str) and path in shipped_chains():
+        path = SCENES / f"{path}.toml"
     source = os.fspath(path)
     try:
         data = Path(source).read_bytes()
@@ -152,7 +210,7 @@ class _ChainReader(_Reader):
                       "stage jams)", f"{params['mu'].value:g}")
         return stage
 
-    def body(self, table: dict, j: int, motion: str) -> Body:
+    def body(self, table: dict, j: int, motion: str, last: bool) -> Body:
         path = f"body[{j}]"
         inertia_key, force_key = BODY[motion]
         other = BODY[st.TRANSLATION if motion == st.ROTATION else st.ROTATION]
@@ -161,7 +219,8 @@ class _ChainReader(_Reader):
                 self.fail(f"{path}.{key}", f"body {j} {'rotates' if motion == st.ROTATION else 'translates'} "
                           f"(set by the stages it joins): give {inertia_key} and {force_key}")
         spring = ("stiffness",) if motion == st.TRANSLATION else ()
-        self.keys(table, path, (inertia_key, force_key, *spring, *(("motor",) if j == 0 else ())))
+        valve = (*VALVE, *SEAT) if last and motion == st.TRANSLATION else ()
+        self.keys(table, path, (inertia_key, force_key, *spring, *(("motor",) if j == 0 else ()), *valve))
         quantity = "mass" if motion == st.TRANSLATION else "inertia"
         rules = {inertia_key: Rule(quantity, 0.0), force_key: Rule(force_key if force_key == "torque" else "force",
                                                                    default=0.0), **{key: SPRING for key in spring}}
@@ -170,7 +229,39 @@ class _ChainReader(_Reader):
             if param.free:
                 self.fail(param.key, "free parameters of a chain are not supported yet: give a plain value")
         motor = self.motor(table["motor"], f"{path}.motor") if "motor" in table else None
-        return Body(motion, params[inertia_key], params[force_key], params.get("stiffness"), motor)
+        valve = self.valve(table, path, f"body{j}_") if last and motion == st.TRANSLATION else None
+        return Body(motion, params[inertia_key], params[force_key], params.get("stiffness"), motor, valve)
+
+    def valve(self, table: dict, path: str, prefix: str) -> Valve | None:
+        """Packing, differential pressure and seat keys of the last body (None when none is given)."""
+        if not any(key in table for key in (*VALVE, *SEAT)):
+            return None
+        params = self.plain(table, path, VALVE, prefix)
+        seat = self.plain(table, path, SEAT, prefix) if "seat" in table or "seat_stiffness" in table else {}
+        return Valve(*params.values(), seat.get("seat"), seat.get("seat_stiffness"))
+
+    def plain(self, table: dict, path: str, rules: dict[str, Rule], prefix: str) -> dict[str, Param]:
+        """Params of plain values (a chain has no free parameters yet)."""
+        params = self.params(table, path, rules, prefix)
+        for param in params.values():
+            if param.free:
+                self.fail(param.key, "free parameters of a chain are not supported yet: give a plain value")
+        return params
+
+    def switch(self, doc: dict, stages: tuple[Stage, ...], motions: list[str]) -> Switch | None:
+        """[switch]: on = "motor" (body 0's drive torque) or "stage K" (stage K's force on body K)."""
+        table = self.table(doc, "switch", required=False)
+        if table is None:
+            return None
+        self.keys(table, "switch", ("on", "setting", "hysteresis", "delay"))
+        choices = ("motor", *(f"stage {k}" for k in range(1, len(stages) + 1)))
+        on = self.text(table, "on", "switch", choices)
+        stage = 0 if on == "motor" else int(on.split()[1])
+        quantity = "torque" if motions[stage] == st.ROTATION else "force"
+        params = self.plain(table, "switch", {"setting": Rule(quantity, 0.0),
+                                              "hysteresis": Rule(quantity, 0.0, "setting", lo_in=True, default=0.0),
+                                              **SWITCH_TIMES}, "switch_")
+        return Switch(stage, params["setting"], params["hysteresis"], params["delay"])
 
     def motor(self, table: object, path: str) -> Motor:
         """speed (SI, increasing from >= 0), torque (SI) of 2 to MOTOR_POINTS points; voltage = U / U_n."""
@@ -212,5 +303,6 @@ class _ChainReader(_Reader):
                           _toml(stages[k].kind))
         tables = self.tables(doc, "body", len(stages) + 1, len(stages) + 1)
         motions = [kinds[0].motion_in, *(kind.motion_out for kind in kinds)]
-        bodies = tuple(self.body(t, j, m) for j, (t, m) in enumerate(zip(tables, motions)))
-        return ChainScene(name, description, stages, bodies, self.source, digest, self.chain_run(doc))
+        bodies = tuple(self.body(t, j, m, j == len(stages)) for j, (t, m) in enumerate(zip(tables, motions)))
+        return ChainScene(name, description, stages, bodies, self.source, digest, self.chain_run(doc),
+                          self.switch(doc, stages, motions))

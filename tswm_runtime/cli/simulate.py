@@ -100,12 +100,13 @@ def _warn_if_edited(module) -> None:
 
 
 def _run_chain(args: argparse.Namespace) -> int:
-    """A chain scene file ([[stage]] tables): its run, per stage regimes, switch times, force maxima."""
+    """A chain scene ([[stage]] tables; a file or a shipped chain's name): its run, per stage regimes, switch
+    times, force maxima, a drive train's answers; with -o the summary (JSON) and the figure per stage."""
     import json
 
     from tswm_common.files import write_atomic
     from tswm_runtime.model.scenes import load_chain_model
-    from tswm_runtime.simulation.chain import simulate_chain, summary
+    from tswm_runtime.simulation.chain import plot, simulate_chain, summary
     from tswm_runtime.simulation.simulate import METHODS, SimulationInputError
 
     if args.set:
@@ -126,6 +127,7 @@ def _run_chain(args: argparse.Namespace) -> int:
         path = write_atomic(os.path.join(args.output, f"{module.SCENE}-summary.json"),
                             json.dumps(result.to_dict(), indent=1, allow_nan=True))
         print(f"  wrote {path}")
+        print(f"  wrote {plot(result, module, os.path.join(args.output, f'{module.SCENE}-stages.png'))}")
     return 0 if result.status == "finished" else 1
 
 

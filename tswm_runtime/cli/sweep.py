@@ -67,8 +67,45 @@ def run(args: argparse.Namespace) -> int:
         return 1
 
 
+def _run_chain(args: argparse.Namespace) -> int:
+    """A chain scene: its sizing table over --grid voltage=... mu_k=... (tswm_runtime/sweeps/chain.py)."""
+    import os
+
+    from tswm_common.files import write_atomic
+    from tswm_runtime.model.scenes import load_chain_model
+    from tswm_runtime.simulation.simulate import METHODS
+    from tswm_runtime.sweeps.chain import ChainSweepError, parse_grid, sizing
+
+    if args.samples is not None or args.range or args.scheduler:
+        raise UsageError("--samples/--range/--scheduler: a chain sweep takes --grid only")
+    module = load_chain_model(args.scene)
+    overrides = setting_overrides(args, SWEEP_SETTINGS)
+    method = overrides.pop("method") or "dopri5"
+    if method not in METHODS:
+        raise UsageError(f"--method {method!r}: must be one of {', '.join(METHODS)}")
+    overrides = {k: v for k, v in overrides.items() if v is not None}
+    try:
+        grid = parse_grid(args.grid, module.STAGES)
+    except ChainSweepError as error:
+        raise UsageError(str(error)) from None
+    table = sizing(args.scene, grid, {**overrides, "method": METHODS[method]},
+                   notice=(lambda text: None) if args.no_progress else _notice)
+    print(f"chain {module.SCENE}: sizing table, {plural(len(table), 'case')}")
+    print(table.to_string(index=False, float_format=lambda x: f"{x:.6g}"))
+    counts = table["status"].value_counts()
+    print("  status: " + ", ".join(f"{k} {v}" for k, v in counts.items()))
+    if args.output:
+        path = write_atomic(os.path.join(args.output, f"{module.SCENE}-sizing.csv"), table.to_csv(index=False))
+        print(f"  wrote {path}")
+    return 0
+
+
 def _run(args: argparse.Namespace) -> int:
     output_directory(args.output)
+    from tswm_runtime.model.scenes import is_chain
+
+    if is_chain(args.scene):
+        return _run_chain(args)
     spec, cold = prepare_kernels(args.scene, ("integrate", "batch"))
     from tswm_runtime.model.scenes import load_model
     from tswm_runtime.simulation.simulate import SimulationInputError

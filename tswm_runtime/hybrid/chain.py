@@ -11,8 +11,16 @@ logic the derivation uses (tswm_common/chain_decision.py), with the module's num
 a flank change, breakaway or rest; no mode or several (a Painleve-type case) stop the run with the
 reason. So a chain needs no kernel of its own: the one compiled for every scene runs it.
 
-A resting chain stays at rest: its forces depend on q0 (springs) and v0 (a motor's table), which
-rest with it. While sliding, every stage force is affine in the bodies' forces; each phase keeps
+The torque switch and the valve's seat are latches in the parameter vector p (the module's
+P_NAMES): their guards stop the machine like the others, and here the seat's contact flips, the
+switch picks up (its delay starts), drops out (below setting - hysteresis) or trips (the motor is cut
+for good); then the mode is decided again with the new forces. A resting chain stays at rest: its
+forces depend on q0 (springs, the seat) and v0 (a motor's table), which rest with it, except when a
+picked-up switch's delay ends while it rests: the motor is cut then and the chain decided again. While
+it rests, the switch sees body 0's drive torque; a switch on a stage's force keeps its state (the
+split of a resting chain's forces is statically undetermined).
+
+While sliding, every stage force is affine in the bodies' forces; each phase keeps
 the stage forces at its ends and at the output points inside it. Without a motor the bodies'
 forces are affine in q0, which is monotone in a sliding phase, so a stage force's extreme lies
 at a phase end and the maxima taken from these samples are exact.
@@ -53,7 +61,8 @@ class Phase:
     mode: int
     t_start: float
     t_end: float
-    forces: list = field(default_factory=list)   # (t, stage_forces) at its ends and output points (sliding)
+    latches: np.ndarray                          # p in the phase: switch state, pick-up time, seated
+    samples: list = field(default_factory=list)  # (t, y, stage_forces) at its ends and output points (sliding)
 
 
 @dataclass
@@ -77,27 +86,59 @@ class ChainRun:
     t: np.ndarray                # output times, and the states there (NaN after a stop)
     y: np.ndarray
     n_steps: int
+    trip: tuple | None = None    # (t, y, mode, stage forces before the cut) when the switch cut the motor
 
 
-def _candidates(module, t: float, y: np.ndarray, directions) -> list[Candidate]:
+def latches(module, y: np.ndarray, voltage: float | None = None) -> np.ndarray:
+    """p at the start: the switch armed, the seat pressed if the last body starts at or beyond it, the
+    motor's voltage U / U_n (the scene's unless given)."""
+    p = np.zeros(len(module.P_NAMES))
+    p[module.P_SEATED] = float(module.HAS_SEAT and module.SPEED_FACTORS[-1] * y[0] >= module.SEAT)
+    p[module.P_VOLTAGE] = getattr(module, "MOTOR_VOLTAGE", 1.0) if voltage is None else voltage
+    return p
+
+
+def _candidates(module, t: float, y: np.ndarray, p: np.ndarray, directions) -> list[Candidate]:
     g = np.empty(len(module.GUARDS))
     out = []
     n = module.STAGES
     for m, direction in enumerate(module.MODE_DIRECTION):
         if direction in directions:
-            module.guards(m, t, y, np.empty(0), g)
-            out.append(Candidate(module.MODES[m], direction, float(module.accel(m, t, y, np.empty(0))), float(g[0]),
+            module.guards(m, t, y, p, g)
+            out.append(Candidate(module.MODES[m], direction, float(module.accel(m, t, y, p)), float(g[0]),
                                  tuple(float(x) for x in g[2:2 + n])))
     return out
 
 
-def decide(module, t: float, y: np.ndarray) -> Decision:
-    """The chain's mode at (t, y): every candidate in the direction of v0 (both at rest), and rest."""
+def decide(module, t: float, y: np.ndarray, p: np.ndarray) -> Decision:
+    """The chain's mode at (t, y) under latches p: every candidate in the direction of v0 (both at rest),
+    and rest (the valve's friction holding anything up to its magnitude)."""
     v = y[1]
     directions = (1, -1) if v == 0 else ((1,) if v > 0 else (-1,))
     statics = Statics(module.PSI, module.LEVER_IN, module.LEVER_OUT,
-                      tuple(float(f) for f in module.body_forces(t, y, np.empty(0))))
-    return decide_numbers(_candidates(module, t, y, directions), v, statics)
+                      tuple(float(f) for f in module.body_forces(t, y, p, 0.0)), float(module.LOAD_FRICTION))
+    return decide_numbers(_candidates(module, t, y, p, directions), v, statics)
+
+
+def _switched(module, mode: int, t: float, y: np.ndarray, p: np.ndarray, guard: str) -> bool:
+    """Apply the switch's logic at (t, y) in ``mode`` (a fired ``guard`` forces its transition); True when
+    the motor has just been cut."""
+    if module.SWITCH_ON < 0:
+        return False
+    g = np.full(len(module.GUARDS), np.nan)
+    if mode == RESTING:
+        drive = float(module.body_forces(t, y, p, 0.0)[0]) if module.SWITCH_ON == 0 else np.nan
+        g[-2] = module.switch_gap(drive, p)
+        g[-1] = module.delay_left(t, p)
+    else:
+        module.guards(mode, t, y, p, g)
+    if p[module.P_SWITCH] != module.TRIPPED and (guard == "switch" or g[-2] < 0):
+        p[module.P_SWITCH] = module.PICKED if p[module.P_SWITCH] == module.ARMED else module.ARMED
+        p[module.P_PICK] = t
+    if p[module.P_SWITCH] == module.PICKED and (guard == "delay" or module.delay_left(t, p) <= 0):
+        p[module.P_SWITCH] = module.TRIPPED
+        return True
+    return False
 
 
 def _chosen(module, decision: Decision, current: int) -> int | None:
@@ -112,22 +153,54 @@ def _chosen(module, decision: Decision, current: int) -> int | None:
     return None
 
 
-def _forces(module, mode: int, t: float, y: np.ndarray) -> np.ndarray:
+def _forces(module, mode: int, t: float, y: np.ndarray, p: np.ndarray) -> np.ndarray:
     out = np.empty(3 * module.STAGES)
-    module.stage_forces(mode, t, y, np.empty(0), out)
+    module.stage_forces(mode, t, y, p, out)
     return out
 
 
+def _cut(module, mode: int, t: float, y: np.ndarray, p: np.ndarray) -> dict:
+    """What the chain carried just before the motor's cut (p still powered): mode, state, stage forces
+    (None at rest: undetermined), body 0's drive torque."""
+    direction = 0.0 if mode == RESTING else float(module.MODE_DIRECTION[mode])
+    return {"t": t, "y": y.copy(), "mode": mode,
+            "forces": None if mode == RESTING else _forces(module, mode, t, y, p),
+            "drive": float(module.body_forces(t, y, p, direction)[0])}
+
+
+def _settle(module, t: float, y: np.ndarray, p: np.ndarray, mode: int, guard: str) -> tuple[Decision, int | None, dict | None]:
+    """The latches after ``guard`` fired in ``mode`` (the seat's contact flips; the switch moves), then the
+    next mode; a switch that picks up with no delay, or sees its setting already where the chain
+    starts or comes to rest, cuts the motor at once and the mode is decided again. Returns the decision,
+    the mode and what the chain carried at a cut (None: no cut here)."""
+    cut = None
+    before = p.copy()
+    if guard == "seat":
+        p[module.P_SEATED] = 1.0 - p[module.P_SEATED]
+    if guard in ("switch", "delay") and _switched(module, mode, t, y, p, guard):
+        cut = _cut(module, mode, t, y, before)
+    decision = decide(module, t, y, p)
+    new = _chosen(module, decision, mode)
+    if new is not None and (guard == "start" or new == RESTING):
+        before = p.copy()
+        if _switched(module, new, t, y, p, "check"):
+            cut = _cut(module, new, t, y, before)
+            decision = decide(module, t, y, p)
+            new = _chosen(module, decision, new)
+    return decision, new, cut
+
+
 def run_chain(module, *, t_end: float, v0: float, rtol: float, atol: float, t_out: np.ndarray,
-              method: int = 0, max_steps: int = 100_000, max_events: int = 1000) -> ChainRun:
-    """Integrate the chain from q0 = 0, v0 to t_end through its mode changes."""
-    p = np.empty(0)
+              method: int = 0, max_steps: int = 100_000, max_events: int = 1000,
+              voltage: float | None = None) -> ChainRun:
+    """Integrate the chain from q0 = 0, v0 to t_end through its mode changes and its switch's and seat's
+    events; ``voltage`` (U / U_n) replaces the scene's motor voltage."""
     modes = tables(module)
     t, y = 0.0, np.array([0.0, float(v0)])
+    p = latches(module, y, voltage)
     rows = np.full((t_out.size, 2), np.nan)
     phases, events, steps, same = [], [], 0, 0
-    decision = decide(module, t, y)
-    mode = _chosen(module, decision, RESTING)
+    decision, mode, trip = _settle(module, t, y, p, RESTING, "start")
     events.append(ChainEvent(t, "start", RESTING, mode, decision))
     status, message = "finished", ""
     while True:
@@ -136,22 +209,30 @@ def run_chain(module, *, t_end: float, v0: float, rtol: float, atol: float, t_ou
             message = decision.reason
             break
         if mode == RESTING:
-            phases.append(Phase(RESTING, t, t_end))
+            t_cut = p[module.P_PICK] + module.SWITCH_DELAY if p[module.P_SWITCH] == module.PICKED else math.inf
+            phases.append(Phase(RESTING, t, min(t_cut, t_end), p.copy()))
             rows[t_out >= t] = (y[0], 0.0)
-            t = t_end
-            break
+            if t_cut >= t_end:
+                t = t_end
+                break
+            t = t_cut
+            decision, mode, cut = _settle(module, t, y, p, RESTING, "delay")
+            trip = trip or cut
+            events.append(ChainEvent(t, "delay", RESTING, mode, decision))
+            continue
         if len(events) >= max_events:
             status, message = "too-many-events", f"{max_events} events"
             break
         first = int(np.searchsorted(t_out, t))
-        phase = Phase(mode, t, t, [(t, _forces(module, mode, t, y))])
+        phase = Phase(mode, t, t, p.copy(), [(t, y.copy(), _forces(module, mode, t, y, p))])
         code, t_stop, n_ev, _, _, _, out, log, _, counters, _ = entry.integrate(
             method, module, p, modes, y, t_end, rtol=rtol, atol=atol, t_out=t_out[first:], max_events=1, t0=t,
             mode0=mode, max_steps=max(max_steps - steps, 1))
         steps += int(counters[0] + counters[1])
         done = out.mode >= 0
         rows[first:][done] = out.y[done]
-        phase.forces += [(t_i, _forces(module, mode, t_i, y_i)) for t_i, y_i in zip(out.t[done], out.y[done])]
+        phase.samples += [(t_i, y_i.copy(), _forces(module, mode, t_i, y_i, p))
+                          for t_i, y_i in zip(out.t[done], out.y[done])]
         same = same + 1 if t_stop == t else 0
         t = t_stop
         if n_ev == 0:
@@ -163,7 +244,7 @@ def run_chain(module, *, t_end: float, v0: float, rtol: float, atol: float, t_ou
         y = log.state[0, :2].copy()
         guard = module.GUARDS[log.index[0, 0]]
         phase.t_end = t
-        phase.forces.append((t, _forces(module, mode, t, y)))
+        phase.samples.append((t, y.copy(), _forces(module, mode, t, y, p)))
         phases.append(phase)
         if guard in ("D", "jam"):
             status = "inconsistent"
@@ -173,11 +254,11 @@ def run_chain(module, *, t_end: float, v0: float, rtol: float, atol: float, t_ou
             break
         if guard == "v0":
             y[1] = 0.0
-        decision = decide(module, t, y)
-        new = _chosen(module, decision, mode)
+        decision, new, cut = _settle(module, t, y, p, mode, guard)
+        trip = trip or cut
         events.append(ChainEvent(t, guard, mode, new, decision))
         if same >= MAX_SAME_TIME:
             status, message = "chattering", f"{MAX_SAME_TIME} decisions at t = {t:.9g} s"
             break
         mode = new
-    return ChainRun(status, message, t, phases, events, t_out, rows, steps)
+    return ChainRun(status, message, t, phases, events, t_out, rows, steps, trip)

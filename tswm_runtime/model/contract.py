@@ -73,15 +73,22 @@ CHAIN_CONSTANTS = {
     "MODE_DIRECTION": "sign of v0 per mode", "MODE_REGIMES": "per mode, each stage's regime",
     "MODE_FLANKS": "per mode, each stage's loaded flank", "STAGE_KINDS": "per stage its kind",
     "BODY_MOTIONS": "per body 'rotation' or 'translation'",
-    "GUARDS": "('D', 'jam', 'N_1', ..., 'N_N', 'v0')", "GUARD_DIRECTIONS": "per mode, per guard",
+    "GUARDS": "('D', 'jam', 'N_1', ..., 'N_N', 'v0', 'seat', 'switch', 'delay')",
+    "GUARD_DIRECTIONS": "per mode, per guard",
     "OBSERVABLES": "() (the stage forces come from stage_forces)", "RUN": "t_end, v0, rtol, atol, max_steps",
     "PSI": "per stage (Psi_t, Psi_i) of forward sliding", "LEVER_IN": "per stage", "LEVER_OUT": "per stage",
     "INERTIA": "per body", "SPEED_FACTORS": "v_j / v_0 per body",
+    "P_NAMES": "('switch', 't_pick', 'seated', 'voltage'): the slots of p, set by the runtime (the first three at "
+               "its events)",
+    "SWITCH_ON": "-1: no torque switch, 0: on body 0's drive torque, k: on stage k's force on its output body",
+    "SWITCH_SETTING": "pick-up setting", "SWITCH_HYSTERESIS": "drop-out below setting - hysteresis",
+    "SWITCH_DELAY": "s from pick-up to the motor's cut", "HAS_SEAT": "whether the last body has a seat",
+    "SEAT": "the seat's travel on the last body", "LOAD_FRICTION": "the valve's Coulomb friction magnitude",
 }
 CHAIN_FUNCTIONS = {
     "rhs": "as above", "jac": "as above", "guards": "as above", "observe": "fills nothing",
     "impact": "NaN: nothing collides", "accel": "accel(mode, t, y, p) -> a_0",
-    "body_forces": "body_forces(t, y, p) -> (F_0, ..., F_N)",
+    "body_forces": "body_forces(t, y, p, direction) -> (F_0, ..., F_N), the valve's friction against direction",
     "stage_forces": "stage_forces(mode, t, y, p, out): per stage (on its input body, on its output body, N)",
 }
 

@@ -5,6 +5,7 @@ with the same message."""
 from __future__ import annotations
 
 import pkgutil
+import re
 from pathlib import Path
 from types import ModuleType
 
@@ -21,12 +22,24 @@ def shipped_scenes() -> list[str]:
     return sorted(m.name.replace("_", "-") for m in pkgutil.iter_modules(generated.__path__))
 
 
+def _shipped_chain(name: str) -> Path | None:
+    """generated/'s module of a shipped chain scene of that name (its header says so), else None."""
+    if not re.fullmatch(r"[a-z0-9][a-z0-9-]*", name):
+        return None
+    path = Path(generated.__path__[0]) / f"{name.replace('-', '_')}.py"
+    if not path.is_file():
+        return None
+    with path.open(encoding="utf-8") as file:
+        return path if "from chain scene" in file.readline() else None
+
+
 def is_chain(scene: str | Path) -> bool:
-    """Whether ``scene`` is a chain scene file: a .toml with [[stage]] tables (read without SymPy)."""
+    """Whether ``scene`` is a chain scene file (a .toml with [[stage]] tables, read without SymPy) or a
+    shipped chain scene's name."""
     import tomllib
 
     if Path(str(scene)).suffix != ".toml":
-        return False
+        return _shipped_chain(str(scene)) is not None
     try:
         return "stage" in tomllib.loads(Path(scene).read_text(encoding="utf-8"))
     except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError):
@@ -34,10 +47,23 @@ def is_chain(scene: str | Path) -> bool:
 
 
 def load_chain_model(scene: str | Path) -> ModuleType:
-    """The generated module of a chain scene file, made into the user cache on first use (SymPy)."""
+    """The generated module of a chain scene file, made into the user cache on first use (SymPy), or a
+    shipped chain's from generated/."""
+    if _shipped_chain(str(scene)) is not None:
+        return load_module(str(scene))
     from derivation.model_cache import module_for_chain
 
     return load_module(module_for_chain(scene))
+
+
+def load_chain_variant(scene: str | Path, mu: dict[int, float]) -> ModuleType:
+    """The module of a chain scene (file or shipped name) with stage k's friction coefficient mu[k]: derived
+    and generated into the user cache on first use (SymPy), as a sweep over friction needs."""
+    from derivation.chain.scene import load_chain
+    from derivation.model_cache import module_for_chain_scene
+
+    chain = load_chain(str(scene) if _shipped_chain(str(scene)) else Path(scene))
+    return load_module(module_for_chain_scene(chain.with_friction(mu)))
 
 
 def model_spec(scene: str | Path) -> str:

@@ -14,6 +14,7 @@ from types import ModuleType
 import numpy as np
 
 from tswm_runtime.hybrid.chain import RESTING, ChainRun, run_chain
+from tswm_runtime.simulation.drive_train import answers
 from tswm_runtime.simulation.simulate import (ATOL_RANGE, DEFAULT_MAX_EVENTS, DEFAULT_POINTS, MAX_EVENTS, MAX_POINTS,
                                               MAX_STEPS, RTOL_RANGE, _check, _finite)
 
@@ -54,22 +55,34 @@ class ChainResult:
     q0: np.ndarray
     v0: np.ndarray
     n_steps: int
+    answers: dict | None = None  # the drive train's: trip, peak after it, extra travel, hold, stall margin
+    samples: tuple = ()          # (t, q0, v0, stage forces) of the sliding phases' samples, NaN between phases
+
+    @property
+    def trip(self) -> dict | None:
+        """t, thrust (the last stage's force on the last body), drive (body 0's torque), travel at the cut."""
+        return self.answers["trip"] if self.answers else None
 
     def to_dict(self) -> dict:
         """The summary as plain data (no arrays)."""
         return {"scene": self.scene, "status": self.status, "message": self.message, "t_stop": self.t_stop,
-                "stages": [asdict(s) for s in self.stages], "events": list(self.events), "n_steps": self.n_steps}
+                "stages": [asdict(s) for s in self.stages], "events": list(self.events), "n_steps": self.n_steps,
+                "answers": self.answers}
 
 
 def settings(module: ModuleType, overrides: dict) -> dict:
     """The chain scene's run settings with ``overrides`` applied, validated, naming a bad one."""
-    run = {**module.RUN, "points": DEFAULT_POINTS, "max_events": DEFAULT_MAX_EVENTS}
+    run = {**module.RUN, "points": DEFAULT_POINTS, "max_events": DEFAULT_MAX_EVENTS, "voltage": None}
     for key, value in overrides.items():
         _check(key in run, "setting", key, lambda: f"one of {', '.join(run)}")
         if value is not None:
             run[key] = value
     for key in ("t_end", "v0", "rtol", "atol"):
         run[key] = _finite(key, run[key])
+    if run["voltage"] is not None:
+        run["voltage"] = _finite("voltage", run["voltage"])
+        _check(hasattr(module, "MOTOR_VOLTAGE"), "voltage", run["voltage"], "for a chain with a motor on body 0")
+        _check(0.0 < run["voltage"] <= 2.0, "voltage", run["voltage"], "U / U_n in (0, 2]")
     _check(run["t_end"] > 0.0, "t_end", run["t_end"], "> t0 = 0 s")
     _check(RTOL_RANGE[0] <= run["rtol"] <= RTOL_RANGE[1], "rtol", run["rtol"], f"in [{RTOL_RANGE[0]:g}, "
            f"{RTOL_RANGE[1]:g}]")
@@ -83,14 +96,38 @@ def settings(module: ModuleType, overrides: dict) -> dict:
 
 def simulate_chain(module: ModuleType, method: int = 0, **overrides) -> ChainResult:
     """One run of a chain module by ``method`` (segment.DOPRI5 or ROSENBROCK23); t_end, v0, rtol, atol,
-    max_steps, points, max_events override the scene's."""
+    max_steps, points, max_events and voltage (the motor's U / U_n) override the scene's."""
     run = settings(module, overrides)
     t_out = np.linspace(0.0, run["t_end"], run["points"])
     result = run_chain(module, t_end=run["t_end"], v0=run["v0"], rtol=run["rtol"], atol=run["atol"], t_out=t_out,
-                       method=method, max_steps=run["max_steps"], max_events=run["max_events"])
+                       method=method, max_steps=run["max_steps"], max_events=run["max_events"], voltage=run["voltage"])
     return ChainResult(module.SCENE, result.status, result.message, result.t_stop,
                        tuple(_stage(module, result, k) for k in range(module.STAGES)), _events(module, result),
-                       result.t, result.y[:, 0], result.y[:, 1], result.n_steps)
+                       result.t, result.y[:, 0], result.y[:, 1], result.n_steps, answers(module, result, run["voltage"]),
+                       _samples(module, result))
+
+
+def _samples(module: ModuleType, run: ChainRun) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The sliding phases' samples as arrays (t, q0, v0, forces with 3 columns per stage), a NaN row after
+    each phase so that plotted lines break where the chain rests or a force jumps."""
+    rows = []
+    for phase in run.phases:
+        if phase.mode != RESTING:
+            rows += [(t, *y, *forces) for t, y, forces in phase.samples]
+            rows.append((phase.t_end, *[np.nan] * (2 + 3 * module.STAGES)))
+    table = np.array(rows, dtype=float).reshape(-1, 3 + 3 * module.STAGES)
+    return table[:, 0], table[:, 1], table[:, 2], table[:, 3:]
+
+
+def plot(result: ChainResult, module: ModuleType, path) -> object:
+    """The run's figure (results/chain_plot.py): travel and speed, each stage's forces, the trip."""
+    from tswm_runtime.results.chain_plot import plot_stages
+
+    t, q0, v0, forces = result.samples
+    stages = [(f"stage {k + 1} ({module.STAGE_KINDS[k]})", UNITS[module.BODY_MOTIONS[k]],
+               UNITS[module.BODY_MOTIONS[k + 1]]) for k in range(module.STAGES)]
+    return plot_stages(path, f"{module.SCENE}: {result.status}", t, module.SPEED_FACTORS[-1] * q0, v0, forces,
+                       stages, result.trip["t"] if result.trip else None)
 
 
 def _regime(module: ModuleType, mode: int, k: int) -> tuple[str, str]:
@@ -106,7 +143,7 @@ def _stage(module: ModuleType, run: ChainRun, k: int) -> StageSummary:
             phases[-1] = StagePhase(regime, flank, phases[-1].t_start, phase.t_end)
         else:
             phases.append(StagePhase(regime, flank, phase.t_start, phase.t_end))
-        for t, forces in phase.forces:
+        for t, _, forces in phase.samples:
             for j, name in enumerate(FORCES):
                 value = float(forces[3 * k + j])
                 if peaks[name] is None or abs(value) > abs(peaks[name].value):
@@ -138,10 +175,53 @@ def summary(result: ChainResult, module: ModuleType) -> list[str]:
         for (name, peak), unit in zip(stage.peaks.items(), units):
             shown = "- (never slid)" if peak is None else f"{peak.value:.6g} {unit} at t = {peak.t:.6g} s"
             lines.append(f"    max |{name} force| while sliding: {shown}")
+    lines += drive_train_lines(result.answers, module)
     lines.append(f"  decisions ({len(result.events)}):")
     for e in result.events:
         lines.append(f"    t = {e['t']:.9g} s, {e['guard']}: {e['from'] or '(start)'} -> {e['to'] or '(stop)'} "
                      f"[{e['outcome']}]")
         if e["outcome"] != "unique" or (e["to"] == "resting" and module.STAGES > 1):
             lines.append(f"      {e['reason']}")
+    return lines
+
+
+def drive_train_lines(answers: dict, module: ModuleType) -> list[str]:
+    """The drive train's answers as printed: trip, peak after it, extra travel, hold, stall margin."""
+    if module.SWITCH_ON < 0 and not module.HAS_SEAT:
+        return []
+    thrust_unit = UNITS[module.BODY_MOTIONS[-1]]
+    torque_unit = UNITS[module.BODY_MOTIONS[0]]
+    travel_unit = "m" if module.BODY_MOTIONS[-1] == "translation" else "rad"
+    lines = ["  drive train:"]
+    trip = answers["trip"]
+    if trip is None:
+        lines.append("    switch: did not trip (the motor was never cut)")
+    else:
+        thrust = ("undetermined (the chain rested: statically undetermined split)" if trip["thrust"] is None
+                  else f"{trip['thrust']:.6g} {thrust_unit}")
+        lines.append(f"    trip at t = {trip['t']:.9g} s: thrust {thrust}, drive {trip['drive']:.6g} {torque_unit}, "
+                     f"travel {trip['travel']:.6g} {travel_unit}")
+        peak = answers["peak_after_trip"]
+        if peak is not None:
+            lines.append(f"    peak thrust after the trip: {peak['thrust']:.6g} {thrust_unit} at t = {peak['t']:.9g} s")
+        lines.append(f"    extra travel after the trip: {answers['extra_travel']:.6g} {travel_unit}")
+    holds = answers["holds"]
+    locking = ", ".join(f"stage {k} ({module.STAGE_KINDS[k - 1]}, Psi_i = {module.PSI[k - 1][1]:.6g} <= 0)"
+                        for k in holds["self_locking"]) or "none"
+    lines.append(f"    after power off: {holds['verdict']}; self-locking: {locking}")
+    intervals = holds["undetermined"]
+    if intervals and all(len(xs) == 1 and xs[0][0] == xs[0][1] for xs in intervals):
+        lines.append("    all stages stuck: the statics leave one internal force: " + ", ".join(
+            f"X_{j + 1} = {xs[0][0]:.6g}" for j, xs in enumerate(intervals)))
+    elif intervals:
+        lines.append("    all stages stuck: the split of the internal force between the stages is statically "
+                     "undetermined; admissible " + ", ".join(
+                         f"X_{j + 1} in " + " u ".join(f"[{lo:.6g}, {hi:.6g}]" for lo, hi in xs)
+                         for j, xs in enumerate(intervals)))
+    if answers["stall_margin"] is not None:
+        lines.append(f"    stall margin: {answers['stall_margin']:.4g} (pull-out {answers['pull_out']:.6g} {torque_unit} "
+                     f"at U/U_n = {answers['voltage']:g} over {answers['needed']:.6g} {torque_unit} needed at the trip "
+                     "thrust)")
+    elif answers["pull_out"] is not None:
+        lines.append(f"    stall margin: - (pull-out {answers['pull_out']:.6g} {torque_unit}; no trip thrust)")
     return lines

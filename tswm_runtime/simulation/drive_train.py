@@ -1,0 +1,76 @@
+"""A drive train's answers from one chain run: the switch's trip, the peak thrust after it and the extra
+travel, whether the seat holds after power off (and which stage self-locks), the stall margin.
+
+The thrust is the last stage's force on the last body (the stem). Peaks are taken over the sliding
+phases' samples (their ends and output points); after the trip the motor is off, the bodies' forces
+are affine in q0, which is monotone in a sliding phase, so the peak after the trip is exact. A stage
+self-locks when its inverse-tractive FTF Psi_i <= 0 (the module's PSI, derived): tan(gamma) <= the
+effective friction. The stall margin is the motor's pull-out torque at the scene's voltage (the
+table's largest torque times (U/U_n)^2) over the torque the chain needs at the trip: the drive torque
+that holds the thrust at the trip while every stage slides forward tractive at constant speed, from
+the stages' derived FTFs: T = prod_i Psi_t,i r_in,i / r_out,i times the thrust (the intermediate
+bodies' own forces are not counted). Above 1 the motor can reach the trip quasi-statically.
+"""
+from __future__ import annotations
+
+import math
+from types import ModuleType
+
+from tswm_runtime.hybrid.chain import RESTING, ChainRun
+
+
+def answers(module: ModuleType, run: ChainRun, voltage: float | None = None) -> dict:
+    """trip, peak_after_trip, extra_travel, holds (verdict, self_locking, seated, undetermined), stall_margin
+    (pull_out over needed); ``voltage`` is the run's U / U_n (None: the scene's)."""
+    n = module.STAGES
+    trip = run.trip
+    out = {"trip": None, "peak_after_trip": None, "extra_travel": None, "holds": _holds(module, run),
+           "stall_margin": None, "pull_out": _pull_out(module, voltage), "needed": None,
+           "voltage": getattr(module, "MOTOR_VOLTAGE", None) if voltage is None else voltage}
+    if trip is None:
+        return out
+    travel = float(module.SPEED_FACTORS[-1] * trip["y"][0])
+    thrust = None if trip["forces"] is None else float(trip["forces"][3 * n - 2])
+    out["trip"] = {"t": trip["t"], "thrust": thrust, "drive": trip["drive"], "travel": travel}
+    after = [(t, y, f) for phase in run.phases if phase.mode != RESTING and phase.latches[module.P_SWITCH]
+             == module.TRIPPED for t, y, f in phase.samples]
+    if after:
+        t, _, forces = max(after, key=lambda s: abs(s[2][3 * n - 2]))
+        out["peak_after_trip"] = {"thrust": float(forces[3 * n - 2]), "t": float(t)}
+        out["extra_travel"] = max(float(module.SPEED_FACTORS[-1] * y[0]) for _, y, _ in after) - travel
+    else:
+        out["extra_travel"] = 0.0
+    if thrust is not None:
+        out["needed"] = thrust * math.prod(psi_t * r_in / r_out for (psi_t, _), r_in, r_out
+                                           in zip(module.PSI, module.LEVER_IN, module.LEVER_OUT))
+        if out["pull_out"] is not None and out["needed"] > 0:
+            out["stall_margin"] = out["pull_out"] / out["needed"]
+    return out
+
+
+def _pull_out(module: ModuleType, voltage: float | None) -> float | None:
+    """The motor's largest torque at the run's voltage (the scene's unless given), or None without a motor."""
+    if not hasattr(module, "MOTOR_TORQUE"):
+        return None
+    return float(max(module.MOTOR_TORQUE) * (module.MOTOR_VOLTAGE if voltage is None else voltage)**2)
+
+
+def _holds(module: ModuleType, run: ChainRun) -> dict:
+    """After the motor's cut: does the chain rest on its seat at the end, which stages self-lock, and the
+    admissible internal forces where every stage is stuck (statically undetermined for two stages or more)."""
+    locking = [k + 1 for k, (_, psi_i) in enumerate(module.PSI) if psi_i <= 0]
+    last = run.phases[-1] if run.phases else None
+    resting = last is not None and last.mode == RESTING and run.status == "finished"
+    seated = bool(module.HAS_SEAT and last is not None and last.latches[module.P_SEATED] > 0.5)
+    rest = next((e.decision for e in reversed(run.events) if e.to_mode == RESTING), None) if resting else None
+    undetermined = [list(map(list, xs)) for xs in rest.internal] if rest is not None and module.STAGES > 1 else []
+    if run.trip is None:
+        verdict = "no trip: the motor was not cut"
+    elif not module.HAS_SEAT:
+        verdict = "no seat in the scene"
+    elif resting and seated:
+        verdict = "holds" if locking else "holds by the valve's friction alone (no stage self-locks)"
+    else:
+        verdict = "seat lost: no stage self-locks" if not locking else "seat lost"
+    return {"verdict": verdict, "self_locking": locking, "seated": seated, "resting": resting,
+            "undetermined": undetermined}
