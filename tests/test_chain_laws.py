@@ -14,6 +14,7 @@ nut moves its stem by L per turn, a wedge its output at tan(gamma) times its inp
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -264,3 +265,55 @@ def test_kinetic_energy_change_is_input_work_less_each_stages_friction_work(chai
         stage_on_body[:, k + 1] += mid(forces[:, 3 * k + 1]) * speed[k + 1] * dq0
     assert kinetic == pytest.approx(external + stage_on_body.sum(axis=0), abs=1e-7 * scale)
     assert kinetic.sum() == pytest.approx(external.sum() - sum(friction), abs=1e-7 * scale)
+
+
+# ---- MSL issue 4000: a lifting table held by its gears with both drive and load applied --------------
+
+MSL = Path(__file__).parent.parent / "docs" / "examples" / "msl4000.toml"
+MSL_LAMBDA = math.atan(0.010 / (math.pi * 0.016))
+MSL_GAMMA = (20 * DEG, MSL_LAMBDA)
+MSL_TAN_RHO = (0.05 / math.cos(20 * DEG), 0.05 / math.cos(math.atan(math.tan(15 * DEG) * math.cos(MSL_LAMBDA))))
+MSL_WEIGHT_AT_WORM = 1962.0 * 0.02 * math.tan(20 * DEG) / 0.08 * 0.010 / (2 * math.pi)   # ideal ratios, N m
+
+
+def _msl_band() -> tuple[float, float]:
+    """(lowest, highest) worm torque that holds the table, from each stage's efficiencies by hand."""
+    rho = [math.atan(t) for t in MSL_TAN_RHO]
+    forward = math.prod(math.tan(g) / math.tan(g + r) for g, r in zip(MSL_GAMMA, rho))
+    backward = math.prod(math.tan(g - r) / math.tan(g) for g, r in zip(MSL_GAMMA, rho))
+    return MSL_WEIGHT_AT_WORM * backward, MSL_WEIGHT_AT_WORM / forward
+
+
+def test_msl4000_holding_band_is_the_product_of_the_efficiencies():
+    """The scene's 0.3 N m lies between the torque that lowers the table (0.1744 N m) and the one that lifts it
+    (0.4228 N m): the chain rests, the only consistent mode. 1 % outside the band it breaks away, lifting
+    (both stages tractive) or lowering (both inverse-tractive)."""
+    low, high = _msl_band()
+    assert low == pytest.approx(0.17435, abs=1e-5) and high == pytest.approx(0.42275, abs=1e-5)
+    text = MSL.read_text()
+    assert 'torque = "0.3 N m"' in text
+    for torque, expected in ((0.99 * low, "backward: inverse-tractive (a), inverse-tractive (a)"), (1.01 * low, "stuck"),
+                             (0.3, "stuck"), (0.99 * high, "stuck"), (1.01 * high, "forward: tractive (a), tractive (a)")):
+        decision = decide(parse_chain(text.replace('torque = "0.3 N m"', f'torque = "{torque!r} N m"'), "msl").values(),
+                          0.0)
+        assert (decision.outcome, decision.modes) == ("unique", (expected,)), (torque, decision.reason)
+
+
+def test_msl4000_rests_and_started_upward_stops_and_stays_as_the_hand_model(chain_module):
+    """From rest the run rests to its end (one decision: the only consistent mode); started lifting at
+    20 rad/s it slows down in the tractive mode, stops when Newton per body with Coulomb per stage says,
+    and stays: the table does not lower itself."""
+    from test_chain_sim import HandChain
+
+    module = chain_module(MSL.read_text())
+    held = simulate_chain(module)
+    assert held.status == "finished" and [e["to"] for e in held.events] == ["resting"]
+    assert held.events[0]["outcome"] == "unique" and np.all(held.v0 == 0.0)
+    hand = HandChain([math.degrees(g) for g in MSL_GAMMA], MSL_TAN_RHO, (0.001, 0.004, 200.0), (0.3, 0.0, -1962.0),
+                     levers=[(0.02, 0.08), (0.008, 1.0)])
+    log, _, y = hand.run(20.0, 1.0)
+    assert [(s, sigma) for _, s, sigma in log] == [(1, (1, 1)), (0, None)]
+    lifted = simulate_chain(module, v0=20.0, **TIGHT)
+    assert [(p.regime, p.flank) for p in lifted.stages[1].phases] == [("tractive", "a"), ("resting", "")]
+    assert lifted.stages[0].switches[0] == pytest.approx(log[1][0], rel=1e-9)
+    assert lifted.q0[-1] == pytest.approx(y[0], rel=1e-9) and lifted.v0[-1] == 0.0
