@@ -40,6 +40,24 @@ def _stages(chain: ChainScene) -> Section:
     return s
 
 
+def _kinetostatics() -> Section:
+    """Each stage's kinematics and contact forces per flank and direction, from mechanics.py."""
+    s = Section("Kinetostatics of a stage")
+    s.text("Stage $k$ is mechanics.py's wedge with $\\gamma = \\gamma_k$, $\\rho = \\rho_k$: input $x_1$, output "
+           "$x_2$, kinematics and contact forces along the guides in terms of the normal force $N \\ge 0$ on the "
+           "loaded flank, and the FTF $\\Psi = -R_1 / R_2$ (tractive: $\\tan(\\gamma+\\rho)$, inverse-tractive: "
+           "$\\tan(\\gamma-\\rho)$):")
+    s.math(f"\\dot x_2 = {_l(mech.kinematics().ratio)}\\,\\dot x_1")
+    rows = []
+    for direction in (1, -1):
+        for flank in ("a", "b"):
+            m = mech.sliding(flank, direction)
+            regime = dyn.TRACTIVE if dyn.flank(dyn.TRACTIVE, direction) == flank else dyn.INVERSE
+            rows.append([f"{flank}, $s = {direction:+d}$", regime, f"${_l(m.R1)}$", f"${_l(m.R2)}$", f"${_l(m.psi)}$"])
+    s.table("lllll", ["flank, direction", "regime", "$R_1$", "$R_2$", "$\\Psi$"], rows)
+    return s
+
+
 def _modes(n_st: int, reachable: list) -> list[Section]:
     sym = dyn.symbols(n_st)
     kin = Section("One coordinate")
@@ -56,11 +74,14 @@ def _modes(n_st: int, reachable: list) -> list[Section]:
     eom.table("lll", ["mode", "$\\Psi_k$", "$D$"],
               [[dyn.sliding(*r).name, ", ".join(f"${_l(p)}$" for p in dyn.sliding(*r).psi),
                 f"${_l(dyn.sliding(*r).denominator)}$"] for r in reachable])
-    first = dyn.sliding(*reachable[0])
-    eom.text(f"Switching functions of the mode {first.name}: stage $k$'s normal force is "
-             "$N_k = \\varphi_k \\cos\\rho_k / (D \\cos(\\gamma_k + f_k s \\rho_k))$, so the mode is consistent "
-             "while every $\\varphi_k / D \\ge 0$ (each $\\varphi_k$ depends on the other stages' FTFs):")
-    eom.math(*(f"\\varphi_{{{k + 1}}} = {_l(p)}" for k, p in enumerate(first.switching)))
+    eom.text("Switching functions: stage $k$'s normal force is "
+             "$N_k = \\varphi_k \\cos\\rho_k / (D \\cos(\\gamma_k + f_k s \\rho_k))$, so a mode is consistent "
+             "while every $\\varphi_k / D \\ge 0$ (each $\\varphi_k$ depends on the other stages' FTFs). Each "
+             "reachable mode's reduced dynamics and switching functions:")
+    for r in reachable:
+        mode = dyn.sliding(*r)
+        eom.text(f"Mode {mode.name}:")
+        eom.math(f"a_0 = {_l(mode.accel)}", *(f"\\varphi_{{{k + 1}}} = {_l(p)}" for k, p in enumerate(mode.switching)))
     return [kin, eom]
 
 
@@ -91,29 +112,127 @@ def _decision(values: ChainValues) -> Section:
     return s
 
 
-def _audit(values: ChainValues, reachable: list) -> Section:
-    """Checks at the scene's values: power balance and Coulomb's losses per mode; one stage equals mechanics."""
+def _at(values: ChainValues) -> dict:
+    sym = dyn.symbols(len(values.gamma))
+    return dict(zip((*sym.gamma, *sym.rho, *sym.lever_in, *sym.lever_out, *sym.inertia, *sym.force), values.args()))
+
+
+def _uniform(n_st: int, forward: bool) -> tuple[int, tuple[str, ...]]:
+    """The mode of steady driving (forward, every stage tractive) or back-driving (backward, inverse-tractive)."""
+    return (1, (dyn.TRACTIVE,) * n_st) if forward else (-1, (dyn.INVERSE,) * n_st)
+
+
+def _steady_force(values: ChainValues, forward: bool) -> float | None:
+    """Body 0's force at which the uniform mode has a_0 = 0, from the derived reduced dynamics (None: not
+    reachable, or a_0 does not depend on it)."""
     n_st = len(values.gamma)
-    sym = dyn.symbols(n_st)
-    at = {**dict(zip((*sym.gamma, *sym.rho, *sym.lever_in, *sym.lever_out, *sym.inertia, *sym.force),
-                     values.args()))}
+    if _uniform(n_st, forward) not in dyn.reachable(values.flanks):
+        return None
+    f0 = dyn.symbols(n_st).force[0]
+    numerator = sp.fraction(sp.together(dyn.sliding(*_uniform(n_st, forward)).accel))[0]
+    at = {k: v for k, v in _at(values).items() if k != f0}
+    roots = sp.solve(numerator.subs(at), f0)
+    return float(roots[0]) if len(roots) == 1 else None
+
+
+def _steady_force_by_hand(values: ChainValues, forward: bool) -> float:
+    """The same, written by hand: each stage passes tan(g)/tan(g + r) of the power forward, or gives back
+    tan(g - r)/tan(g) of it; every other body's force takes or gives its share at its speed ratio."""
+    n_st = len(values.gamma)
+    speed = [1.0]
+    for k in range(n_st):
+        speed.append(speed[-1] * values.lever_in[k] * math.tan(values.gamma[k]) / values.lever_out[k])
+    out = -values.force[-1] * speed[-1]            # power per unit v_0 the last stage gives its output body
+    for k in range(n_st - 1, -1, -1):
+        g, r = values.gamma[k], values.rho[k]
+        into = out * math.tan(g + r) / math.tan(g) if forward else out * math.tan(g - r) / math.tan(g)
+        out = into - values.force[k] * speed[k]   # what stage k takes from body k, given by stage k - 1
+    return into
+
+
+def _band(values: ChainValues) -> Section:
+    s = Section("Driving and holding torque")
+    high, low = _steady_force(values, True), _steady_force(values, False)
+    s.text("Body 0's force $F_0$ at which the chain runs steadily ($a_0 = 0$), the other bodies' forces as given: "
+           "driving forward with every stage tractive, and driven back by the loads with every stage "
+           "inverse-tractive; solved from the reduced dynamics of these two modes.")
+    rows = [[words, "-" if f is None else f"{f:.6g}"] for words, f in
+            (("forward, every stage tractive", high), ("backward, every stage inverse-tractive", low))]
+    s.table("ll", ["steady mode", "$F_0$"], rows)
+    if high is not None and low is not None and low < high:
+        s.text(f"Started from rest with $F_0$ between {low:.6g} and {high:.6g}, neither of these breakaways is "
+               "consistent (each would start with $a_0$ against its direction): the drive cannot lift the load "
+               "through the forward losses, and the load cannot drive the chain back through the backward losses. "
+               "Whether the chain then rests is the decision below: resting is consistent when the stages' stick "
+               "cones admit an internal force split.")
+    return s
+
+
+def _switch_rows(values: ChainValues, reachable: list) -> list[list[str]]:
+    """At the body-0 force where stage k's switching function vanishes: N_k in this mode and in the mode with
+    stage k on its other regime (both 0), and the difference of their a_0 (0: the switch is smooth)."""
+    n_st = len(values.gamma)
+    f0 = dyn.symbols(n_st).force[0]
+    at = {k: v for k, v in _at(values).items() if k != f0}
     rows = []
     for direction, regimes in reachable:
         mode = dyn.sliding(direction, regimes)
+        for k in range(n_st):
+            other = (*regimes[:k], dyn.INVERSE if regimes[k] == dyn.TRACTIVE else dyn.TRACTIVE, *regimes[k + 1:])
+            roots = sp.solve(mode.switching[k].subs(at), f0)
+            if (direction, other) not in reachable or len(roots) != 1:
+                continue
+            point = {**at, f0: roots[0]}
+            neighbour = dyn.sliding(direction, other)
+            normal = max(abs(float(mode.normal[k].subs(point))), abs(float(neighbour.normal[k].subs(point))))
+            jump = abs(float((mode.accel - neighbour.accel).subs(point)))
+            rows.append([mode.name, str(k + 1), f"{float(roots[0]):.6g}", f"{normal:.3g}", f"{jump:.3g}"])
+    return rows
+
+
+def _audit(values: ChainValues, reachable: list) -> Section:
+    """Checks at the scene's values: the FTFs and steady forces against hand-written formulas, power balance
+    per stage and of the chain, contact force 0 at every switch; one stage equals mechanics."""
+    n_st = len(values.gamma)
+    sym = dyn.symbols(n_st)
+    at = _at(values)
+    speed = dyn.speed_factors(sym)
+    rows, ftf_same = [], True
+    for direction, regimes in reachable:
+        mode = dyn.sliding(direction, regimes)
         point = {**at, dyn.v0: direction * AUDIT_SPEED}
-        speed = dyn.speed_factors(sym)
         supplied = sum(sym.force[j] * speed[j] * dyn.v0 for j in range(n_st + 1))
         kinetic = sum(sym.inertia[j] * speed[j]**2 * mode.accel * dyn.v0 for j in range(n_st + 1))
-        losses = sum(mode.friction_power)
-        balance = float((supplied - kinetic - losses).subs(point))
-        coulomb = float(sum(p - c for p, c in zip(mode.friction_power, mode.coulomb_power)).subs(point))
-        rows.append([mode.name, f"{balance:.3g}", f"{coulomb:.3g}"])
+        balance = float((supplied - kinetic - sum(mode.friction_power)).subs(point))
+        stages = max(abs(float((p - c).subs(point))) for p, c in zip(mode.friction_power, mode.coulomb_power))
+        rows.append([mode.name, f"{balance:.3g}", f"{stages:.3g}"])
+        hand = [sp.tan(sym.gamma[k] + (1 if r == dyn.TRACTIVE else -1) * sym.rho[k]) for k, r in enumerate(regimes)]
+        ftf_same &= all(sp.simplify(sp.expand_trig(p - h)) == 0 for p, h in zip(mode.psi, hand))
     s = Section("Audit")
     s.text(f"At the scene's values and $v_0 = \\pm{AUDIT_SPEED:g}$: input power minus the rate of kinetic energy "
-           "minus the stages' friction losses (from the forces), and the losses minus Coulomb's "
-           "$\\tan\\rho\\,N|v_1|/\\cos\\gamma$; both vanish to rounding. tests/test_chain.py checks the same "
-           "symbolically and against Newton written by hand, and that one stage is mechanics.py's wedge.")
-    s.table("lll", ["mode", "power balance", "losses - Coulomb"], rows)
+           "minus the stages' friction losses (from the forces), and per stage the largest difference between its "
+           "loss $-(R_1 v_1 + R_2 v_2)$ and Coulomb's $\\tan\\rho\\,N|v_1|/\\cos\\gamma$; both vanish to "
+           "rounding. tests/test_chain.py checks the same symbolically and against Newton written by hand, "
+           "tests/test_chain_laws.py on simulated runs.")
+    s.table("lll", ["mode", "power balance", "max over stages: loss - Coulomb"], rows)
+    s.text("Every mode's FTFs against $\\tan(\\gamma_k \\pm \\rho_k)$ written by hand: "
+           + ("agree exactly." if ftf_same else "DIFFER."))
+    hand_rows = []
+    for forward, words in ((True, "forward, every stage tractive"), (False, "backward, every stage inverse-tractive")):
+        derived = _steady_force(values, forward)
+        if derived is not None:
+            by_hand = _steady_force_by_hand(values, forward)
+            hand_rows.append([words, f"{derived:.9g}", f"{by_hand:.9g}",
+                              f"{abs(derived - by_hand) / max(abs(by_hand), 1e-300):.2g}"])
+    s.text("Steady $F_0$ from the reduced dynamics against the stages' efficiencies by hand "
+           "($\\tan\\gamma/\\tan(\\gamma+\\rho)$ forward, $\\tan(\\gamma-\\rho)/\\tan\\gamma$ back, "
+           "power passed stage by stage):")
+    s.table("llll", ["steady mode", "derived", "by hand", "relative difference"], hand_rows)
+    s.text("At each switch (the body-0 force where a stage's switching function vanishes, the other forces as "
+           "given): the stage's normal force in the mode and in the mode with that stage on its other regime "
+           "(both must be 0), and the difference of their $a_0$ (0: the regimes meet continuously):")
+    s.table("lllll", ["mode", "stage", "$F_0$ at the switch", "$N_k$, largest magnitude", "$\\Delta a_0$, magnitude"],
+            _switch_rows(values, reachable))
     one = dyn.sliding(1, (dyn.TRACTIVE,))
     ref = mech.sliding("a", 1)
     s1 = dyn.symbols(1)
@@ -132,8 +251,8 @@ def build_chain_document(chain: ChainScene) -> dict:
     params = [[f"`{p.name}`", f"{p.value:.6g}", p.unit, "fixed"]
               for p in (*(q for s in chain.stages for q in s.params.values()),
                         *(q for b in chain.bodies for q in (b.inertia, b.force)))]
-    sections = [_stages(chain), *_modes(len(chain.stages), reachable), _rest(len(chain.stages)),
-                _decision(values), _audit(values, reachable)]
+    sections = [_stages(chain), _kinetostatics(), *_modes(len(chain.stages), reachable), _rest(len(chain.stages)),
+                _band(values), _decision(values), _audit(values, reachable)]
     return {"title": f"Derivation of the chain of stages for scene `{chain.name}`",
             "description": chain.description, "source": chain.source, "digest": chain.digest,
             "params": params, "sections": sections}

@@ -1,0 +1,91 @@
+"""The chain's derivation document: every stage's kinetostatics, every mode's reduced dynamics and switching
+functions, the driving and holding torque, and an audit whose numbers are checked here against formulas
+written by hand; scene text reaches LaTeX only escaped."""
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import pytest
+
+from derivation.chain.document import build_chain_document
+from derivation.chain.scene import load_chain, parse_chain
+from derivation.document import render
+
+MSL = Path(__file__).parent.parent / "docs" / "examples" / "msl4000.toml"
+DEG = math.pi / 180
+
+
+def _sections(doc: dict) -> dict:
+    return {section.title: section for section in doc["sections"]}
+
+
+def _tables(section) -> list[list[list[str]]]:
+    return [block[3] for block in section.blocks if block[0] == "table"]
+
+
+def _msl_by_hand() -> tuple[float, float]:
+    """(lowest, highest) worm torque holding the lifting table: its weight at the worm over the ideal ratios,
+    times the backward efficiencies or over the forward ones, tan(g)/tan(g + r') and tan(g - r')/tan(g),
+    with tan(r') = mu / cos(alpha_n) and a thread's tan(alpha_n) = tan(15 deg) cos(lambda)."""
+    lam = math.atan(0.010 / (math.pi * 0.016))
+    gammas = (20 * DEG, lam)
+    rhos = (math.atan(0.05 / math.cos(20 * DEG)), math.atan(0.05 / math.cos(math.atan(math.tan(15 * DEG) * math.cos(lam)))))
+    weight = 1962.0 * 0.02 * math.tan(20 * DEG) / 0.08 * 0.010 / (2 * math.pi)
+    forward = math.prod(math.tan(g) / math.tan(g + r) for g, r in zip(gammas, rhos))
+    backward = math.prod(math.tan(g - r) / math.tan(g) for g, r in zip(gammas, rhos))
+    return weight * backward, weight / forward
+
+
+@pytest.fixture(scope="module")
+def msl_document():
+    return build_chain_document(load_chain(MSL))
+
+
+def test_the_document_shows_every_modes_dynamics_and_switching_functions(msl_document):
+    sections = _sections(msl_document)
+    assert {"Kinetostatics of a stage", "Modes and reduced equation of motion", "Resting chain",
+            "Driving and holding torque", "Decision at the scene's forces", "Audit"} <= set(sections)
+    (ftf,) = _tables(sections["Kinetostatics of a stage"])
+    assert [row[1] for row in ftf] == ["tractive", "inverse-tractive", "inverse-tractive", "tractive"]
+    modes = [b[1] for b in sections["Modes and reduced equation of motion"].blocks if b[0] == "text"
+             and b[1].startswith("Mode ")]
+    assert len(modes) == 8
+    equations = [b[1] for b in sections["Modes and reduced equation of motion"].blocks if b[0] == "math"][1:]
+    assert len(equations) == 8 and all(len(e) == 3 and e[0].startswith("a_0 = ") for e in equations)
+
+
+def test_the_msl4000_band_and_audit_agree_with_the_hand_efficiencies(msl_document):
+    """The driving and holding torques are the hand band; the audit's hand comparison, power balances and
+    the normal forces and a_0 jumps at every switch are zero to rounding; the decision at rest is resting,
+    the only consistent mode, each breakaway rejected with its reason."""
+    low, high = _msl_by_hand()
+    sections = _sections(msl_document)
+    (band,) = _tables(sections["Driving and holding torque"])
+    assert float(band[0][1]) == pytest.approx(high, rel=5e-6) and float(band[1][1]) == pytest.approx(low, rel=5e-6)
+    balance, steady, switches = _tables(sections["Audit"])
+    assert len(balance) == 8 and all(abs(float(x)) < 1e-12 for row in balance for x in row[1:])
+    assert [float(row[2]) for row in steady] == pytest.approx([high, low], rel=5e-9)   # printed to 9 digits
+    assert all(float(row[3]) < 1e-13 for row in steady)
+    assert len(switches) == 16
+    assert all(float(row[3]) < 1e-9 * 2000 and float(row[4]) < 1e-9 for row in switches)
+    audit_text = " ".join(b[1] for b in sections["Audit"].blocks if b[0] == "text")
+    assert "DIFFER" not in audit_text and audit_text.count("agree") == 2
+    at_rest = next(b[1] for b in sections["Decision at the scene's forces"].blocks if b[0] == "text")
+    assert at_rest.startswith("At rest: unique, stuck") and "would not leave rest in its direction" in at_rest
+
+
+HOSTILE = '\\input{/etc/passwd} $x^2$ 100% & #1 _a ~ {} \\\\ \\end{document}'
+
+
+def test_scene_text_reaches_latex_escaped():
+    """A description full of LaTeX's specials is printed as text, never run; the name is limited to
+    [a-z0-9-] by the scene reader."""
+    text = MSL.read_text().replace('description = "Motor at', 'description = "' + HOSTILE.replace("\\", "\\\\")
+                                   .replace('"', '\\"') + ' Motor at')
+    chain = parse_chain(text, "hostile.toml")
+    assert chain.description.startswith(HOSTILE)
+    tex = render(build_chain_document(chain), "latex")
+    assert "\\input{" not in tex and "\\end{document}" in tex and tex.count("\\end{document}") == 1
+    assert "\\textbackslash{}input\\{/etc/passwd\\}" in tex and "100\\%" in tex and "\\&" in tex and "\\#1" in tex
+    assert "\\$x" in tex
