@@ -84,3 +84,18 @@ def test_auto_is_dopri5_where_nothing_is_stiff():
     auto, explicit = (simulate("paper-runup", method=m) for m in ("auto", "dopri5"))
     assert auto.n_switches == 0
     assert (auto.n_steps, auto.nfev, auto.final_state) == (explicit.n_steps, explicit.nfev, explicit.final_state)
+
+
+def test_the_sweep_table_counts_autos_switches():
+    """The sweep's n_switches column is the run's Result.n_switches, case by case (slow-load,
+    T = 10 s, m2 = 150 and 250 kg: auto switches; dopri5 never does)."""
+    from tswm_runtime.model.contract import load_module
+    from tswm_runtime.sweeps.sweep import grid_cases, parse_grid, sweep
+
+    module = load_module("slow-load")
+    P = grid_cases(module, parse_grid(["m2=150:250:2"], module))
+    for method in ("auto", "dopri5"):
+        table = sweep(module, P, {"method": method, "t_end": 10.0}).table
+        runs = [simulate("slow-load", {"m2": m2}, method=method, t_end=10.0) for m2 in P[:, 0]]
+        assert list(table["n_switches"]) == [r.n_switches for r in runs], method
+        assert (table["n_switches"] >= 1).all() == (method == "auto")
