@@ -21,7 +21,7 @@ FLANKS = ("a", "b")
 MODES = ("forward", "backward", "stick", "sliding")
 LITERAL_MODES = (("forward",), ("forward", "sliding"))
 EQUATIONS = ("consistent", "literal")
-METHODS = ("dopri5", "rosenbrock23")
+METHODS = ("dopri5", "rosenbrock23", "rodas4", "auto")
 TOP_KEYS = ("name", "description", "equations", "wedge", "friction", "drive", "load",
             "impact", "mesh", "lost_motion", "reference", "modes", "run")
 NAME = re.compile(r"[a-z0-9][a-z0-9-]{0,63}")     # a file name on every system: at most 64 characters
@@ -627,7 +627,7 @@ class _Reader:
         table = self.table(doc, "run", required=False) or {}
         self.keys(table, "run", (*RUN, "method"))
         value = {k: self.number(table, k, "run", rule, free_ok=False)[0] for k, rule in RUN.items()}
-        method = self.text(table, "method", "run", METHODS, default="dopri5")
+        method = self.text(table, "method", "run", METHODS, default="auto")
         return Run(**{**value, "max_steps": int(value["max_steps"])}, method=method)
 
     def scene(self, doc: dict, digest: str) -> Scene:

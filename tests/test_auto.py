@@ -56,13 +56,14 @@ def test_the_spectral_radius_bound_is_above_and_close_to_numpys():
         assert rho * (1 - 1e-12) <= bound <= 1.3 * rho, (J, rho, bound)
 
 
-@pytest.mark.parametrize("t_end", [10.0, 100.0])
-def test_auto_switches_on_the_slow_load_and_stays_accurate(t_end):
+@pytest.mark.parametrize("t_end, rtol", [(10.0, 1e-6), (100.0, 1e-6), (100.0, 1e-9)])
+def test_auto_switches_on_the_slow_load_and_stays_accurate(t_end, rtol):
     """After the run-up the gear follows the slowly changing load: DOPRI5 steps at its stability
-    limit there (6538 steps to 100 s), auto hands over to ROSENBROCK23 and takes a fraction of the
-    steps; x1(T) and v1(T) within 10 rtol of the reference, as the fixed methods'."""
+    limit there (6538 steps to 100 s), auto hands over to RODAS4 and takes a fraction of the
+    steps; x1(T) and v1(T) within 10 rtol of the reference, as the fixed methods'. At rtol 1e-9
+    DOPRI5 holds h|J| at 2.8 to 3.23, below dopri5.f's 3.25: with that bound auto took 5352 of
+    DOPRI5's 7027 steps to 100 s (818 with segment.STIFF_H_RHO)."""
     ref = reference(CASES[f"slow load T={t_end:g}"])
-    rtol = 1e-6
     runs = {m: simulate("slow-load", method=m, t_end=t_end, rtol=rtol, atol=rtol * 1e-3)
             for m in ("dopri5", "auto")}
     for method, r in runs.items():
@@ -84,3 +85,18 @@ def test_auto_is_dopri5_where_nothing_is_stiff():
     auto, explicit = (simulate("paper-runup", method=m) for m in ("auto", "dopri5"))
     assert auto.n_switches == 0
     assert (auto.n_steps, auto.nfev, auto.final_state) == (explicit.n_steps, explicit.nfev, explicit.final_state)
+
+
+def test_the_sweep_table_counts_autos_switches():
+    """The sweep's n_switches column is the run's Result.n_switches, case by case (slow-load,
+    T = 10 s, m2 = 150 and 250 kg: auto switches; dopri5 never does)."""
+    from tswm_runtime.model.contract import load_module
+    from tswm_runtime.sweeps.sweep import grid_cases, parse_grid, sweep
+
+    module = load_module("slow-load")
+    P = grid_cases(module, parse_grid(["m2=150:250:2"], module))
+    for method in ("auto", "dopri5"):
+        table = sweep(module, P, {"method": method, "t_end": 10.0}).table
+        runs = [simulate("slow-load", {"m2": m2}, method=method, t_end=10.0) for m2 in P[:, 0]]
+        assert list(table["n_switches"]) == [r.n_switches for r in runs], method
+        assert (table["n_switches"] >= 1).all() == (method == "auto")

@@ -573,7 +573,7 @@ def test_invalid_input():
 
 
 def test_an_unknown_method_is_refused_by_name():
-    with pytest.raises(ValueError, match=r"method 7: expected 0 \(dopri5\) or 1 \(rosenbrock23\)"):
+    with pytest.raises(ValueError, match=r"method 7: expected 0 \(dopri5\), 1 \(rosenbrock23\) or 3 \(rodas4\)"):
         seg.attempt_function(7)
 
 

@@ -87,7 +87,7 @@ def test_paper():
     assert {k: p.value for k, p in s.reference.items()} == {"Ft1": 990.0, "Ft2": 8303.7}
     assert s.modes == ("forward", "stick")
     assert (s.run.t_end, s.run.x1, s.run.v1, s.run.rtol, s.run.atol, s.run.method) == (
-        1.0, 0.0, 0.0, 1e-6, 1e-9, "dopri5")
+        1.0, 0.0, 0.0, 1e-6, 1e-9, "auto")
 
 
 def test_paper_params_order_and_free():
@@ -222,7 +222,7 @@ def test_defaults():
     s = scene(reference=None, run=None, modes=None)
     assert s.modes == ("forward",) and s.reference == {} and s.description == ""
     assert (s.run.t_end, s.run.x1, s.run.v1, s.run.rtol, s.run.atol, s.run.method,
-            s.run.max_steps) == (1.0, 0.0, 0.0, 1e-6, 1e-9, "dopri5", 100000)
+            s.run.max_steps) == (1.0, 0.0, 0.0, 1e-6, 1e-9, "auto", 100000)
 
 
 def test_per_flank_slopes_one_sided_and_equal():

@@ -77,7 +77,7 @@ def test_resume_skips_finished_chunks(tmp_path):
     pd.testing.assert_frame_equal(read_table(tmp_path / "paper-sweep.csv"), changed.table, check_exact=True)
     written = ["m2 [kg]", "F2 [N]", "status", "problem", "t_stop [s]", "S1m [N]", "tS1m [s]", "S2m [N]", "tS2m [s]",
                "KD1", "KD2", "x1 [m]", "v1 [m/s]", "regimes", "modes", "n_events", "steps", "rejected", "nfev",
-               "njev", "impacts", "impact_energy [J]"]
+               "njev", "n_switches", "impacts", "impact_energy [J]"]
     assert list(pd.read_parquet(tmp_path / "paper-sweep.parquet").columns) == written
     assert list(pd.read_csv(tmp_path / "paper-sweep.csv").columns) == written
 

@@ -1,7 +1,7 @@
-"""Method auto against dopri5, rosenbrock23 and the scipy peers, on the benchmark's cases.
+"""Method auto against dopri5, rosenbrock23, rodas4 and the scipy peers, on the benchmark's cases.
 
 Each configuration is one whole ``simulate()`` call (``bench.cases.run_simulate`` with the
-method) or one careful user's peer call (``bench.peers``), measured by ``bench.measure``:
+method, at each rtol the method accepts: ``METHOD_RTOL_MIN``) or one careful user's peer call (``bench.peers``), measured by ``bench.measure``:
 one untimed warm-up, then rounds over all configurations in shuffled order, medians. Errors
 against each case's reference (``bench.cases.reference``). Prints, and writes to DIR/auto.json
 and DIR/auto.md: per run the error, median time, rhs calls and steps; per case and error
@@ -23,8 +23,9 @@ from tswm_runtime.bench import report
 from tswm_runtime.bench.bench import ATOL_PER_RTOL, measure
 from tswm_runtime.bench.cases import CASES, reference, run_peer, run_simulate
 from tswm_runtime.bench.peers import SCIPY_METHODS
+from tswm_runtime.simulation.simulate import METHOD_RTOL_MIN
 
-METHODS = ("dopri5", "rosenbrock23", "auto")
+METHODS = ("dopri5", "rosenbrock23", "rodas4", "auto")
 LEVELS = (1e-6, 1e-9)
 
 
@@ -33,7 +34,8 @@ def configurations(cases, tols, peers):
     for case in cases:
         for rtol in tols:
             atol = rtol * ATOL_PER_RTOL
-            out += [(case, f"tswm {m}", rtol, partial(run_simulate, case, rtol, atol, method=m), 1) for m in METHODS]
+            out += [(case, f"tswm {m}", rtol, partial(run_simulate, case, rtol, atol, method=m), 1) for m in METHODS
+                    if rtol >= METHOD_RTOL_MIN[m][0]]
             out += [(case, p, rtol, partial(run_peer, case, p, rtol, atol), 1) for p in peers]
     return out
 
@@ -53,7 +55,7 @@ def comparisons(rows):
             peer_costs = {p: c for p in peers if not math.isnan(c := cost(p))}
             best = min(peer_costs, key=peer_costs.get) if peer_costs else None
             row |= {"fastest_peer": best, "peer_s": peer_costs.get(best, math.nan)}
-            row |= {f"{k}_over_auto": row[f"{k}_s"] / row["auto_s"] for k in ("dopri5", "rosenbrock23", "peer")}
+            row |= {f"{k}_over_auto": row[f"{k}_s"] / row["auto_s"] for k in ("dopri5", "rosenbrock23", "rodas4", "peer")}
             out.append(row)
     return out
 
@@ -80,7 +82,7 @@ def main(argv=None) -> int:
     cfmt = {"error": "{:.0e}"} | {k: ("{:.2f}" if "_over_" in k else "{:.3e}") for k in table[0] if k.endswith("_s")
                                    or "_over_" in k}
     md = "\n".join([
-        "# Method auto against dopri5, rosenbrock23 and the scipy peers", "",
+        "# Method auto against dopri5, rosenbrock23, rodas4 and the scipy peers", "",
         f"{args.repeats} shuffled rounds, medians of whole calls; load (1, 5, 15 min) before "
         f"{', '.join(f'{x:.1f}' for x in load_before)}, after {', '.join(f'{x:.1f}' for x in load_after)}.", "",
         report.md_table(rows, ["case", "solver", "rtol", "err", "err_S1", "err_v1", "err_x1", "err_t", "t_med",

@@ -9,7 +9,7 @@ fresh NUMBA_CACHE_DIR:
     integrate     import hybrid.entry and hybrid.rows (compiles integrate_hybrid, run_segment,
                   integrate_at, fill_rows, states_at and no_jacobian), everything cold
     batch         import hybrid.batch (run_batch, parallel) with the integrate group cached
-    METHOD        segment.attempt_function(METHOD): the step of dopri5, rosenbrock23, with the
+    METHOD        segment.attempt_function(METHOD): the step of dopri5, rosenbrock23, rodas4, with the
                   integrate group cached
     model:SCENE   load_module(SCENE) and a first simulate(points=2) with the kernels cached
 
@@ -66,7 +66,8 @@ def main() -> int:
         seconds["batch"] = timed("import tswm_runtime.hybrid.batch", cache,
                                  "import tswm_runtime.hybrid.entry, tswm_runtime.hybrid.rows")
         print(f"batch {seconds['batch']:.1f} s", flush=True)
-        for name, code in (("dopri5", "DOPRI5"), ("rosenbrock23", "ROSENBROCK23")):  # simulate.METHODS
+        for name, code in (("dopri5", "DOPRI5"), ("rosenbrock23", "ROSENBROCK23"),
+                           ("rodas4", "RODAS4")):  # simulate.METHODS
             seconds[name] = timed(f"segment.attempt_function(segment.{code})", cache,
                                   "import tswm_runtime.hybrid.machine\nfrom tswm_runtime.integration import segment")
             print(f"{name} {seconds[name]:.1f} s", flush=True)

@@ -5,16 +5,16 @@ For shipped scenes of the paper gear, against the independent reference of
 them, on hand-written formulas), prints the worst sample error of x1, v1, S1, S2 in units
 of rtol, separately for samples within the first 5 ms after a segment boundary (t0, an
 event: "first") and all others ("ordinary"), for rtol 1e-3..1e-9 (atol = 1e-3 rtol) and
-each method (dopri5, rosenbrock23, auto). Measure: |y(t_i) - y_ref(t_i)| / (rtol max_t |y_ref|) (``dense.worst_ratios``).
+each method (dopri5, rosenbrock23, rodas4, auto). Measure: |y(t_i) - y_ref(t_i)| / (rtol max_t |y_ref|) (``dense.worst_ratios``).
 
-Run: ``python tools/sample_accuracy.py [--points N] [--case NAME ...]``
+Run: ``python tools/sample_accuracy.py [--points N] [--case NAME ...] [--method NAME ...] [--rtol R ...]``
 """
 import argparse
 
 from tswm_runtime.reference import dense
 from tswm_runtime.simulation.simulate import simulate
 
-METHODS = ("dopri5", "rosenbrock23", "auto")
+METHODS = ("dopri5", "rosenbrock23", "rodas4", "auto")
 RTOLS = tuple(10.0 ** -k for k in range(3, 10))
 # name: (scene, free parameters, m2, load schedule of the reference, v1 at t = 0)
 CASES = {
@@ -38,6 +38,8 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--points", type=int, default=20001, help="output rows over the run (default 20001)")
     ap.add_argument("--case", action="append", choices=sorted(CASES), help="only these cases")
+    ap.add_argument("--method", action="append", choices=METHODS, help="only these methods")
+    ap.add_argument("--rtol", action="append", type=float, help="these rtols (default 1e-3 .. 1e-9)")
     args = ap.parse_args(argv)
     cols = [(name, kind) for kind in ("ordinary", "first") for name in dense.QUANTITIES]
     for case in args.case or CASES:
@@ -45,8 +47,8 @@ def main(argv=None):
         reference = dense.PaperGear(m2, schedule, v0, 1.0)
         print(f"{case}: reference events {reference.events}, DOP853 vs quadrature {reference.check():.1e}")
         print(f"  {'method':12s} {'rtol':>6s} " + " ".join(f"{n + ' ' + k[:3]:>9s}" for n, k in cols))
-        for method in METHODS:
-            for rtol in RTOLS:
+        for method in args.method or METHODS:
+            for rtol in args.rtol or RTOLS:
                 w = measure(case, method, rtol, args.points, reference)
                 print(f"  {method:12s} {rtol:6.0e} " + " ".join(f"{w[c]:9.2f}" for c in cols), flush=True)
 

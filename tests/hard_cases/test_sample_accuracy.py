@@ -27,7 +27,7 @@ CASES = {  # scene, free parameters, v1(0); the reference's m2, load schedule
     "stall-stick-breakaway": ("load-schedule", {}, 0.0, (200.0, ((0.0, 0.0), (0.3, -30000.0), (0.6, -2000.0)))),
     "brake-to-stick": ("paper", {"F2": -15000.0}, 2.0, (200.0, ((0.0, -15000.0),))),
 }
-METHODS = ("dopri5", "rosenbrock23", "auto")  # auto: slow run only
+METHODS = ("dopri5", "rosenbrock23", "rodas4", "auto")  # auto: slow run only
 RTOLS = (1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8, 1e-9)
 GRID = list(itertools.product(sorted(CASES), RTOLS, METHODS))
 # The default run: every case with each method, at rtol 1e-4 to 1e-9 (rosenbrock23 at 1e-9 is
@@ -38,7 +38,10 @@ GRID = list(itertools.product(sorted(CASES), RTOLS, METHODS))
 # commit 46b74eb (before the accuracy fix), 3 of the kept 6 fail (stall dopri5 1e-9: v1 103 rtol).
 KEPT = [("brake-to-stick", 1e-7, "dopri5"), ("runup-load-step", 1e-6, "dopri5"),
         ("stall-stick-breakaway", 1e-9, "dopri5"), ("brake-to-stick", 1e-9, "rosenbrock23"),
-        ("runup-load-step", 1e-4, "rosenbrock23"), ("stall-stick-breakaway", 1e-6, "rosenbrock23")]
+        ("runup-load-step", 1e-4, "rosenbrock23"), ("stall-stick-breakaway", 1e-6, "rosenbrock23"),
+        ("stall-stick-breakaway", 1e-3, "rodas4"), ("brake-to-stick", 1e-3, "rodas4")]
+# rodas4's two at rtol 1e-3 were 26.8 and 22.9 rtol off (S1) before its step was judged by its dense
+# output's error too (``rodas.dense_error``): 1.4 and 0.4 after (tools/sample_accuracy.py).
 
 
 @functools.lru_cache(maxsize=None)
@@ -59,7 +62,8 @@ def test_every_output_row_is_within_ten_rtol_of_the_reference(case, rtol, method
 @pytest.mark.parametrize("method", sorted(METHOD_RTOL_MIN))
 @pytest.mark.parametrize("case", sorted(CASES))
 def test_each_method_delivers_at_the_tightest_rtol_it_accepts(case, method):
-    """At METHOD_RTOL_MIN too (dopri5 1e-12, rosenbrock23 1e-9; measured worst 3.8 and 3.9 rtol); a
+    """At METHOD_RTOL_MIN too (dopri5 1e-12, rosenbrock23 1e-9, rodas4 and auto 1e-12; measured worst 3.8,
+    3.9, 3.8 and 3.8 rtol); a
     tighter rtol is refused (rosenbrock23 at 1e-10 was 39 rtol off, tests/test_bounds.py)."""
     rtol = METHOD_RTOL_MIN[method][0]
     scene, params, v0, _ = CASES[case]

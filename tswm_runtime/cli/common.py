@@ -34,7 +34,7 @@ SETTING_OPTIONS = {  # run setting: (option, type, metavar, help)
     "t_end": ("--t-end", float, "T", "end time [s] (default: the scene's)"),
     "rtol": ("--rtol", float, "R", "relative tolerance (default: the scene's)"),
     "atol": ("--atol", float, "A", "absolute tolerance (default: the scene's)"),
-    "method": ("--method", str, None, "integrator, dopri5, rosenbrock23 or auto (default: the scene's)"),
+    "method": ("--method", str, None, "integrator, dopri5, rosenbrock23, rodas4 or auto (default: the scene's)"),
     "points": ("--points", int, "N", "number of output points (default: 1001)"),
     "max_steps": ("--max-steps", int, "N", "step attempts allowed per run (default: the scene's)"),
     "max_events": ("--max-events", int, "N", "size of the event log per run (default: 1000)"),
@@ -46,7 +46,7 @@ def add_setting_options(parser: argparse.ArgumentParser, keys) -> None:
     for key in keys:
         option, kind, metavar, help_text = SETTING_OPTIONS[key]
         if key == "method":
-            parser.add_argument(option, choices=("dopri5", "rosenbrock23", "auto"), help=help_text)
+            parser.add_argument(option, choices=("dopri5", "rosenbrock23", "rodas4", "auto"), help=help_text)
         else:
             parser.add_argument(option, type=kind, metavar=metavar, help=help_text)
 

@@ -43,8 +43,8 @@ from tswm_runtime.jit.structures import (INDEX_WIDTH, JUMP_WIDTH, MODE_TABLES, S
 
 F_T_STOP, F_S1M, F_TS1M, F_S2M, F_TS2M, F_X1, F_V1, F_IMPACT_E = range(8)
 N_F = 8
-I_STATUS, I_EVENTS, I_STEPS, I_REJECTED, I_RHS, I_JAC, I_FIRST, I_NMODES, I_IMPACTS = range(9)
-N_I = 9
+I_STATUS, I_EVENTS, I_STEPS, I_REJECTED, I_RHS, I_JAC, I_FIRST, I_NMODES, I_IMPACTS, I_SWITCHES = range(10)
+N_I = 10
 
 #: Where run_batch writes, one row per case: out_f (N_F floats), out_i (N_I integers), seq.
 Results = namedtuple("Results", "f i seq")
@@ -147,4 +147,5 @@ def run_batch(functions, tables, P, start, settings, max_events, n_obs, results)
         for k in range(4):
             out_i[I_STEPS + k] = record.counters[k]
         out_i[I_FIRST] = first
+        out_i[I_SWITCHES] = record.counters[segment.N_SWITCHES]
         _write_sequence(results.f[c], out_i, results.seq[c], first, n_ev, record.log)

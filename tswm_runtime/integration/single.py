@@ -11,8 +11,8 @@ from tswm_runtime.jit import cache_guard
 from tswm_runtime.jit.arrays import copy_into
 from tswm_runtime.jit.cache_guard import njit
 from tswm_runtime.integration.steplog import no_steps
-from tswm_runtime.integration.segment import (DOPRI5, INVALID_INPUT, N_COUNTERS, ROSENBROCK23, AttemptFunction, run,
-                                              segment_work)
+from tswm_runtime.integration.segment import (DOPRI5, INVALID_INPUT, N_COUNTERS, RODAS4, ROSENBROCK23, AttemptFunction,
+                                              run, segment_work)
 from tswm_runtime.jit.signatures import MATRIX, VECTOR, GuardsFunction, JacFunction, RhsFunction
 from tswm_runtime.jit.structures import (EVENT_SETTINGS, INDEX_WIDTH, JUMP_WIDTH, TOLERANCES, EventLog, Functions,
                                          Outputs, Record, Segment, Settings, State)
@@ -32,7 +32,7 @@ def _valid(method, t0, y0, t_end, tol, max_steps, ev, out, i_out, y_stop, counte
         numbers = numbers and a >= 0.0
     for d in ev.directions:
         numbers = numbers and -1 <= d <= 1
-    return (method == DOPRI5 or method == ROSENBROCK23) and sizes and outputs and numbers
+    return (method == DOPRI5 or method == ROSENBROCK23 or method == RODAS4) and sizes and outputs and numbers
 
 
 
@@ -53,7 +53,7 @@ def integrate_segment(method, attempt, rhs, jac, guards, mode, p, t0, y0, t_end,
                       i_out, y_out, y_stop, counters):
     """Integrate y' = rhs(mode, t, y, p) from (t0, y0) to t_end or the first event.
 
-    method: DOPRI5 or ROSENBROCK23 (the latter calls jac once per accepted step;
+    method: DOPRI5, ROSENBROCK23 or RODAS4 (the stiff two call jac once per accepted step;
         DOPRI5 runs may pass ``no_jacobian``); attempt: its step, ``attempt_function(method)``.
     rhs, jac, guards: the model, compiled with the signatures in ``signatures``.
     mode, p: discrete mode and parameter vector, passed through to the model.

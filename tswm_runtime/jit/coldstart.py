@@ -71,9 +71,12 @@ GROUPS = {
     "batch": ("the parallel sweep kernel", [("hybrid/batch.py", "run_batch", True)]),
     "dopri5": ("the dopri5 step", [("integration/segment.py", "dopri5_attempt", True)]),
     "rosenbrock23": ("the rosenbrock23 step", [("integration/segment.py", "rosenbrock23_attempt", True)]),
+    "rodas4": ("the rodas4 step", [("integration/segment.py", "rodas4_attempt", True)]),
 }
-#: The step groups each method (``simulate.METHODS``) compiles: auto switches between both steps.
-STEP_GROUPS = {"dopri5": ("dopri5",), "rosenbrock23": ("rosenbrock23",), "auto": ("dopri5", "rosenbrock23")}
+#: The step groups each method (``simulate.METHODS``) compiles: auto switches between dopri5's and rodas4's
+#: steps (``segment.AUTO_STIFF``).
+STEP_GROUPS = {"dopri5": ("dopri5",), "rosenbrock23": ("rosenbrock23",), "rodas4": ("rodas4",),
+               "auto": ("dopri5", "rodas4")}
 
 _announced: set = set()
 _lock = threading.Lock()

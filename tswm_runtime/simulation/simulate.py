@@ -31,21 +31,24 @@ from tswm_runtime.results.rows import MAX_LOGGED_STEPS, Rows, output_times, stat
 
 coldstart.done()
 
-METHODS = {"dopri5": segment.DOPRI5, "rosenbrock23": segment.ROSENBROCK23, "auto": segment.AUTO}
+METHODS = {"dopri5": segment.DOPRI5, "rosenbrock23": segment.ROSENBROCK23, "rodas4": segment.RODAS4,
+           "auto": segment.AUTO}
 # Below 1e-13 a step's error is rounding; above 1e-2 the error per step is not controlled any more
 # (paper-runup against rtol 1e-12: S1 max 0.24 % off at rtol 1e-2, 90 % off at rtol 0.1).
 RTOL_RANGE = (1e-13, 1e-2)
 # The tightest rtol each method delivers: every output row within 10 rtol of the dense reference
 # (tests/hard_cases/test_sample_accuracy.py), and why not below. Measured worst rows on its three cases:
-# rosenbrock23 3.9 rtol at 1e-9, 38.6 at 1e-10; dopri5 3.8 at 1e-12, 37.7 at 1e-13 (below 1e-12 the
-# reference itself, 1.7e-12 of |v1|, cannot tell).
+# rosenbrock23 3.9 rtol at 1e-9, 38.6 at 1e-10; dopri5 3.8 at 1e-12, 37.7 at 1e-13; rodas4 and auto
+# (which switches to rodas4) 3.8 at 1e-12 (below 1e-12 the reference itself, 1.7e-12 of |v1|, cannot tell).
 METHOD_RTOL_MIN = {
     "dopri5": (1e-12, "below it the rows cannot be shown to be within 10 rtol (the reference is good to "
                       "1.7e-12)"),
     "rosenbrock23": (1e-9, "its step tolerance stops at 1e-12, so below 1e-9 its rows are about "
                            "1e-8/rtol rtol off (39 rtol at 1e-10); use dopri5 for a tighter rtol"),
-    "auto": (1e-9, "where it switches to rosenbrock23 it is bound as rosenbrock23 is: below 1e-9 those rows "
-                   "are about 1e-8/rtol rtol off; use dopri5 for a tighter rtol"),
+    "rodas4": (1e-12, "below it the rows cannot be shown to be within 10 rtol (the reference is good to "
+                      "1.7e-12)"),
+    "auto": (1e-12, "below it the rows cannot be shown to be within 10 rtol (the reference is good to "
+                    "1.7e-12)"),
 }
 # atol is absolute on x1 [m] and v1 [m/s]: below 1e-20 the error estimate underflows (NaN steps), above 1 m
 # it accepts any step and the answer is silently wrong. Within that range a run is judged after it ends:

@@ -38,7 +38,7 @@ except ImportError:  # pragma: no cover - POSIX machines have it
 
 ENV = "TSWM_COLD_START"
 MODES = ("background", "foreground", "interpret")
-METHOD_GROUPS = ("dopri5", "rosenbrock23")
+METHOD_GROUPS = ("dopri5", "rosenbrock23", "rodas4")
 PROBE_CASES = 8   # a sweep times this many cases interpreted to choose between interpreting and compiling
 
 

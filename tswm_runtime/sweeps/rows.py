@@ -106,6 +106,7 @@ def run_cases(module: ModuleType, P: np.ndarray, run: dict):
         "x1": out_f[:, batch.F_X1], "v1": out_f[:, batch.F_V1], "regimes": regimes, "modes": mode_codes,
         "n_events": out_i[:, batch.I_EVENTS], "steps": out_i[:, batch.I_STEPS],
         "rejected": out_i[:, batch.I_REJECTED], "nfev": out_i[:, batch.I_RHS], "njev": out_i[:, batch.I_JAC],
+        "n_switches": out_i[:, batch.I_SWITCHES],
         "impacts": out_i[:, batch.I_IMPACTS], "impact_energy": out_f[:, batch.F_IMPACT_E],
     })
     return pd.DataFrame(columns)

@@ -28,6 +28,7 @@ One row per case: the free parameters, then
     modes     the same phases as mode indices into the module's MODES, space separated
     n_events, steps, rejected, nfev, njev   events logged, accepted and rejected steps,
               rhs and Jacobian calls
+    n_switches   method auto's switches between its explicit and its stiff method (0 for the others)
     impacts, impact_energy   impacts with a normal impulse (scenes with a clearance and
               rigid flanks) and the kinetic energy they took [J]
 
@@ -70,7 +71,8 @@ MAX_CHUNKS = 10**5
 MAX_SEED = 2**63 - 1
 ROW_BYTES = 220   # bytes per case in chunks + parquet + CSV: 214 measured on a 2000-case paper grid
 RESULT_COLUMNS = ("status", "problem", "t_stop", "S1m", "tS1m", "S2m", "tS2m", "KD1", "KD2", "x1", "v1",
-                  "regimes", "modes", "n_events", "steps", "rejected", "nfev", "njev", "impacts", "impact_energy")
+                  "regimes", "modes", "n_events", "steps", "rejected", "nfev", "njev", "n_switches", "impacts",
+                  "impact_energy")
 # Units of the result columns in the written tables ('S1m [N]'); the parameters carry PARAM_UNITS.
 RESULT_UNITS = {"t_stop": "s", "S1m": "N", "tS1m": "s", "S2m": "N", "tS2m": "s", "x1": "m", "v1": "m/s",
                 "impact_energy": "J"}
