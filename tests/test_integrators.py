@@ -9,6 +9,9 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 from hypothesis import example, given, settings, strategies as st
+# numba's type of a first-class function value (attempt_function) is registered by this module: with
+# every kernel loaded from the cache nothing else imports it, and integrate_segment got a pyobject
+import numba.experimental.function_type  # noqa: F401
 from numba import njit
 from scipy.integrate import RK45, solve_ivp
 
@@ -514,6 +517,34 @@ def test_a_step_left_unsampled_keeps_its_cubic_away_from_zero(g_a, g_b, rate_a, 
     lowest = min(sign * cubic(theta) for theta in [0.0, 1.0] + critical)
     distance = min(sign * g_a, sign * g_b)
     assert lowest >= (1.0 - ev.CLEAR_MARGIN) * distance - 1e-9 * (abs(g_a) + abs(g_b) + h * (abs(rate_a) + abs(rate_b)))
+
+
+@njit
+def _dip_bound(sign, slope_a, slope_b):
+    return ev._dip_bound(sign, slope_a, slope_b)
+
+
+@settings(max_examples=400, deadline=None)
+@given(g_a=_VALUES, g_b=_VALUES, slope_a=_VALUES, slope_b=_VALUES, sign=st.sampled_from([-1, 1]))
+def test_the_cheap_dip_bound_holds_the_cubic(g_a, g_b, slope_a, slope_b, sign):
+    """clear_of_zero's first test: ``_dip_bound`` is never below how far sign H dips under its smaller end
+    value on [0, 1] (H the cubic Hermite interpolant of the end values and slopes per unit theta),
+    checked on a fine grid of theta independently of the bound's derivation."""
+    theta = np.linspace(0.0, 1.0, 3001)
+    H = (g_a * (1 - 3 * theta**2 + 2 * theta**3) + slope_a * theta * (1 - theta)**2
+         + g_b * (3 * theta**2 - 2 * theta**3) - slope_b * theta**2 * (1 - theta))
+    dip = min(sign * g_a, sign * g_b) - np.min(sign * H)
+    assert dip <= _dip_bound(sign, slope_a, slope_b) + 1e-12 * (abs(g_a) + abs(g_b) + abs(slope_a) + abs(slope_b))
+
+
+def test_the_cheap_dip_bound_is_reached_and_passes_nan_on():
+    """The bound is sharp (a single slope toward zero dips by 4/27 of it, at theta = 1/3 or 2/3), zero
+    for slopes that point away from zero, and NaN for a NaN slope (clear_of_zero then takes the
+    full test)."""
+    assert _dip_bound(1, -1.0, 0.0) == pytest.approx(4.0 / 27.0, rel=1e-15)
+    assert _dip_bound(-1, 0.0, -2.0) == pytest.approx(8.0 / 27.0, rel=1e-15)
+    assert _dip_bound(1, 3.0, -5.0) == 0.0
+    assert math.isnan(_dip_bound(1, math.nan, 0.0)) and math.isnan(_dip_bound(-1, 0.0, math.nan))
 
 
 @njit
