@@ -128,7 +128,7 @@ def test_tiny_run_writes_the_report(tmp_path, capsys):
                       tols=(1e-5, 1e-8), repeats=1, sweep_n=2, cases=16) == 0
     runs = pd.read_csv(tmp_path / "runs.csv")
     assert set(runs["solver"]) == {"tswm simulate", "tswm simulate rosenbrock23", "tswm simulate rodas4",
-                                   "tswm simulate dopri5",
+                                   "tswm simulate auto",
                                    "tswm simulate points=2",
                                    "tswm sweep per case", "RK45", bench_report.TSWM_FIXED_COST}
     assert (runs["status"] == "finished").all() and (runs["repeats"] == 1).all()

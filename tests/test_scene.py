@@ -87,7 +87,7 @@ def test_paper():
     assert {k: p.value for k, p in s.reference.items()} == {"Ft1": 990.0, "Ft2": 8303.7}
     assert s.modes == ("forward", "stick")
     assert (s.run.t_end, s.run.x1, s.run.v1, s.run.rtol, s.run.atol, s.run.method) == (
-        1.0, 0.0, 0.0, 1e-6, 1e-9, "auto")
+        1.0, 0.0, 0.0, 1e-6, 1e-9, "dopri5")
 
 
 def test_paper_params_order_and_free():
