@@ -22,7 +22,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import pkgutil
 import subprocess
 import sys
 import tempfile
@@ -45,13 +44,14 @@ def timed(code: str, cache_dir: str, setup: str = "") -> float:
 
 
 def main() -> int:
-    import generated
     import numba
+
+    from derivation.scene import shipped_scenes   # single-stage scenes; chains compile through the chain kernel
 
     from tswm_runtime.common import provenance
 
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    shipped = sorted(m.name.replace("_", "-") for m in pkgutil.iter_modules(generated.__path__))
+    shipped = sorted(shipped_scenes())
     parser.add_argument("--scenes", default=",".join(shipped), help="comma-separated scene names")
     args = parser.parse_args()
     load_before = os.getloadavg()
