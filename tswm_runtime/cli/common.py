@@ -55,6 +55,16 @@ def setting_overrides(args: argparse.Namespace, keys) -> dict:
     return {key: getattr(args, key) for key in keys}
 
 
+def chain_inputs(args: argparse.Namespace, keys):
+    """A chain command's module, its run-setting overrides (without the method) and the method's name
+    (--method, else dopri5: a chain's default)."""
+    from tswm_runtime.model.scenes import load_chain_model
+
+    module = load_chain_model(args.scene)
+    overrides = setting_overrides(args, keys)
+    return module, overrides, overrides.pop("method") or "dopri5"
+
+
 def setting_error(error: Exception, overrides: dict) -> UsageError:
     """A SimulationInputError as a usage error naming the option (or the scene's [run] key)."""
     message = str(error)

@@ -8,7 +8,7 @@ import sys
 import time
 
 from tswm_runtime.common.words import plural
-from tswm_runtime.cli.common import (SETTING_OPTIONS, UsageError, add_setting_options, output_directory,
+from tswm_runtime.cli.common import (SETTING_OPTIONS, UsageError, add_setting_options, chain_inputs, output_directory,
                                      parse_sets, prepare_kernels, run_method, setting_error, setting_overrides)
 
 MAX_EVENT_LINES = 40
@@ -105,17 +105,12 @@ def _run_chain(args: argparse.Namespace) -> int:
     import json
 
     from tswm_common.files import write_atomic
-    from tswm_runtime.model.scenes import load_chain_model
     from tswm_runtime.simulation.chain import plot, simulate_chain, summary
     from tswm_runtime.simulation.simulate import METHODS, SimulationInputError
 
     if args.set:
         raise UsageError("--set: a chain scene has no free parameters; change its scene file")
-    module = load_chain_model(args.scene)
-    overrides = setting_overrides(args, SETTING_OPTIONS)
-    method = overrides.pop("method") or "dopri5"
-    if method not in METHODS:
-        raise UsageError(f"--method {method!r}: must be one of {', '.join(METHODS)}")
+    module, overrides, method = chain_inputs(args, SETTING_OPTIONS)
     try:
         result = simulate_chain(module, method=METHODS[method], **overrides)
     except SimulationInputError as error:

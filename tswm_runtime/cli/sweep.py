@@ -11,8 +11,8 @@ import sys
 from tswm_common.text import printable
 from tswm_runtime.common.words import plural
 from tswm_runtime.sweeps import DEFAULT_CHUNK, DEFAULT_WAIT_FOR_WORKERS
-from tswm_runtime.cli.common import (MAX_MESSAGE, UsageError, add_setting_options, output_directory, prepare_kernels, run_method,
-                                     setting_error, setting_overrides)
+from tswm_runtime.cli.common import (MAX_MESSAGE, UsageError, add_setting_options, chain_inputs, output_directory,
+                                     prepare_kernels, run_method, setting_error, setting_overrides)
 
 SWEEP_SETTINGS = ("t_end", "rtol", "atol", "method", "max_steps", "max_events")
 
@@ -72,17 +72,12 @@ def _run_chain(args: argparse.Namespace) -> int:
     import os
 
     from tswm_common.files import write_atomic
-    from tswm_runtime.model.scenes import load_chain_model
     from tswm_runtime.simulation.simulate import METHODS
     from tswm_runtime.sweeps.chain import ChainSweepError, parse_grid, sizing
 
     if args.samples is not None or args.range or args.scheduler:
         raise UsageError("--samples/--range/--scheduler: a chain sweep takes --grid only")
-    module = load_chain_model(args.scene)
-    overrides = setting_overrides(args, SWEEP_SETTINGS)
-    method = overrides.pop("method") or "dopri5"
-    if method not in METHODS:
-        raise UsageError(f"--method {method!r}: must be one of {', '.join(METHODS)}")
+    module, overrides, method = chain_inputs(args, SWEEP_SETTINGS)
     overrides = {k: v for k, v in overrides.items() if v is not None}
     try:
         grid = parse_grid(args.grid, module.STAGES)
