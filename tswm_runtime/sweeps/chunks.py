@@ -16,7 +16,6 @@ expects are stale: reported, and removed on request (``prune``).
 from __future__ import annotations
 
 import hashlib
-import io
 import json
 from pathlib import Path
 from types import ModuleType
@@ -78,13 +77,9 @@ def chunk_name(key: dict) -> str:
 def write_chunk(path: Path, table, key: dict) -> Path:
     """The rows (a pyarrow Table) as parquet with its key and its columns' checksum in the schema
     metadata, written atomically."""
-    import pyarrow.parquet as pq
-
     arrow = table.replace_schema_metadata({METADATA_KEY: json.dumps(key, sort_keys=True).encode(),
                                            CHECKSUM_KEY: columns.digest(table).encode()})
-    buffer = io.BytesIO()
-    pq.write_table(arrow, buffer)
-    return write_atomic(path, buffer.getvalue())
+    return write_atomic(path, columns.parquet(arrow))
 
 
 def read_chunk(path: Path, key: dict, P: np.ndarray, names: list[str]):

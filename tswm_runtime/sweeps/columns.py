@@ -4,7 +4,8 @@
 process 0.36 s of CPU), so the columns are made from their
 buffers instead: numbers zero-copy from a contiguous numpy array, text as a few distinct strings
 and a code per case, decoded by Arrow's C++ ``dictionary_decode``. ``digest`` checksums a table
-from the same buffers, and ``numbers_of`` reads a numeric column back as numpy.
+from the same buffers, ``numbers_of`` reads a numeric column back as numpy, and ``parquet``
+writes a table.
 """
 from __future__ import annotations
 
@@ -39,6 +40,17 @@ def texts(words: list[str], which: np.ndarray) -> pa.Array:
 
 def table(columns: dict[str, pa.Array]) -> pa.Table:
     return pa.Table.from_arrays(list(columns.values()), names=list(columns))
+
+
+def parquet(arrow: pa.Table) -> bytes:
+    """The table as a parquet file's bytes; only the text columns dictionary-encoded (trying it on
+    every column, parquet's default, took 2.3 times the CPU for a file 8 % larger)."""
+    import pyarrow.parquet as pq
+
+    text = [name for name, kind in zip(arrow.column_names, arrow.schema.types) if pa.types.is_string(kind)]
+    buffer = pa.BufferOutputStream()
+    pq.write_table(arrow, buffer, use_dictionary=text)
+    return buffer.getvalue().to_pybytes()
 
 
 def _chunks(column) -> list[pa.Array]:

@@ -32,13 +32,17 @@ def sequence_texts(module: ModuleType, seq: np.ndarray, n_modes: np.ndarray) -> 
     with -1) and its number of modes (more end in '…'). A grid has a few distinct sequences, each
     spelt once."""
     letters = [REGIME_LETTERS.get(r, "?") for r in module.MODE_REGIME]
-    kept = np.where(np.arange(SEQ_LEN) < n_modes[:, None], seq, -1)  # the first n_modes only
-    keys = np.ascontiguousarray(np.column_stack([kept, n_modes > SEQ_LEN]).astype(np.int64))
-    distinct, which = np.unique(keys.view(np.dtype((np.void, keys.shape[1] * 8))).ravel(), return_inverse=True)
+    longest = min(SEQ_LEN, int(n_modes.max(initial=0)))   # the columns any case uses
+    kept = np.where(np.arange(longest) < n_modes[:, None], seq[:, :longest], -1)  # the first n_modes only
+    small = len(letters) < 255   # a key of one byte per mode (the padding -1 as 255): a quicker sort
+    width = np.dtype(np.uint8 if small else np.int64)
+    keys = np.ascontiguousarray(np.column_stack([kept, n_modes > SEQ_LEN]).astype(width))
+    distinct, which = np.unique(keys.view(np.dtype((np.void, keys.shape[1] * width.itemsize))).ravel(),
+                                return_inverse=True)
     regimes, codes = [], []
     for key in distinct:
-        *modes_of, more = np.frombuffer(key.tobytes(), np.int64).tolist()
-        modes_of = [m for m in modes_of if m >= 0]  # not the padding
+        *modes_of, more = np.frombuffer(key.tobytes(), width).tolist()
+        modes_of = [m for m in modes_of if m != (255 if small else -1)]  # not the padding
         regimes.append("".join(letters[m] for m in modes_of) + ("…" if more else ""))
         codes.append(" ".join(map(str, modes_of)) + (" …" if more else ""))
     return regimes, codes, which.ravel()

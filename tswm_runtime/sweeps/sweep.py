@@ -62,7 +62,7 @@ from tswm_runtime.model.scenes import load_model
 from tswm_runtime.model.values import ValueInputError, si_value
 from tswm_common.files import write_atomic
 from tswm_runtime.simulation.simulate import settings, unknown_parameter
-from tswm_runtime.sweeps import chunks, cluster
+from tswm_runtime.sweeps import chunks, cluster, columns
 from tswm_runtime.sweeps.rows import case_table, run_cases  # noqa: F401  (run_cases: the fit's evaluations)
 
 LOG = logging.getLogger("tswm_runtime.sweep")
@@ -302,14 +302,6 @@ class SweepClusterLost(RuntimeError):
     message names the problem, how many chunks are safe and how to resume."""
 
 
-def _parquet_bytes(table) -> bytes:
-    import pyarrow.parquet as pq
-
-    buffer = io.BytesIO()
-    pq.write_table(table, buffer)
-    return buffer.getvalue()
-
-
 def _csv_bytes(table) -> bytes:
     """The table as CSV (pyarrow's writer: header quoted, text quoted, numbers as the shortest text
     that reads back to the same double, NaN as nan)."""
@@ -347,7 +339,7 @@ def sweep(model: str | ModuleType, P: np.ndarray, overrides: dict | None = None,
     runtime = chunks.runtime_digest()
     keys = [chunks.chunk_key(module, run, P[a:b], i, runtime) for i, (a, b) in enumerate(bounds)]
     names = [chunks.chunk_name(key) for key in keys]
-    columns = [*module.PARAM_NAMES, *RESULT_COLUMNS]
+    column_names = [*module.PARAM_NAMES, *RESULT_COLUMNS]
     tables: dict[int, object] = {}
     outcome = SweepOutcome(rows=None, parquet=None, csv=None)
     todo = []
@@ -356,7 +348,7 @@ def sweep(model: str | ModuleType, P: np.ndarray, overrides: dict | None = None,
         if path is None or not path.exists():
             todo.append(i)
             continue
-        table, why = chunks.read_chunk(path, keys[i], P[bounds[i][0]:bounds[i][1]], columns)
+        table, why = chunks.read_chunk(path, keys[i], P[bounds[i][0]:bounds[i][1]], column_names)
         if table is None:
             outcome.rejected.append((i, why))
             outcome.warnings.append(f"chunk {i} ({path}): {why}; recomputing it")
@@ -400,7 +392,7 @@ def sweep(model: str | ModuleType, P: np.ndarray, overrides: dict | None = None,
         stem = module.SCENE
         names = written_names(module)
         written = outcome.rows.rename_columns([names[name] for name in outcome.rows.column_names])
-        outcome.parquet = write_atomic(out / f"{stem}-sweep.parquet", _parquet_bytes(written))
+        outcome.parquet = write_atomic(out / f"{stem}-sweep.parquet", columns.parquet(written))
         outcome.csv = write_atomic(out / f"{stem}-sweep.csv", _csv_bytes(written))
         write_atomic(out / f"{stem}-sweep.json", json.dumps({
             "scene": module.SCENE, "scene_digest": getattr(module, "SCENE_DIGEST", None),
