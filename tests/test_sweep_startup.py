@@ -38,3 +38,31 @@ def test_a_warm_sweep_imports_no_registry_pandas_plot_cluster_or_cas_and_compute
     assert loaded == []
     _, numbas = _sweep(tmp_path / "numba-load", NUMBA_OWN_LOAD)
     assert ours == numbas
+
+
+COMMAND = """
+import atexit, sys
+atexit.register(lambda: print('interpreter teardown ran'))
+sys.argv = ['tswm', 'sweep', 'paper-runup', '--grid', 'm2=100:400:3', '--grid', 'F2_after={F2}', '--no-progress',
+            '-o', sys.argv[1]]
+from tswm_runtime.cli import command
+command()
+"""
+
+
+def test_the_command_ends_at_once_with_its_status_and_all_written(tmp_path):
+    """``tswm`` (cli.command) skips the interpreter's teardown (numba's finalizers) once its files
+    are written: no atexit handler runs, yet stdout, stderr and the tables are complete, and the
+    exit status is main's (0 done, 2 bad input)."""
+    from tswm_runtime.sweeps.sweep import read_table
+
+    done = subprocess.run([sys.executable, "-c", COMMAND.format(F2="-20000:5000:4"), str(tmp_path)],
+                          capture_output=True, text=True, cwd=ROOT)
+    assert done.returncode == 0, done.stderr
+    assert "interpreter teardown ran" not in done.stdout
+    assert done.stdout.rstrip().endswith(f"wrote {tmp_path / 'paper-runup-sweep.json'}")
+    assert len(read_table(tmp_path / "paper-runup-sweep.csv")) == 12
+    bad = subprocess.run([sys.executable, "-c", COMMAND.format(F2="1:2"), str(tmp_path / "bad")],
+                         capture_output=True, text=True, cwd=ROOT)
+    assert bad.returncode == 2 and "--grid 'F2_after=1:2'" in bad.stderr, bad.stderr
+    assert "interpreter teardown ran" not in bad.stdout
