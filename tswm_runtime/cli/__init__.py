@@ -89,8 +89,8 @@ def command() -> None:
 def exit_now(status: int) -> None:
     """End the process with ``status`` once stdout, stderr and the log handlers are flushed,
     without the interpreter's teardown: numba's and llvmlite's finalizers then free every
-    loaded kernel's LLVM module one by one, 0.2-0.3 s of CPU after a warm sweep had written its
-    files. Every file tswm writes is complete (and closed) before ``main`` returns."""
+    loaded kernel's LLVM module one by one, 0.30-0.36 s of CPU after a warm one-case sweep had
+    written its files. Every file tswm writes is complete (and closed) before ``main`` returns."""
     import logging
 
     logging.shutdown()
