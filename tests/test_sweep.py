@@ -104,6 +104,7 @@ def test_cli_sweep_writes_tables(tmp_path, capsys):
     # the run's description beside the tables, as the README says, and named in the output
     about = json.loads((tmp_path / "paper-sweep.json").read_text())
     assert about["scene"] == "paper" and about["cases"] == 5 and about["columns"] == list(table.columns)
+    assert about["chunks"] == [path.name for path in sorted((tmp_path / "chunks").glob("chunk-*.parquet"))]
     for name in ("paper-sweep.parquet", "paper-sweep.csv", "paper-sweep.json"):
         assert f"wrote {tmp_path / name}" in out
 

@@ -98,15 +98,14 @@ def read_table(path: str | Path):
     import pandas as pd
 
     path = Path(path)
-    if path.suffix == ".csv":  # CSV holds no types: 200.0 reads as an integer, empty text as missing
-        names = [UNIT_SUFFIX.sub("", name) for name in pd.read_csv(path, nrows=0).columns]
-        table = pd.read_csv(path, header=0, names=names, dtype={
-            name: "str" if name in TEXT_COLUMNS else "int64" if name in COUNT_COLUMNS else "float64" for name in names})
-        table[list(TEXT_COLUMNS)] = table[list(TEXT_COLUMNS)].fillna("")
-        return table
-    else:
-        table = pd.read_parquet(path)
-    return table.rename(columns=lambda name: UNIT_SUFFIX.sub("", name))
+    if path.suffix != ".csv":
+        return pd.read_parquet(path).rename(columns=lambda name: UNIT_SUFFIX.sub("", name))
+    # CSV holds no types: 200.0 reads as an integer, empty text as missing
+    names = [UNIT_SUFFIX.sub("", name) for name in pd.read_csv(path, nrows=0).columns]
+    table = pd.read_csv(path, header=0, names=names, dtype={
+        name: "str" if name in TEXT_COLUMNS else "int64" if name in COUNT_COLUMNS else "float64" for name in names})
+    table[list(TEXT_COLUMNS)] = table[list(TEXT_COLUMNS)].fillna("")
+    return table
 
 
 class SweepInputError(ValueError):
@@ -390,8 +389,8 @@ def sweep(model: str | ModuleType, P: np.ndarray, overrides: dict | None = None,
     outcome.rows = (_concat(frames) if frames else case_table(module, P[:0], run))
     if out is not None:
         stem = module.SCENE
-        names = written_names(module)
-        written = outcome.rows.rename_columns([names[name] for name in outcome.rows.column_names])
+        with_units = written_names(module)
+        written = outcome.rows.rename_columns([with_units[name] for name in outcome.rows.column_names])
         outcome.parquet = write_atomic(out / f"{stem}-sweep.parquet", columns.parquet(written))
         outcome.csv = write_atomic(out / f"{stem}-sweep.csv", _csv_bytes(written))
         write_atomic(out / f"{stem}-sweep.json", json.dumps({
