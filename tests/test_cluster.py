@@ -29,9 +29,9 @@ BIN = Path(sys.executable).parent
 GRID = ["--grid", "F2=-15000:-1000:8", "--grid", "m2=150:250:5"]   # 40 cases
 SETTINGS = {"t_end": 0.5}
 # Worker preload scripts (dask may run a preload more than once: each is idempotent).
-SLOW = ("import time\nfrom tswm_runtime.sweeps import rows\n_real = rows.__dict__.setdefault('unslowed', rows.run_cases)\n\n\n"
-        "def run_cases(module, P, run):\n    time.sleep(0.4)\n    return _real(module, P, run)\n\n\n"
-        "rows.run_cases = run_cases\n")
+SLOW = ("import time\nfrom tswm_runtime.sweeps import rows\n_real = rows.__dict__.setdefault('unslowed', rows.case_table)\n\n\n"
+        "def case_table(module, P, run):\n    time.sleep(0.4)\n    return _real(module, P, run)\n\n\n"
+        "rows.case_table = case_table\n")
 NO_TSWM = "import sys\nsys.modules['tswm_runtime'] = None   # import tswm_runtime raises ModuleNotFoundError\n"
 OTHER_VERSION = "from tswm_runtime.common import provenance\nprovenance.TSWM_VERSION = '0.0.0-other'\n"
 

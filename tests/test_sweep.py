@@ -104,6 +104,7 @@ def test_cli_sweep_writes_tables(tmp_path, capsys):
     # the run's description beside the tables, as the README says, and named in the output
     about = json.loads((tmp_path / "paper-sweep.json").read_text())
     assert about["scene"] == "paper" and about["cases"] == 5 and about["columns"] == list(table.columns)
+    assert about["chunks"] == [path.name for path in sorted((tmp_path / "chunks").glob("chunk-*.parquet"))]
     for name in ("paper-sweep.parquet", "paper-sweep.csv", "paper-sweep.json"):
         assert f"wrote {tmp_path / name}" in out
 
@@ -152,6 +153,7 @@ def test_mode_sequences_are_spelt_per_case_and_long_ones_end_in_an_ellipsis():
     seq[1, :] = [0, 2] * (SEQ_LEN // 2)   # exactly SEQ_LEN modes: nothing left out
     seq[2, :] = seq[1]                    # one mode more than kept
     n_modes = np.array([2, SEQ_LEN, SEQ_LEN + 1, 0])
-    regimes, codes = sequence_texts(module, seq, n_modes)
+    distinct_regimes, distinct_codes, which = sequence_texts(module, seq, n_modes)
+    regimes, codes = np.array(distinct_regimes)[which], np.array(distinct_codes)[which]
     assert list(regimes) == ["TS", "TG" * (SEQ_LEN // 2), "TG" * (SEQ_LEN // 2) + "…", ""]
     assert list(codes) == ["0 1", " ".join(["0 2"] * (SEQ_LEN // 2)), " ".join(["0 2"] * (SEQ_LEN // 2)) + " …", ""]

@@ -81,8 +81,7 @@ def test_chunk_with_right_key_but_wrong_rows_is_recomputed(paper, cases, referen
     import pyarrow.parquet as pq
 
     key = json.loads(pq.read_schema(path).metadata[chunks.METADATA_KEY])
-    forged = out.table.iloc[0:2].reset_index(drop=True)
-    chunks.write_chunk(path, forged, key)
+    chunks.write_chunk(path, out.rows.slice(0, 2), key)
     again = sweep(paper, cases, SETTINGS, output=tmp_path, chunk_size=2)
     assert again.computed == [2] and "parameter rows differ" in again.rejected[0][1]
     pd.testing.assert_frame_equal(again.table, reference)
@@ -126,7 +125,7 @@ def test_changed_runtime_reuses_nothing(paper, cases, tmp_path, monkeypatch):
 
 def test_ctrl_c_keeps_complete_chunks_and_the_rerun_resumes(paper, cases, reference, tmp_path, monkeypatch,
                                                               capsys):
-    real = sweep_module.run_cases
+    real = sweep_module.case_table
     calls = []
 
     def interrupted_on_second(module, P, run):
@@ -135,7 +134,7 @@ def test_ctrl_c_keeps_complete_chunks_and_the_rerun_resumes(paper, cases, refere
             raise KeyboardInterrupt
         return real(module, P, run)
 
-    monkeypatch.setattr(sweep_module, "run_cases", interrupted_on_second)
+    monkeypatch.setattr(sweep_module, "case_table", interrupted_on_second)
     argv = ["sweep", "paper", "--grid", "F2=-15000:-1000:6", "--chunk-size", "2", "-o", str(tmp_path),
             "--no-progress"]
     assert main(argv + ["--t-end", "1"]) == 1
@@ -144,7 +143,7 @@ def test_ctrl_c_keeps_complete_chunks_and_the_rerun_resumes(paper, cases, refere
     assert "Traceback" not in err
     assert len(chunk_files(tmp_path)) == 1 and not list((tmp_path / "chunks").glob("*.tmp"))
     assert not (tmp_path / "paper-sweep.parquet").exists()
-    monkeypatch.setattr(sweep_module, "run_cases", real)
+    monkeypatch.setattr(sweep_module, "case_table", real)
     assert main(argv + ["--t-end", "1"]) == 0
     assert "reused 1" in capsys.readouterr().out
     expected = sweep(paper, cases, {"t_end": 1.0}, chunk_size=2).table
@@ -237,3 +236,29 @@ def test_simulate_warns_when_a_body_no_longer_matches_its_header(paper, tmp_path
     monkeypatch.setattr(scenes, "load_model", lambda spec: _module_at(paper, path, open(paper.__file__).read()))
     assert main(["simulate", "paper", "--t-end", "0.01"]) == 0
     assert "warning" not in capsys.readouterr().err
+
+
+def test_column_checksum_is_the_values_not_their_chunking(paper, cases):
+    """The checksum reads the columns' buffers: the same rows split into other chunks (or sliced)
+    give the same digest, one changed number or one changed character another."""
+    import pyarrow as pa
+
+    from tswm_runtime.sweeps import columns
+
+    rows = sweep(paper, cases, SETTINGS, chunk_size=2).rows
+    whole = rows.combine_chunks()
+    assert rows.column("status").num_chunks == 3 and whole.column("status").num_chunks == 1
+    assert columns.digest(rows) == columns.digest(whole)
+    assert columns.digest(rows.slice(1, 3)) == columns.digest(whole.slice(1, 3)) != columns.digest(whole.slice(0, 3))
+    s1m = columns.numbers_of(rows.column("S1m")).copy()
+    s1m[4] = np.nextafter(s1m[4], np.inf)
+    changed = rows.set_column(rows.column_names.index("S1m"), "S1m", columns.numbers(s1m))
+    assert columns.digest(changed) != columns.digest(rows)
+    regimes = rows.column("regimes").to_pylist()
+    regimes[5] = regimes[5] + "S"
+    retyped = rows.set_column(rows.column_names.index("regimes"), "regimes", pa.array(regimes))
+    assert columns.digest(retyped) != columns.digest(rows)
+    moved = list(regimes)   # the same characters, one moved from a row to the next: other lengths
+    moved[4], moved[5] = regimes[4] + regimes[5][:1], regimes[5][1:]
+    shifted = rows.set_column(rows.column_names.index("regimes"), "regimes", pa.array(moved))
+    assert columns.digest(shifted) != columns.digest(retyped)

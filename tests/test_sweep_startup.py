@@ -6,8 +6,10 @@ from pathlib import Path
 
 ROOT = Path(__file__).parents[1]
 # What a warm sweep never needs: numba's lowering registries (loaded by its cache's refresh, with
-# scipy.linalg), the plots, code generation, the cluster, the CAS.
-NOT_NEEDED = ("scipy.linalg", "numba.np.linalg", "matplotlib", "jinja2", "dask", "distributed", "sympy", "derivation")
+# scipy.linalg), pandas (pyarrow builds and writes the tables), the plots, code generation, the
+# cluster, the CAS.
+NOT_NEEDED = ("scipy.linalg", "numba.np.linalg", "pandas", "matplotlib", "jinja2", "dask", "distributed", "sympy",
+              "derivation")
 SWEEP = """
 import json, sys
 {before}
@@ -27,11 +29,40 @@ def _sweep(tmp: Path, before: str = "") -> tuple[list[str], bytes]:
     return json.loads(done.stdout.splitlines()[-1]), (tmp / "paper-runup-sweep.csv").read_bytes()
 
 
-def test_a_warm_sweep_imports_no_registry_plot_cluster_or_cas_and_computes_the_same(tmp_path):
+def test_a_warm_sweep_imports_no_registry_pandas_plot_cluster_or_cas_and_computes_the_same(tmp_path):
     """The second of two sweep processes (the first fills numba's cache if it is cold) loads its
-    kernels without numba's registries and writes the same table as numba's own cache load."""
+    kernels without numba's registries, builds and writes its tables without pandas, and writes
+    the same table as numba's own cache load."""
     _sweep(tmp_path / "first")
     loaded, ours = _sweep(tmp_path / "warm")
     assert loaded == []
     _, numbas = _sweep(tmp_path / "numba-load", NUMBA_OWN_LOAD)
     assert ours == numbas
+
+
+COMMAND = """
+import atexit, sys
+atexit.register(lambda: print('interpreter teardown ran'))
+sys.argv = ['tswm', 'sweep', 'paper-runup', '--grid', 'm2=100:400:3', '--grid', 'F2_after={F2}', '--no-progress',
+            '-o', sys.argv[1]]
+from tswm_runtime.cli import command
+command()
+"""
+
+
+def test_the_command_ends_at_once_with_its_status_and_all_written(tmp_path):
+    """``tswm`` (cli.command) skips the interpreter's teardown (numba's finalizers) once its files
+    are written: no atexit handler runs, yet stdout, stderr and the tables are complete, and the
+    exit status is main's (0 done, 2 bad input)."""
+    from tswm_runtime.sweeps.sweep import read_table
+
+    done = subprocess.run([sys.executable, "-c", COMMAND.format(F2="-20000:5000:4"), str(tmp_path)],
+                          capture_output=True, text=True, cwd=ROOT)
+    assert done.returncode == 0, done.stderr
+    assert "interpreter teardown ran" not in done.stdout
+    assert done.stdout.rstrip().endswith(f"wrote {tmp_path / 'paper-runup-sweep.json'}")
+    assert len(read_table(tmp_path / "paper-runup-sweep.csv")) == 12
+    bad = subprocess.run([sys.executable, "-c", COMMAND.format(F2="1:2"), str(tmp_path / "bad")],
+                         capture_output=True, text=True, cwd=ROOT)
+    assert bad.returncode == 2 and "--grid 'F2_after=1:2'" in bad.stderr, bad.stderr
+    assert "interpreter teardown ran" not in bad.stdout

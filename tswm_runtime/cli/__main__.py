@@ -1,6 +1,4 @@
 """``python -m tswm_runtime.cli``: the tswm command."""
-import sys
+from tswm_runtime.cli import command
 
-from tswm_runtime.cli import main
-
-sys.exit(main())
+command()

@@ -144,21 +144,27 @@ def _run(args: argparse.Namespace) -> int:
         raise setting_error(error, overrides) from None
     for warning in outcome.warnings:
         print(f"tswm sweep: warning: {printable(warning, MAX_MESSAGE)}", file=sys.stderr)
-    table = outcome.table
-    n = len(table)
+    n = outcome.rows.num_rows
     print(f"scene {module.SCENE}: {plural(n, 'case')} in {outcome.seconds:.3g} s "
           f"({n / outcome.seconds if outcome.seconds else 0:.4g} cases/s incl. load and writing); "
           f"chunks computed {len(outcome.computed)} (of them {len(outcome.rejected)} rejected on disk), "
           f"reused {len(outcome.skipped)}")
-    counts = table["status"].value_counts()
-    print("  status: " + ", ".join(f"{k} {v}" for k, v in counts.items()))
-    regimes = table["regimes"].value_counts().head(8)
+    print("  status: " + ", ".join(f"{k} {v}" for k, v in _counts(outcome.rows.column("status"))))
     print("  regime codes (T tractive, I inverse-tractive, S stick, A/B backward, F phi = 0, G free flight): "
-          + ", ".join(f"{k or '-'} {v}" for k, v in regimes.items()))
+          + ", ".join(f"{k or '-'} {v}" for k, v in _counts(outcome.rows.column("regimes"))[:8]))
     if outcome.parquet:
         print(f"  wrote {outcome.parquet}\n  wrote {outcome.csv}\n"
               f"  wrote {outcome.parquet.with_name(f'{module.SCENE}-sweep.json')}")
     return 0
+
+
+def _counts(column) -> list[tuple[str, int]]:
+    """(value, how many rows hold it) of a text column, most frequent first (ties in order of appearance)."""
+    import pyarrow.compute
+
+    counts = pyarrow.compute.value_counts(column)
+    pairs = zip(counts.field("values").to_pylist(), counts.field("counts").to_pylist())
+    return sorted(pairs, key=lambda pair: -pair[1])
 
 
 def add_parser(sub) -> None:

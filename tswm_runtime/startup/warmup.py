@@ -156,20 +156,20 @@ def begin(cold: ColdStart, method: str | None) -> str:
 def interpreting_is_quicker(cold: ColdStart, module, P, overrides: dict, method: str | None) -> bool:
     """For a sweep: whether its cases, interpreted, take less time than compiling first (the
     estimate) and running them compiled. Times up to PROBE_CASES cases interpreted (after one
-    untimed case: the first call imports pandas); says so if compiling wins."""
+    untimed case: the first call sets up its columns); says so if compiling wins."""
     import time
 
     from tswm_runtime.simulation.simulate import settings
-    from tswm_runtime.sweeps.sweep import run_cases
+    from tswm_runtime.sweeps.rows import case_table
 
     n = P.shape[0]
     if cold.mode == "interpret" or n <= PROBE_CASES:
         return True
     run = settings(module, overrides)
     try:
-        run_cases(module, P[:1], run)
+        case_table(module, P[:1], run)
         start = time.perf_counter()
-        run_cases(module, P[1:1 + PROBE_CASES], run)
+        case_table(module, P[1:1 + PROBE_CASES], run)
     except PYTHON_ONLY_ERRORS as error:
         coldstart.LOG.warning(f"tswm: the interpreted probe stopped on {type(error).__name__}: {error}: compiling")
         return False

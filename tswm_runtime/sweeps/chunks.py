@@ -16,7 +16,6 @@ expects are stale: reported, and removed on request (``prune``).
 from __future__ import annotations
 
 import hashlib
-import io
 import json
 from pathlib import Path
 from types import ModuleType
@@ -25,6 +24,7 @@ import numpy as np
 
 from tswm_runtime.common.provenance import TSWM_VERSION as __version__
 from tswm_runtime.jit.cache_guard import kernel_digest
+from tswm_runtime.sweeps import columns
 from tswm_common.files import write_atomic
 
 KEY_FORMAT = 1
@@ -32,7 +32,7 @@ METADATA_KEY = b"tswm.chunk"
 CHECKSUM_KEY = b"tswm.columns"
 PATTERN = "chunk-*.parquet"
 RUNTIME_SOURCES = ("model/modes.py", "model/checks.py", "simulation/simulate.py", "sweeps/rows.py", "sweeps/sweep.py",
-                   "sweeps/chunks.py")   # besides cache_guard's kernels
+                   "sweeps/chunks.py", "sweeps/columns.py")   # besides cache_guard's kernels
 
 
 def model_digest(module: ModuleType) -> str:
@@ -60,19 +60,6 @@ def rows_digest(P: np.ndarray) -> str:
     return hashlib.sha256(repr(P.shape).encode() + P.tobytes()).hexdigest()
 
 
-def columns_digest(table) -> str:
-    """sha256 over a table's column names, types and values (text columns by their strings)."""
-    h = hashlib.sha256()
-    for name in table.columns:
-        values = table[name].to_numpy()
-        h.update(f"{name}\x1f{values.dtype.str}\x1f".encode())
-        if values.dtype.kind in "biuf":
-            h.update(np.ascontiguousarray(values).tobytes())
-        else:
-            h.update("\x1e".join(map(repr, values)).encode("utf-8", "surrogatepass"))
-    return h.hexdigest()
-
-
 def chunk_key(module: ModuleType, run: dict, P: np.ndarray, index: int, runtime: str | None = None) -> dict:
     """Everything a chunk's rows depend on, as a JSON-able dict."""
     return {"format": KEY_FORMAT, "index": index, "scene": module.SCENE,
@@ -88,29 +75,22 @@ def chunk_name(key: dict) -> str:
 
 
 def write_chunk(path: Path, table, key: dict) -> Path:
-    """The table as parquet with its key in the schema metadata, written atomically."""
-    import pyarrow as pa
-    import pyarrow.parquet as pq
-
-    arrow = pa.Table.from_pandas(table, preserve_index=False)
-    arrow = arrow.replace_schema_metadata({**(arrow.schema.metadata or {}),
-                                          METADATA_KEY: json.dumps(key, sort_keys=True).encode(),
-                                          CHECKSUM_KEY: columns_digest(table).encode()})
-    buffer = io.BytesIO()
-    pq.write_table(arrow, buffer)
-    return write_atomic(path, buffer.getvalue())
+    """The rows (a pyarrow Table) as parquet with its key and its columns' checksum in the schema
+    metadata, written atomically."""
+    arrow = table.replace_schema_metadata({METADATA_KEY: json.dumps(key, sort_keys=True).encode(),
+                                           CHECKSUM_KEY: columns.digest(table).encode()})
+    return write_atomic(path, columns.parquet(arrow))
 
 
-def read_chunk(path: Path, key: dict, P: np.ndarray, columns: list[str]):
-    """(table, None) when the file holds exactly the chunk ``key`` describes, else (None, why not)."""
+def read_chunk(path: Path, key: dict, P: np.ndarray, names: list[str]):
+    """(pyarrow Table, None) when the file holds exactly the chunk ``key`` describes, else (None, why not)."""
     import pyarrow.parquet as pq
 
     try:
-        arrow = pq.read_table(path)
+        arrow = pq.ParquetFile(path).read()
         metadata = arrow.schema.metadata or {}
         stored = json.loads(metadata.get(METADATA_KEY, b"null"))
         checksum = metadata.get(CHECKSUM_KEY, b"").decode("ascii", "replace")
-        table = arrow.to_pandas()
     except Exception as error:  # truncated or not parquet at all: any reader error means recompute
         return None, f"unreadable ({type(error).__name__}: {str(error)[:120]})"
     if stored is None:
@@ -118,14 +98,20 @@ def read_chunk(path: Path, key: dict, P: np.ndarray, columns: list[str]):
     if stored != key:
         diff = sorted(k for k in set(key) | set(stored) if key.get(k) != stored.get(k))
         return None, f"its key differs in {', '.join(diff)}"
-    if list(table.columns) != columns:
+    table = arrow.replace_schema_metadata(None)
+    if table.column_names != names:
         return None, "its columns differ from this sweep's"
-    if checksum != columns_digest(table):
+    try:
+        held = columns.digest(table)
+    except TypeError as error:
+        return None, f"its columns differ from this sweep's ({error})"
+    if checksum != held:
         return None, ("its columns do not match their checksum (altered or corrupted since it was written)"
                       if checksum else "it carries no checksum of its columns (written by an older tswm)")
-    names = key["params"]
-    held = table[names].to_numpy(dtype=np.float64) if names else np.empty((len(table), 0))
-    if held.shape != P.shape or not np.array_equal(held, P):
+    params = key["params"]
+    rows = (np.column_stack([columns.numbers_of(table.column(name)) for name in params]) if params
+            else np.empty((table.num_rows, 0)))
+    if rows.shape != P.shape or not np.array_equal(rows, P):
         return None, "its parameter rows differ from the rows asked for"
     return table, None
 

@@ -144,13 +144,13 @@ def chunk_task(pack: ModelPackage, P, run: dict):
     import numba
     from distributed import get_worker
 
-    from tswm_runtime.sweeps.rows import run_cases
+    from tswm_runtime.sweeps.rows import case_table
 
     module = installed(pack)
     worker = get_worker()
     with _lock:
         numba.set_num_threads(max(1, min(worker.state.nthreads, numba.config.NUMBA_NUM_THREADS)))
-        table = run_cases(module, P, run)
+        table = case_table(module, P, run)
         threads = numba.get_num_threads()
     return {**stamp(pack), "worker": worker.address, "numba threads": threads}, table
 

@@ -9,7 +9,9 @@ a truncated, altered, foreign or stale one is recomputed with a warning, and fil
 removed with ``prune``). An interrupted sweep leaves only complete chunks and resumes
 without recomputing them. With a dask.distributed ``Client`` the chunks run as tasks on
 its workers instead (``cluster.py``: every worker checked first, the model shipped with the
-work). The rows of a chunk come from ``rows.run_cases``.
+work). The rows of a chunk come from ``rows.case_table``, as Arrow columns, and every table is
+written by pyarrow (parquet, and CSV by ``pyarrow.csv``); pandas is imported only for a caller
+that reads ``SweepOutcome.table``.
 
 One row per case: the free parameters, then
 
@@ -32,13 +34,15 @@ One row per case: the free parameters, then
     impacts, impact_energy   impacts with a normal impulse (scenes with a clearance and
               rigid flanks) and the kinetic energy they took [J]
 
-The table in memory (``SweepOutcome.table``) has these names; the written SCENE-sweep.parquet
+The table in memory (``SweepOutcome.rows``, a pyarrow Table; ``SweepOutcome.table``, the same
+as a pandas DataFrame) has these names; the written SCENE-sweep.parquet
 and .csv carry the unit in the name where there is one (``written_names``: 'm2 [kg]',
 'S1m [N]', 'tS1m [s]', 'v1 [m/s]'; 'KD1', 'status' as they are), and ``read_table`` reads
 them back without it. ``tswm fit --measured`` reads them as written.
 """
 from __future__ import annotations
 
+import functools
 import io
 import json
 import logging
@@ -58,8 +62,8 @@ from tswm_runtime.model.scenes import load_model
 from tswm_runtime.model.values import ValueInputError, si_value
 from tswm_common.files import write_atomic
 from tswm_runtime.simulation.simulate import settings, unknown_parameter
-from tswm_runtime.sweeps import chunks, cluster
-from tswm_runtime.sweeps.rows import run_cases
+from tswm_runtime.sweeps import chunks, cluster, columns
+from tswm_runtime.sweeps.rows import case_table, run_cases  # noqa: F401  (run_cases: the fit's evaluations)
 
 LOG = logging.getLogger("tswm_runtime.sweep")
 # Size bounds (docs/promises.md): above LARGE_SWEEP cases a sweep states its size and needs --large;
@@ -77,6 +81,7 @@ RESULT_COLUMNS = ("status", "problem", "t_stop", "S1m", "tS1m", "S2m", "tS2m", "
 RESULT_UNITS = {"t_stop": "s", "S1m": "N", "tS1m": "s", "S2m": "N", "tS2m": "s", "x1": "m", "v1": "m/s",
                 "impact_energy": "J"}
 TEXT_COLUMNS = ("status", "problem", "regimes", "modes")
+COUNT_COLUMNS = ("n_events", "steps", "rejected", "nfev", "njev", "n_switches", "impacts")   # int64; the rest float64
 UNIT_SUFFIX = re.compile(r"\s*\[([^\[\]]*)\]$")
 
 
@@ -93,12 +98,14 @@ def read_table(path: str | Path):
     import pandas as pd
 
     path = Path(path)
-    if path.suffix == ".csv":  # CSV writes empty text as it writes a missing number
-        table = pd.read_csv(path, dtype={name: "str" for name in TEXT_COLUMNS})
-        table[list(TEXT_COLUMNS)] = table[list(TEXT_COLUMNS)].fillna("")
-    else:
-        table = pd.read_parquet(path)
-    return table.rename(columns=lambda name: UNIT_SUFFIX.sub("", name))
+    if path.suffix != ".csv":
+        return pd.read_parquet(path).rename(columns=lambda name: UNIT_SUFFIX.sub("", name))
+    # CSV holds no types: 200.0 reads as an integer, empty text as missing
+    names = [UNIT_SUFFIX.sub("", name) for name in pd.read_csv(path, nrows=0).columns]
+    table = pd.read_csv(path, header=0, names=names, dtype={
+        name: "str" if name in TEXT_COLUMNS else "int64" if name in COUNT_COLUMNS else "float64" for name in names})
+    table[list(TEXT_COLUMNS)] = table[list(TEXT_COLUMNS)].fillna("")
+    return table
 
 
 class SweepInputError(ValueError):
@@ -264,10 +271,11 @@ def sample_cases(module: ModuleType, samples: int, ranges: dict, seed: int) -> n
 
 @dataclass
 class SweepOutcome:
-    """What a sweep did: the rows, the files written, chunks computed, reused and rejected
-    (index, why), stale files found (and pruned), warnings for the user."""
+    """What a sweep did: the rows (a pyarrow Table; ``table`` gives them as a pandas DataFrame),
+    the files written, chunks computed, reused and rejected (index, why), stale files found (and
+    pruned), warnings for the user."""
 
-    table: object  # pandas.DataFrame
+    rows: object  # pyarrow.Table
     parquet: Path | None
     csv: Path | None
     computed: list[int] = field(default_factory=list)
@@ -277,6 +285,11 @@ class SweepOutcome:
     pruned: bool = False
     warnings: list[str] = field(default_factory=list)
     seconds: float = 0.0
+
+    @functools.cached_property
+    def table(self):
+        """The rows as a pandas DataFrame (pandas is imported here, on first use)."""
+        return self.rows.to_pandas()
 
 
 class SweepInterrupted(KeyboardInterrupt):
@@ -288,9 +301,13 @@ class SweepClusterLost(RuntimeError):
     message names the problem, how many chunks are safe and how to resume."""
 
 
-def _parquet_bytes(table) -> bytes:
+def _csv_bytes(table) -> bytes:
+    """The table as CSV (pyarrow's writer: header quoted, text quoted, numbers as the shortest text
+    that reads back to the same double, NaN as nan)."""
+    import pyarrow.csv
+
     buffer = io.BytesIO()
-    table.to_parquet(buffer, index=False)
+    pyarrow.csv.write_csv(table, buffer)
     return buffer.getvalue()
 
 
@@ -321,16 +338,16 @@ def sweep(model: str | ModuleType, P: np.ndarray, overrides: dict | None = None,
     runtime = chunks.runtime_digest()
     keys = [chunks.chunk_key(module, run, P[a:b], i, runtime) for i, (a, b) in enumerate(bounds)]
     names = [chunks.chunk_name(key) for key in keys]
-    columns = [*module.PARAM_NAMES, *RESULT_COLUMNS]
+    column_names = [*module.PARAM_NAMES, *RESULT_COLUMNS]
     tables: dict[int, object] = {}
-    outcome = SweepOutcome(table=None, parquet=None, csv=None)
+    outcome = SweepOutcome(rows=None, parquet=None, csv=None)
     todo = []
     for i, name in enumerate(names):
         path = out / "chunks" / name if out is not None else None
         if path is None or not path.exists():
             todo.append(i)
             continue
-        table, why = chunks.read_chunk(path, keys[i], P[bounds[i][0]:bounds[i][1]], columns)
+        table, why = chunks.read_chunk(path, keys[i], P[bounds[i][0]:bounds[i][1]], column_names)
         if table is None:
             outcome.rejected.append((i, why))
             outcome.warnings.append(f"chunk {i} ({path}): {why}; recomputing it")
@@ -369,26 +386,27 @@ def sweep(model: str | ModuleType, P: np.ndarray, overrides: dict | None = None,
         if bar:
             bar.close()
     frames = [tables[i] for i in range(len(bounds))]
-    outcome.table = (_concat(frames) if frames else run_cases(module, P[:0], run))
+    outcome.rows = (_concat(frames) if frames else case_table(module, P[:0], run))
     if out is not None:
         stem = module.SCENE
-        written = outcome.table.rename(columns=written_names(module))
-        outcome.parquet = write_atomic(out / f"{stem}-sweep.parquet", _parquet_bytes(written))
-        outcome.csv = write_atomic(out / f"{stem}-sweep.csv", written.to_csv(index=False))
+        with_units = written_names(module)
+        written = outcome.rows.rename_columns([with_units[name] for name in outcome.rows.column_names])
+        outcome.parquet = write_atomic(out / f"{stem}-sweep.parquet", columns.parquet(written))
+        outcome.csv = write_atomic(out / f"{stem}-sweep.csv", _csv_bytes(written))
         write_atomic(out / f"{stem}-sweep.json", json.dumps({
             "scene": module.SCENE, "scene_digest": getattr(module, "SCENE_DIGEST", None),
             "model_digest": keys[0]["model_digest"] if keys else chunks.model_digest(module),
             "runtime_version": __version__, "runtime_digest": runtime, "settings": run,
             "cases": int(P.shape[0]), "chunk_size": chunk_size, "chunks": names,
-            "columns": list(written.columns)}, indent=2, default=str))
+            "columns": written.column_names}, indent=2, default=str))
     outcome.seconds = time.perf_counter() - start
     return outcome
 
 
 def _concat(frames: list):
-    import pandas as pd
+    import pyarrow as pa
 
-    return pd.concat(frames, ignore_index=True)
+    return pa.concat_tables(frames)
 
 
 def _report_stale(outcome: SweepOutcome, directory: Path, expected: set[str], prune: bool) -> None:
@@ -417,6 +435,6 @@ def _run_here(module, P, run, bounds, todo, finish, bar) -> None:
     """Compute the chunks ``todo`` in this process on all cores; ``finish`` stores each."""
     for i in todo:
         a, b = bounds[i]
-        finish(i, run_cases(module, P[a:b], run))
+        finish(i, case_table(module, P[a:b], run))
         if bar:
             bar.update()
