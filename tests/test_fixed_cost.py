@@ -54,8 +54,8 @@ def test_runs_with_other_tolerances_in_between_are_not_run_twice(monkeypatch):
     """The step log's size is guessed from the last run with the same settings: a long run (rtol 1e-11,
     more steps than the smallest log) after a short one with other settings integrates once."""
     calls = []
-    integrate = sim.entry.integrate
-    monkeypatch.setattr(sim.entry, "integrate", lambda *a, **k: calls.append(k["rtol"]) or integrate(*a, **k))
+    run = sim.entry.run
+    monkeypatch.setattr(sim.entry, "run", lambda *a, **k: calls.append(a[4].tol.rtol) or run(*a, **k))
     monkeypatch.setattr(sim, "_STEPS_NEEDED", {})
     for rtol in (1e-11, 1e-4, 1e-11, 1e-4):
         r = simulate("paper-runup", rtol=rtol, atol=rtol * 1e-3)
