@@ -199,7 +199,7 @@ def prepared(module: ModuleType, overrides: dict) -> Prepared:
     overrides: validating and building the initial state cost ~8 us a call. Its run dict is shared:
     copy it to change it."""
     try:  # the key tells 1 from True and 1.0, and 0.0 from -0.0 (equal in Python, not here)
-        key = (module, tuple((k, type(v), float(v).hex() if isinstance(v, float) else v) for k, v in overrides.items()))
+        key = (module, *[(k, type(v), v.hex() if isinstance(v, float) else v) for k, v in overrides.items()])
         known = _PREPARED_RUNS.get(key)
     except TypeError:  # an unhashable value: validated below, which names it
         key = known = None
