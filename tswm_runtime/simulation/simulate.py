@@ -108,7 +108,7 @@ def parameter_vector(module: ModuleType, params: dict | None) -> np.ndarray:
     checked against the scene file's rules for them. A finite float within its quantity's limits
     is taken as it is (``_free``); any other value goes through ``si_value`` and ``_finite``, which
     word why it is refused."""
-    index, row, largest, smallest, latches = _free(module)
+    index, row, largest, smallest, latches, holds = _free(module)
     row = list(row)
     for name, value in (params or {}).items():
         j = index.get(name)
@@ -118,7 +118,7 @@ def parameter_vector(module: ModuleType, params: dict | None) -> np.ndarray:
         else:
             row[_index(module, name)] = _free_value(module, name, value)
     try:
-        ok = checks.row_check(module)(row)
+        ok = holds(row)
     except ArithmeticError:
         ok = False
     if not ok:
@@ -146,14 +146,15 @@ def _free_value(module: ModuleType, name: str, value) -> float:
 
 def _free(module: ModuleType) -> tuple:
     """({free parameter: index}, the defaults, per parameter the largest and the smallest nonzero |value|
-    its quantity allows (``units.LIMITS``; none: any finite value), the latches (inf)), once per module."""
+    its quantity allows (``units.LIMITS``; none: any finite value), the latches (inf), the scene's rules
+    (``checks.row_check``)), once per module."""
     known = _FREE.get(module)
     if known is None:
         quantity = quantities(module)
         limits = [units.LIMITS.get(quantity[name][1], (None, sys.float_info.max)) for name in module.PARAM_NAMES]
         known = ({name: j for j, name in enumerate(module.PARAM_NAMES)}, tuple(module.PARAM_DEFAULTS),
                  [hi for _, hi in limits], [lo or 0.0 for lo, _ in limits],
-                 [math.inf] * len(getattr(module, "LATCH_NAMES", ())))
+                 [math.inf] * len(getattr(module, "LATCH_NAMES", ())), checks.row_check(module))
         if len(_FREE) >= 256:
             _FREE.clear()
         _FREE[module] = known
@@ -259,8 +260,9 @@ def check_atol_scale(module: ModuleType, atol: float, scales: list[float]) -> No
     total = sum(scales)  # NaN if any is NaN (all are >= 0)
     if not scales or total != total:
         return
-    k = scales.index(max(scales))
-    if 0.0 < scales[k] < math.inf and atol > ATOL_SCALE * scales[k]:
+    largest = max(scales)
+    if 0.0 < largest < math.inf and atol > ATOL_SCALE * largest:
+        k = scales.index(largest)
         name = (*module.STATES, "x1")[k]
         unit = "m/s" if name.startswith("v") or name.endswith("rate") else "m"
         raise SimulationInputError(
@@ -403,7 +405,8 @@ def _integrate(module: ModuleType, p: np.ndarray, ready: Prepared, interruptible
     its latches unset (inf), which the run sets. Returns (the kernel's outcome, the RunArrays, the
     counters as a list, whether the run wrote rows)."""
     run = ready.run
-    capacity, t_out = _plan(run, _STEPS_NEEDED.get(ready.steps_key, (0, 0)))
+    known = _STEPS_NEEDED.get(ready.steps_key, (0, 0))
+    capacity, t_out = _plan(run, known)
     start = Start(0.0, ready.y0, ready.quad, -1, p)
     n_observables = len(module.OBSERVABLES)
     while True:
@@ -412,9 +415,10 @@ def _integrate(module: ModuleType, p: np.ndarray, ready: Prepared, interruptible
                                     _direct_in_a_thread if interruptible else _direct)
         head = arrays.ints[:N_HEAD].tolist()   # the counters, then the step log's count
         needed = tuple(head[N_COUNTERS:])
-        if len(_STEPS_NEEDED) >= 256:
-            _STEPS_NEEDED.clear()
-        _STEPS_NEEDED[ready.steps_key] = needed
+        if needed != known:
+            if len(_STEPS_NEEDED) >= 256:
+                _STEPS_NEEDED.clear()
+            _STEPS_NEEDED[ready.steps_key] = known = needed
         if t_out.size or (needed[0] <= capacity[0] and needed[1] <= capacity[1]):
             return outcome, arrays, head[:N_COUNTERS], bool(t_out.size)
         capacity, t_out = _plan(run, needed)
