@@ -54,8 +54,8 @@ def test_runs_with_other_tolerances_in_between_are_not_run_twice(monkeypatch):
     """The step log's size is guessed from the last run with the same settings: a long run (rtol 1e-11,
     more steps than the smallest log) after a short one with other settings integrates once."""
     calls = []
-    integrate = sim.entry.integrate
-    monkeypatch.setattr(sim.entry, "integrate", lambda *a, **k: calls.append(k["rtol"]) or integrate(*a, **k))
+    run = sim.entry.run
+    monkeypatch.setattr(sim.entry, "run", lambda *a, **k: calls.append(a[4].tol.rtol) or run(*a, **k))
     monkeypatch.setattr(sim, "_STEPS_NEEDED", {})
     for rtol in (1e-11, 1e-4, 1e-11, 1e-4):
         r = simulate("paper-runup", rtol=rtol, atol=rtol * 1e-3)
@@ -110,6 +110,7 @@ def test_the_scalar_rule_check_agrees_with_numpy_on_random_rows():
             row = defaults * factors
             expected = checks.violations(module, [row])[0]
             assert checks.row_violation(module, tuple(row.tolist())) == expected
+            assert _compiled_verdict(module, row.tolist()) == (expected == "")
             bad += bool(expected)
         assert bad > 10
 
@@ -117,16 +118,63 @@ def test_the_scalar_rule_check_agrees_with_numpy_on_random_rows():
 def test_the_scalar_rule_check_agrees_with_numpy_on_the_jam_rule():
     """The jam rule (a free slope: gamma + the largest friction angle < 90 deg), for both friction laws,
     a friction coefficient c of 0 (a division by zero: numpy's inf) and NaN included."""
-    from types import SimpleNamespace
+    from types import ModuleType
 
     for law in ("constant", "decreasing"):
-        module = SimpleNamespace(PARAM_NAMES=("gamma", "friction"), PARAM_UNITS=("rad", ""), FIXED={},
-                                 PARAM_CHECKS=(("jam", "gamma", "wedge.gamma", "friction", law,
-                                                "gamma + rho below 90 deg"),))
+        module = ModuleType(f"jam_{law}")   # a stand-in for a generated module: the checks are remembered per module
+        vars(module).update(PARAM_NAMES=("gamma", "friction"), PARAM_UNITS=("rad", ""), FIXED={},
+                            PARAM_CHECKS=(("jam", "gamma", "wedge.gamma", "friction", law, "gamma + rho below 90 deg"),))
         for gamma in (0.1, 1.5, math.pi / 2):
             for friction in (0.0, -0.0, 0.01, 0.2, 1.0, 1.6, math.inf, math.nan):
                 expected = checks.violations(module, [[gamma, friction]])[0]
                 assert checks.row_violation(module, (gamma, friction)) == expected, (law, gamma, friction)
+                assert _compiled_verdict(module, [gamma, friction]) == (expected == ""), (law, gamma, friction)
+
+
+def _compiled_verdict(module, row: list) -> bool:
+    """checks.row_check's verdict on a row; where it divides by zero (it raises), simulate asks
+    row_violation (numpy's inf), so that one's verdict stands."""
+    try:
+        return bool(checks.row_check(module)(row))
+    except ArithmeticError:
+        return checks.row_violation(module, tuple(row)) == ""
+
+
+@pytest.mark.parametrize("scene", ["paper-runup", "paper", "lost-motion", "valve-travel"])
+def test_a_float_parameter_is_held_to_the_same_limits_as_its_text(scene):
+    """simulate takes a finite float within its quantity's limits as it is (parameter_vector's shortcut);
+    the same number as text goes through si_value: the same vector, or the same message."""
+    module = sim._load(scene)
+    values = [0.0, -0.0, 1e-300, 1e-12, 1e-10, 1e-9, 0.5, -7.5, 1e6, 1.0000001e6, 1e9, 1.0000001e9, 1e12,
+              -1.0000001e12, 1e13, 1e15, 1e16, math.inf, -math.inf, math.nan]
+    refused = 0
+    for name in module.PARAM_NAMES:
+        for value in values:
+            outcomes = []
+            for given in (value, repr(value)):
+                try:
+                    outcomes.append(sim.parameter_vector(module, {name: given}).tolist())
+                except SimulationInputError as error:
+                    outcomes.append(str(error))
+            assert outcomes[0] == outcomes[1], (name, value, outcomes)
+            refused += isinstance(outcomes[0], str)
+    assert refused > 3 * len(module.PARAM_NAMES)
+
+
+def test_a_runs_arrays_are_disjoint_views_that_fill_their_two_blocks():
+    """entry.record_views lays every array of a run (the summary, the Outputs but their times, the
+    EventLog, the maxima, the counters, the StepLog) in its two blocks without overlap or gap."""
+    r = simulate("paper-runup", {"F2_after": -12000.0}, points=11)
+    arrays = r.record.arrays
+    summary, record = arrays.views
+    out, log, mon, counters, steps = record
+    views = [summary, *out[1:], *log, mon, counters, *steps]
+    for block, dtype in ((arrays.floats, np.float64), (arrays.ints, np.int64)):
+        mine = [v for v in views if v.dtype == dtype]
+        assert all(v.base is block and v.flags.c_contiguous for v in mine)
+        assert sum(v.size for v in mine) == block.size
+        assert not any(np.shares_memory(a, b) for i, a in enumerate(mine) for b in mine[i + 1:] if a.size and b.size)
+    assert r.n_steps == counters[0] and r.S1_max == mon[0, 1] and list(r.final_state.values()) == summary[2:].tolist()
 
 
 def test_a_new_value_is_checked_after_a_valid_one_ran():

@@ -82,10 +82,10 @@ def wrap(owner, name, label=None):
     setattr(owner, name, timer)
 
 
-for name in ("_load", "parameter_vector", "settings", "initial_state", "method_step", "_integrate",
-             "check_atol_scale", "RunRecord"):
+for name in ("_load", "parameter_vector", "prepared", "method_step", "_integrate", "check_atol_scale", "RunRecord",
+             "Rows"):
     wrap(S, name)
-wrap(S.entry, "integrate", "entry.integrate")
+wrap(S.entry, "run", "entry.run")
 wrap(S.Result, "build", "Result.build")
 wrapped, _, kernel, _ = calls(N)
 spent["kernel"] = kernel

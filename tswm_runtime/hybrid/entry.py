@@ -11,7 +11,17 @@ through its addresses too, so its compiled code is not linked into this small ke
 MemoryError from its work arrays) reach Python. After the run ``integrate_at`` also writes the
 run's summary (``summarize``: the largest |state| and the state where it stopped), so that a
 caller reading only those needs no numpy pass over the step log.
+
+A run's arrays (the Outputs, EventLog, maxima, counters, StepLog and the summary) are views of
+two blocks, one of floats and one of integers (``block_sizes``, ``record_views``): Python
+allocates two arrays instead of fifteen (about 0.6 us each) and the kernel unboxes two;
+``RunArrays`` builds the views in Python only when something reads them. The counters and the
+step log's count lead the integer block, the summary and the maxima the float block, so a
+caller reads them with one slice each (``HEAD``).
 """
+from collections import namedtuple
+from functools import cached_property
+
 import numpy as np
 from numba import types
 
@@ -24,12 +34,72 @@ from tswm_runtime.jit.addresses import function_at
 from tswm_runtime.jit.arrays import copy_into
 from tswm_runtime.jit.cache_guard import njit
 from tswm_runtime.jit.signatures import GUARDS_SIG, JAC_SIG, RHS_SIG, VECTOR, address, jit_address
-from tswm_runtime.jit.structures import (INDEX_WIDTH, JUMP_WIDTH, EventLog, Outputs, Record, Settings, Start,
-                                         StepLog, Tolerances)
+from tswm_runtime.jit.structures import (INDEX_WIDTH, INTS, JUMP_WIDTH, MODE_TABLES, SETTINGS, START, EventLog,
+                                         Outputs, Record, Settings, Start, StepLog, Tolerances)
+
+#: The sizes of a run's arrays: the width of a state row (states and their integral), the
+#: parameters (latches included), the observables (rows of the maxima), the step log's steps and
+#: segments, the event log's events.
+Sizes = namedtuple("Sizes", "width params observables steps segments events")
+SIZES = types.NamedUniTuple(types.int64, 6, Sizes)
+#: The integer block starts with the counters (``segment.N_COUNTERS``) and the step log's count
+#: (steps, segments); the float block with the summary (2 x width) and the maxima (observables x 3).
+N_COUNTERS = segment.N_COUNTERS
 
 _machine_at = function_at(types.FunctionType(HYBRID_SIG), raises=True)
-#: integrate_hybrid's signature with its functions replaced by their addresses, and the summary.
-ENTRY_SIG = HYBRID_SIG.return_type(ADDRESSES, *HYBRID_SIG.args[2:], VECTOR)
+#: integrate_hybrid's signature with its functions replaced by their addresses, its Record by the
+#: output times, the Sizes and the two blocks.
+ENTRY_SIG = HYBRID_SIG.return_type(ADDRESSES, MODE_TABLES, START, SETTINGS, VECTOR, SIZES, VECTOR, INTS)
+
+
+@njit(error_model="numpy")
+def block_sizes(sizes, points):
+    """(floats, integers) in the two blocks of a run of ``sizes`` (Sizes) writing ``points`` rows."""
+    w, n_p, n_obs, n_steps, n_seg, n_ev = sizes
+    floats = (2 * w + 3 * n_obs + n_steps * (4 + 2 * w + 4 * (w + 1)) + n_seg * n_p
+              + n_ev * (1 + w + JUMP_WIDTH) + points * (w + n_p))
+    return floats, N_COUNTERS + 2 + 2 * n_steps + n_seg + INDEX_WIDTH * n_ev + points
+
+
+@njit(error_model="numpy")
+def record_views(floats, ints, t_out, sizes):
+    """(summary, Record) as views of the blocks ``floats`` and ``ints`` (``block_sizes``); the
+    Outputs at the times ``t_out``. Compiled in ``integrate_at``, run as Python by ``RunArrays``."""
+    w, n_p, n_obs, n_steps, n_seg, n_ev = sizes
+    n_out = t_out.size
+    at = 2 * w + 3 * n_obs
+    summary, mon = floats[:2 * w], floats[2 * w:at].reshape((n_obs, 3))
+    f = floats[at:at + 4 * n_steps].reshape((n_steps, 4))
+    at += 4 * n_steps
+    y_a = floats[at:at + n_steps * w].reshape((n_steps, w))
+    at += n_steps * w
+    y_hi = floats[at:at + n_steps * w].reshape((n_steps, w))
+    at += n_steps * w
+    q = floats[at:at + n_steps * (w + 1) * 4].reshape((n_steps, w + 1, 4))
+    at += n_steps * (w + 1) * 4
+    seg_p = floats[at:at + n_seg * n_p].reshape((n_seg, n_p))
+    at += n_seg * n_p
+    log_t = floats[at:at + n_ev]
+    at += n_ev
+    log_state = floats[at:at + n_ev * w].reshape((n_ev, w))
+    at += n_ev * w
+    log_jump = floats[at:at + n_ev * JUMP_WIDTH].reshape((n_ev, JUMP_WIDTH))
+    at += n_ev * JUMP_WIDTH
+    out_y = floats[at:at + n_out * w].reshape((n_out, w))
+    at += n_out * w
+    out_p = floats[at:at + n_out * n_p].reshape((n_out, n_p))
+    at = N_COUNTERS + 2
+    counters, count = ints[:N_COUNTERS], ints[N_COUNTERS:at]
+    index = ints[at:at + 2 * n_steps].reshape((n_steps, 2))
+    at += 2 * n_steps
+    seg_mode = ints[at:at + n_seg]
+    at += n_seg
+    log_index = ints[at:at + INDEX_WIDTH * n_ev].reshape((n_ev, INDEX_WIDTH))
+    at += INDEX_WIDTH * n_ev
+    out_mode = ints[at:at + n_out]
+    steps = StepLog(f, index, y_a, y_hi, q, seg_mode, seg_p, count)
+    return summary, Record(Outputs(t_out, out_y, out_mode, out_p), EventLog(log_t, log_index, log_state, log_jump),
+                           mon, counters, steps)
 
 
 @njit(error_model="numpy")
@@ -60,14 +130,35 @@ def summarize(start, record, summary):
 
 
 @cache_guard.compile_cached(ENTRY_SIG, error_model="numpy", nogil=True)
-def integrate_at(functions, tables, start, settings, record, summary):
-    """``integrate_hybrid`` with its functions at the addresses ``functions`` (see ``functions``),
-    then, unless its input was invalid, ``summarize`` into ``summary``."""
+def integrate_at(functions, tables, start, settings, t_out, sizes, floats, ints):
+    """``integrate_hybrid`` with its functions at the addresses ``functions`` (see ``functions``)
+    and its Record in the blocks ``floats`` and ``ints`` (``record_views``: the maxima and counters
+    zeroed, the output rows NaN), then, unless its input was invalid, ``summarize``."""
+    summary, record = record_views(floats, ints, t_out, sizes)
+    record.mon[:] = 0.0
+    record.counters[:] = 0
+    record.out.y[:] = np.nan
     integrate = _machine_at(functions[0], functions[1])
     outcome = integrate(model_functions(functions), segment_function(functions), tables, start, settings, record)
     if outcome[0] != INVALID_INPUT:  # the sizes agree
         summarize(start, record, summary)
     return outcome
+
+
+class RunArrays:
+    """A run's two blocks; its arrays (``record_views``) as views, built on first access."""
+
+    def __init__(self, floats: np.ndarray, ints: np.ndarray, t_out: np.ndarray, sizes: Sizes):
+        self.floats, self.ints, self.t_out, self.sizes = floats, ints, t_out, sizes
+
+    @cached_property
+    def views(self) -> tuple:
+        """(summary, Record)."""
+        return getattr(record_views, "py_func", record_views)(self.floats, self.ints, self.t_out, self.sizes)
+
+    @property
+    def record(self) -> Record:
+        return self.views[1]
 
 
 def functions(method: int, model) -> tuple:
@@ -99,31 +190,7 @@ def _call(kernel, args, counters):
     return kernel(*args)
 
 
-def step_log(steps: int, segments: int, width: int, n_params: int) -> StepLog:
-    """An empty StepLog (``integration.steplog``) for ``steps`` steps and ``segments`` segments of a
-    run with ``width`` states and integrals and ``n_params`` parameters (latches included)."""
-    return StepLog(np.empty((steps, 4)), np.empty((steps, 2), np.int64), np.empty((steps, width)),
-                   np.empty((steps, width)), np.empty((steps, width + 1, 4)), np.empty(segments, np.int64),
-                   np.empty((segments, n_params)), np.zeros(2, np.int64))
-
-
-def _outputs(t_out: np.ndarray, width: int, n_params: int) -> Outputs:
-    """Outputs at the times t_out; for none, one shared set of empty arrays per shape (nothing is
-    written to an array of size 0)."""
-    if t_out.size:
-        return Outputs(t_out, np.full((t_out.size, width), np.nan), np.full(t_out.size, -1, np.int64),
-                       np.empty((t_out.size, n_params)))
-    known = _NO_OUTPUTS.get((width, n_params))
-    if known is None:
-        known = _NO_OUTPUTS[(width, n_params)] = Outputs(t_out, np.empty((0, width)), np.empty(0, np.int64),
-                                                          np.empty((0, n_params)))
-    return known
-
-
-_NO_OUTPUTS: dict = {}
-
-
-def _settings(method: int, n: int, *, t_end, rtol, atol, hmin, hmax, max_steps) -> Settings:
+def settings(method: int, n: int, *, t_end, rtol, atol, hmin=0.0, hmax=np.inf, max_steps=100_000) -> Settings:
     """The Settings of a run of n states (atol: a number or one per state); for a number remembered
     per value (the kernel never writes them; building them cost ~4 us a call)."""
     if not isinstance(atol, (float, int)):
@@ -143,28 +210,47 @@ def _settings(method: int, n: int, *, t_end, rtol, atol, hmin, hmax, max_steps) 
 _SETTINGS: dict = {}
 
 
+def run(method: int, model, tables, start: Start, run_settings: Settings, t_out: np.ndarray, sizes: Sizes,
+        call=_call) -> tuple:
+    """``integrate_at`` on new blocks for ``sizes``: (its outcome, RunArrays). ``start.p`` is
+    written (latches); ``t_out``: float64, contiguous. call(kernel, args, ints) runs the kernel
+    (e.g. in a thread, watching the counters at the head of ints)."""
+    n_floats, n_ints = _block_sizes(sizes, t_out.size)
+    floats, ints = np.empty(n_floats), np.empty(n_ints, np.int64)
+    outcome = call(integrate_at, (functions(method, model), tables, start, run_settings, t_out, sizes, floats, ints),
+                   ints)
+    return outcome, RunArrays(floats, ints, t_out, sizes)
+
+
+def _block_sizes(sizes: Sizes, points: int) -> tuple[int, int]:
+    """``block_sizes``, remembered per sizes and points."""
+    key = (sizes, points)
+    known = _BLOCK_SIZES.get(key)
+    if known is None:
+        known = getattr(block_sizes, "py_func", block_sizes)(sizes, points)
+        if len(_BLOCK_SIZES) >= 256:
+            _BLOCK_SIZES.clear()
+        _BLOCK_SIZES[key] = known
+    return known
+
+
+_BLOCK_SIZES: dict = {}
+
+
 def integrate(method, model, p, tables, y0, t_end, *, rtol, atol, t_out, max_events, quad=None, t0=0.0,
-              mode0=-1, hmin=0.0, hmax=np.inf, max_steps=100_000, steps=(0, 0), summary=None, call=_call):
-    """integrate_hybrid with keyword arguments: builds the structures and work arrays from
-    plain values and returns (status, t_stop, n_events, last mode, need, first mode,
-    Outputs, EventLog, mon, counters, StepLog). model: the generated module; p is written
-    (latches). atol: a number or one per state. steps: the StepLog's capacity (steps, segments);
-    its count says how many there were (more than the capacity: the log is incomplete).
-    summary: None, or an array of 2 x (states and integrals) that the run fills (``summarize``).
-    call(kernel, args, counters) runs the kernel (e.g. in a thread, watching counters)."""
+              mode0=-1, hmin=0.0, hmax=np.inf, max_steps=100_000, steps=(0, 0)):
+    """integrate_hybrid with keyword arguments (``run``): returns (status, t_stop, n_events, last
+    mode, need, first mode, Outputs, EventLog, mon, counters, StepLog). model: the generated module;
+    p is written (latches). atol: a number or one per state. steps: the StepLog's capacity (steps,
+    segments); its count says how many there were (more than the capacity: the log is incomplete)."""
     y0 = np.ascontiguousarray(y0, dtype=np.float64)
     quad = _NO_VALUES if quad is None else np.ascontiguousarray(quad, dtype=np.float64)
-    width = y0.size + quad.size
-    out = _outputs(np.ascontiguousarray(t_out, dtype=np.float64), width, p.size)
-    log = EventLog(np.empty(max_events), np.empty((max_events, INDEX_WIDTH), np.int64), np.empty((max_events, width)),
-                   np.zeros((max_events, JUMP_WIDTH)))
-    mon, counters = np.zeros((len(model.OBSERVABLES), 3)), np.zeros(segment.N_COUNTERS, np.int64)
-    settings = _settings(method, y0.size, t_end=t_end, rtol=rtol, atol=atol, hmin=hmin, hmax=hmax, max_steps=max_steps)
-    step_record = step_log(*steps, width, p.size)
-    args = (functions(method, model), tables, Start(float(t0), y0, quad, int(mode0), p), settings,
-            Record(out, log, mon, counters, step_record), _NO_VALUES if summary is None else summary)
-    result = call(integrate_at, args, counters)
-    return (*result, out, log, mon, counters, step_record)
+    run_settings = settings(method, y0.size, t_end=t_end, rtol=rtol, atol=atol, hmin=hmin, hmax=hmax,
+                            max_steps=max_steps)
+    sizes = Sizes(y0.size + quad.size, p.size, len(model.OBSERVABLES), *steps, max_events)
+    outcome, arrays = run(method, model, tables, Start(float(t0), y0, quad, int(mode0), p), run_settings,
+                          np.ascontiguousarray(t_out, dtype=np.float64), sizes)
+    return (*outcome, *arrays.record)
 
 
 _NO_VALUES = np.empty(0)

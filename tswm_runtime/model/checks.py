@@ -89,6 +89,61 @@ def violations(module: ModuleType, P: np.ndarray) -> list[str]:
     return reasons
 
 
+def row_check(module: ModuleType):
+    """``ok(row)``: whether a row of free values (plain floats, PARAM_NAMES order) keeps every rule of
+    the module's PARAM_CHECKS, as one expression in plain float arithmetic compiled once per module
+    (``_holds`` on each check cost ~1 us; this a tenth of it). Its text holds only ``r[j]`` (free
+    values), ``c[k]`` (the rules' numbers and fixed values) and operators. It may raise
+    ArithmeticError (a check that divides by zero); ``row_violation`` words a row that fails."""
+    known = _ROW_CHECKS.get(module)
+    if known is None:
+        known = _compiled_check(module)
+        if len(_ROW_CHECKS) >= 256:
+            _ROW_CHECKS.clear()
+        _ROW_CHECKS[module] = known
+    return known
+
+
+_ROW_CHECKS: dict = {}
+
+
+def _compiled_check(module: ModuleType):
+    free = {name: j for j, name in enumerate(module.PARAM_NAMES)}
+    constants: list[float] = []
+
+    def number(value) -> str:
+        constants.append(float(value))
+        return f"c[{len(constants) - 1}]"
+
+    def value(name: str) -> str:
+        return f"r[{free[name]}]" if name in free else number(module.FIXED[name])
+
+    terms = []
+    for check in getattr(module, "PARAM_CHECKS", ()):
+        kind = check[0]
+        if kind == "range":
+            _, name, _, lo, hi, lo_in, hi_in, _ = check
+            x = value(name)
+            terms.append(f"isfinite({x})")
+            if lo is not None:
+                terms.append(f"{x} {'>=' if lo_in else '>'} {number(lo)}")
+            if hi is not None:
+                terms.append(f"{x} {'<=' if hi_in else '<'} {number(hi)}")
+        elif kind == "bound":
+            x = value(check[1])
+            terms.append(f"isfinite({x}) and {number(check[3])} <= {x} <= {number(check[4])}")
+        elif kind == "less":
+            terms.append(f"{value(check[1])} < {value(check[3])}")
+        elif kind == "jam":
+            _, gamma, _, rho_key, law, _ = check
+            rho = value(rho_key) if law == "constant" else f"{number(DEG)} / {value(rho_key)}"
+            terms.append(f"{value(gamma)} + {rho} < {number(90 * DEG)}")
+        else:
+            raise ValueError(f"unknown parameter check {kind!r}")
+    code = compile(f"lambda r: {' and '.join(f'({t})' for t in terms) or 'True'}", "<parameter checks>", "eval")
+    return eval(code, {"__builtins__": {}, "isfinite": math.isfinite, "c": tuple(constants)})  # noqa: S307
+
+
 def row_violation(module: ModuleType, row) -> str:
     """'' or why one row of free values (plain floats, PARAM_NAMES order) breaks a rule: checked in
     plain float arithmetic (numpy cost ~15 us a row, this ~2 us); a row that fails, or whose check

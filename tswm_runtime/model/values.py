@@ -18,7 +18,7 @@ def si_value(module: ModuleType, name: str, value):
     or without a unit of the parameter's quantity. A finite value outside ``units.LIMITS`` of its
     quantity is refused. Unknown names pass through unchanged (the caller refuses them with the
     list of free parameters)."""
-    si, quantity = _quantities(module).get(name, (None, None))
+    si, quantity = quantities(module).get(name, (None, None))
     if isinstance(value, str):
         value = _from_text(name, value, si, quantity)
     try:
@@ -31,7 +31,7 @@ def si_value(module: ModuleType, name: str, value):
     return value
 
 
-def _quantities(module: ModuleType) -> dict:
+def quantities(module: ModuleType) -> dict:
     """{free parameter: (its SI unit, its quantity or None)}, worked out once per module."""
     known = _QUANTITIES.get(module)
     if known is None:

@@ -6,7 +6,7 @@ from dataclasses import dataclass, field
 from enum import IntEnum
 from functools import cached_property
 from types import ModuleType
-from typing import NamedTuple
+from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 
@@ -15,6 +15,9 @@ from tswm_runtime.hybrid import machine as hybrid
 from tswm_runtime.jit.structures import EventLog
 from tswm_runtime.model.modes import event_guard, event_name
 from tswm_runtime.results.rows import MAX_LOGGED_STEPS, Rows, state_names, states
+
+if TYPE_CHECKING:  # the kernels load on importing entry: simulate announces that first
+    from tswm_runtime.hybrid.entry import RunArrays
 
 class Status(IntEnum):
     """The mode machine's status codes (hybrid.FINISHED, ...), for Python."""
@@ -113,14 +116,14 @@ _EMPTY.setflags(write=False)
 
 class RunRecord(NamedTuple):
     """What a run leaves for the parts of its Result built on first access: the module, the
-    parameter vector (latches set), the running maxima, the EventLog and its number of events, the
-    first and last mode, the status code and the mode needed, the states at the start, and for a run
-    that met inf or NaN its first non-finite value and last values (``status_message``)."""
+    parameter vector (latches set), the run's arrays (``entry.RunArrays``: the running maxima
+    ``mon``, the EventLog ``log``) and its number of events, the first and last mode, the status
+    code and the mode needed, the states at the start, and for a run that met inf or NaN its first
+    non-finite value and last values (``status_message``)."""
 
     module: ModuleType
     p: np.ndarray
-    mon: np.ndarray
-    log: EventLog
+    arrays: RunArrays
     n_events: int
     first_mode: int
     last_mode: int
@@ -129,6 +132,15 @@ class RunRecord(NamedTuple):
     start: np.ndarray
     found: tuple | None = None
     last_values: tuple | None = None
+
+    @property
+    def mon(self) -> np.ndarray:
+        """The observables' running maxima, one row each: (|value|, value, t)."""
+        return self.arrays.record.mon
+
+    @property
+    def log(self) -> EventLog:
+        return self.arrays.record.log
 
 
 #: The parts of a Result built from its RunRecord on first access (``Result.__getstate__`` builds them).
@@ -340,15 +352,13 @@ class Result:
         return y[:, [order[name] for name in self.sol_names]].T.copy()
 
     @classmethod
-    def build(cls, record: RunRecord, run: dict, rows: Rows, final_state: dict, counters, *, t_stop: float) -> Result:
+    def build(cls, record: RunRecord, run: dict, rows: Rows, final_state: dict, maxima: list, counts: list,
+              t_stop: float) -> Result:
         """Assemble the result: what a caller reads at once from the run (``final_state``: the states and
-        x1 at t_stop; the maxima from record.mon), the rest from ``record`` on first access."""
-        mon = record.mon.tolist()
-        counts = counters.tolist()
-        return cls(scene=record.module.SCENE, settings=dict(run), rows=rows, final_state=final_state,
-                   S1_max=mon[0][1], t_S1_max=mon[0][2], S2_max=mon[1][1], t_S2_max=mon[1][2],
-                   status=STATUS_NAMES[record.code], t_stop=float(t_stop), n_steps=counts[0], n_rejected=counts[1],
-                   nfev=counts[2], njev=counts[3], n_switches=counts[4], record=record)
+        x1 at t_stop; ``maxima``: (|value|, value, t) of S1 and S2 in a row, as in record.mon; ``counts``:
+        steps, rejected, rhs and jac calls, switches), the rest from ``record`` on first access."""
+        return cls(record.module.SCENE, dict(run), rows, final_state, maxima[1], maxima[2], maxima[4], maxima[5],
+                   STATUS_NAMES[record.code], t_stop, *counts, record)
 
 
 def _events(module: ModuleType, log: EventLog, n_events: int) -> list[Event]:

@@ -14,6 +14,7 @@ import functools
 import importlib
 import sys
 from types import ModuleType
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -21,6 +22,9 @@ from tswm_runtime.hybrid.rows import fill_rows
 from tswm_runtime.integration.steplog import states_at
 from tswm_runtime.jit.signatures import GUARDS_SIG, address
 from tswm_runtime.jit.structures import Outputs, StepLog
+
+if TYPE_CHECKING:  # the kernels load on importing entry: simulate announces that first
+    from tswm_runtime.hybrid.entry import RunArrays
 
 MAX_LOGGED_STEPS = 10**6  # about 200-300 MB of step log at the limit
 
@@ -50,14 +54,23 @@ def states(steps: StepLog, n_states: int, t, side: int = 0) -> tuple[np.ndarray,
 
 class Rows:
     """The series of a run at its output times (``points`` from 0 to ``t_end``), computed on first
-    ``values()`` and kept. ``written``: the rows the kernel wrote at t_out as it went, for a run too
-    long to keep its steps (None: the steps are kept)."""
+    ``values()`` and kept, from the run's arrays (``entry.RunArrays``): its StepLog ``steps``, and
+    ``written``: the rows the kernel wrote at t_out as it went (``wrote``), for a run too long to keep
+    its steps (None: the steps are kept)."""
 
-    def __init__(self, module: ModuleType, steps: StepLog, t_end: float, points: int, p: np.ndarray,
-                 written: Outputs | None = None):
-        self.module, self.steps, self.p, self.written = module, steps, p, written
+    def __init__(self, module: ModuleType, arrays: RunArrays, t_end: float, points: int, p: np.ndarray,
+                 wrote: bool = False):
+        self.module, self.arrays, self.p, self.wrote = module, arrays, p, wrote
         self.t_end, self.points = t_end, points
         self._values: dict | None = None
+
+    @functools.cached_property
+    def steps(self) -> StepLog:
+        return self.arrays.record.steps
+
+    @functools.cached_property
+    def written(self) -> Outputs | None:
+        return self.arrays.record.out if self.wrote else None
 
     @property
     def t_out(self) -> np.ndarray:
@@ -73,9 +86,12 @@ class Rows:
         return int(np.searchsorted(self.t_out, self.steps.f[n_steps - 1, 2], side="right")) if n_steps else 0
 
     def __getstate__(self) -> dict:
-        """For pickling (a Result that travels): the rows evaluated, the module by its import name."""
+        """For pickling (a Result that travels): the rows evaluated, the module by its import name, the
+        step log and the rows written without the rest of the run's arrays."""
         self.values()
-        return {**self.__dict__, "module": self.module.__name__}
+        state = {**self.__dict__, "module": self.module.__name__, "steps": self.steps, "written": self.written}
+        del state["arrays"]
+        return state
 
     def __setstate__(self, state: dict) -> None:
         state["module"] = sys.modules.get(state["module"]) or importlib.import_module(state["module"])

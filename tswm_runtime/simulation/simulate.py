@@ -19,13 +19,15 @@ from tswm_runtime.jit import coldstart
 
 coldstart.announce(("integrate",))  # before the next imports compile the kernels, if not cached
 from tswm_runtime.hybrid import entry  # noqa: E402
+from tswm_runtime.hybrid.entry import Sizes  # noqa: E402
 
 from tswm_runtime.integration import segment  # noqa: E402
 
 from tswm_runtime.model import checks, modes  # noqa: E402
 from tswm_runtime.model.scenes import load_model  # noqa: E402
-from tswm_runtime.model.values import ValueInputError, si_value  # noqa: E402
+from tswm_runtime.model.values import ValueInputError, quantities, si_value  # noqa: E402
 from tswm_runtime.hybrid.machine import INCONSISTENT, NOT_FINITE  # noqa: E402
+from tswm_runtime.jit.structures import ModeTables, Settings, Start  # noqa: E402
 from tswm_runtime.results.result import Result, RunRecord, first_non_finite  # noqa: E402
 from tswm_runtime.results.rows import MAX_LOGGED_STEPS, Rows, output_times, state_names  # noqa: E402
 
@@ -103,22 +105,63 @@ def with_latches(module: ModuleType, P: np.ndarray) -> np.ndarray:
 
 def parameter_vector(module: ModuleType, params: dict | None) -> np.ndarray:
     """The free parameters (scene defaults, overridden by ``params``) plus latches (inf),
-    checked against the scene file's rules for them."""
-    values = dict(zip(module.PARAM_NAMES, module.PARAM_DEFAULTS))
+    checked against the scene file's rules for them. A finite float within its quantity's limits
+    is taken as it is (``_free``); any other value goes through ``si_value`` and ``_finite``, which
+    word why it is refused."""
+    index, row, largest, smallest, latches, holds = _free(module)
+    row = list(row)
     for name, value in (params or {}).items():
-        if name not in values:
-            raise SimulationInputError(f"parameter {name!r}: {unknown_parameter(module, name)}")
-        try:
-            value = si_value(module, name, value)
-        except ValueInputError as error:
-            raise SimulationInputError(str(error)) from None
-        values[name] = value if type(value) is float and math.isfinite(value) else _finite(f"parameter {name}", value)
-    row = tuple(values.values())
-    problem = checks.row_violation(module, row)
-    if problem:
-        raise SimulationInputError(problem)
-    # = with_latches(module, [row])[0], built directly (one array instead of four)
-    return np.array(row + (math.inf,) * len(getattr(module, "LATCH_NAMES", ())), dtype=np.float64)
+        j = index.get(name)
+        if j is not None and type(value) is float and abs(value) <= largest[j] and (
+                abs(value) >= smallest[j] or value == 0.0):
+            row[j] = value
+        else:
+            row[_index(module, name)] = _free_value(module, name, value)
+    try:
+        ok = holds(row)
+    except ArithmeticError:
+        ok = False
+    if not ok:
+        problem = checks.row_violation(module, tuple(row))
+        if problem:
+            raise SimulationInputError(problem)
+    return np.array(row + latches, dtype=np.float64)
+
+
+def _index(module: ModuleType, name: str) -> int:
+    try:
+        return module.PARAM_NAMES.index(name)
+    except ValueError:
+        raise SimulationInputError(f"parameter {name!r}: {unknown_parameter(module, name)}") from None
+
+
+def _free_value(module: ModuleType, name: str, value) -> float:
+    """A free parameter's value in SI (``si_value``), finite, or a message naming it and the value."""
+    try:
+        value = si_value(module, name, value)
+    except ValueInputError as error:
+        raise SimulationInputError(str(error)) from None
+    return value if type(value) is float and math.isfinite(value) else _finite(f"parameter {name}", value)
+
+
+def _free(module: ModuleType) -> tuple:
+    """({free parameter: index}, the defaults, per parameter the largest and the smallest nonzero |value|
+    its quantity allows (``units.LIMITS``; none: any finite value), the latches (inf), the scene's rules
+    (``checks.row_check``)), once per module."""
+    known = _FREE.get(module)
+    if known is None:
+        quantity = quantities(module)
+        limits = [units.LIMITS.get(quantity[name][1], (None, sys.float_info.max)) for name in module.PARAM_NAMES]
+        known = ({name: j for j, name in enumerate(module.PARAM_NAMES)}, tuple(module.PARAM_DEFAULTS),
+                 [hi for _, hi in limits], [lo or 0.0 for lo, _ in limits],
+                 [math.inf] * len(getattr(module, "LATCH_NAMES", ())), checks.row_check(module))
+        if len(_FREE) >= 256:
+            _FREE.clear()
+        _FREE[module] = known
+    return known
+
+
+_FREE: dict = {}
 
 
 def initial_state(module: ModuleType, run: dict) -> tuple[np.ndarray, np.ndarray]:
@@ -132,12 +175,19 @@ def initial_state(module: ModuleType, run: dict) -> tuple[np.ndarray, np.ndarray
 class Prepared(NamedTuple):
     """What a run's settings alone decide, worked out once per module and settings (``prepared``): the
     validated settings, the initial state and its integral (``initial_state``; the kernel never writes
-    them: shared by every run with these settings), and their width."""
+    them: shared by every run with these settings), their width and names (``state_names``), the
+    method's code, the kernel's Settings and ModeTables, and the key of the step log's size
+    (``_STEPS_NEEDED``)."""
 
     run: dict
     y0: np.ndarray
     quad: np.ndarray
     width: int
+    names: tuple
+    method: int
+    settings: Settings
+    tables: ModeTables
+    steps_key: tuple
 
 
 def settings(module: ModuleType, overrides: dict) -> dict:
@@ -150,7 +200,7 @@ def prepared(module: ModuleType, overrides: dict) -> Prepared:
     overrides: validating and building the initial state cost ~8 us a call. Its run dict is shared:
     copy it to change it."""
     try:  # the key tells 1 from True and 1.0, and 0.0 from -0.0 (equal in Python, not here)
-        key = (module, tuple((k, type(v), float(v).hex() if isinstance(v, float) else v) for k, v in overrides.items()))
+        key = (module, *[(k, type(v), v.hex() if isinstance(v, float) else v) for k, v in overrides.items()])
         known = _PREPARED_RUNS.get(key)
     except TypeError:  # an unhashable value: validated below, which names it
         key = known = None
@@ -158,7 +208,11 @@ def prepared(module: ModuleType, overrides: dict) -> Prepared:
         return known
     run = _validated(module, overrides)
     y0, quad = initial_state(module, run)
-    known = Prepared(run, y0, quad, y0.size + quad.size)
+    method = METHODS[run["method"]]
+    known = Prepared(run, y0, quad, y0.size + quad.size, state_names(module, y0.size + quad.size), method,
+                     entry.settings(method, y0.size, t_end=run["t_end"], rtol=run["rtol"], atol=run["atol"],
+                                    hmax=run["hmax"], max_steps=run["max_steps"]),
+                     modes.tables(module), (module, run["method"], run["rtol"], run["atol"], run["t_end"], run["hmax"]))
     if key is not None:
         if len(_PREPARED_RUNS) >= 1024:
             _PREPARED_RUNS.clear()
@@ -206,8 +260,9 @@ def check_atol_scale(module: ModuleType, atol: float, scales: list[float]) -> No
     total = sum(scales)  # NaN if any is NaN (all are >= 0)
     if not scales or total != total:
         return
-    k = scales.index(max(scales))
-    if 0.0 < scales[k] < math.inf and atol > ATOL_SCALE * scales[k]:
+    largest = max(scales)
+    if 0.0 < largest < math.inf and atol > ATOL_SCALE * largest:
+        k = scales.index(largest)
         name = (*module.STATES, "x1")[k]
         unit = "m/s" if name.startswith("v") or name.endswith("rate") else "m"
         raise SimulationInputError(
@@ -317,11 +372,12 @@ def _direct_in_a_thread(kernel, args: tuple, counters: np.ndarray):
     return _in_a_thread(_entry_point(kernel), args, counters)
 
 
-def _first_non_finite(module: ModuleType, t: np.ndarray, values: dict, mon: np.ndarray):
+def _first_non_finite(module: ModuleType, t: np.ndarray, values: dict, maxima: list[float]):
     """(name, time, value) of the run's first inf or NaN in its series, else in the maxima of S1
-    and S2 (found between output points); None if all are finite."""
-    maxima = [(f"{name} max", float(mon[k, 2]), float(mon[k, 1])) for k, name in enumerate(module.OBSERVABLES)]
-    return first_non_finite(t, values) or next((m for m in maxima if not math.isfinite(m[2])), None)
+    and S2 (found between output points; ``maxima``: (|value|, value, t) per observable, in a row);
+    None if all are finite."""
+    found = [(f"{name} max", maxima[3 * k + 2], maxima[3 * k + 1]) for k, name in enumerate(module.OBSERVABLES)]
+    return first_non_finite(t, values) or next((m for m in found if not math.isfinite(m[2])), None)
 
 
 def _plan(run: dict, needed: tuple[int, int]) -> tuple[tuple, np.ndarray]:
@@ -342,31 +398,35 @@ MIN_STEP_CAPACITY = 256
 _STEPS_NEEDED: dict = {}
 
 
-def _integrate(module: ModuleType, p: np.ndarray, ready: Prepared, interruptible: bool, summary: np.ndarray) -> tuple:
-    """entry.integrate for ``simulate``: every step kept and no output rows (run again with a
-    larger step log if it filled up), or, for a run of more than MAX_LOGGED_STEPS steps, run again
-    writing its rows at the output times, its log keeping the last step only. ``p``: the parameter
-    vector with its latches unset (inf), which the run sets. Fills ``summary`` (``entry.summarize``).
-    Returns entry.integrate's outcome and the rows written (or None)."""
+def _integrate(module: ModuleType, p: np.ndarray, ready: Prepared, interruptible: bool) -> tuple:
+    """entry.run for ``simulate``: every step kept and no output rows (run again with a larger step
+    log if it filled up), or, for a run of more than MAX_LOGGED_STEPS steps, run again writing its
+    rows at the output times, its log keeping the last step only. ``p``: the parameter vector with
+    its latches unset (inf), which the run sets. Returns (the kernel's outcome, the RunArrays, the
+    counters as a list, whether the run wrote rows)."""
     run = ready.run
-    key = (module, run["method"], run["rtol"], run["atol"], run["t_end"], run["hmax"])
-    capacity, t_out = _plan(run, _STEPS_NEEDED.get(key, (0, 0)))
+    known = _STEPS_NEEDED.get(ready.steps_key, (0, 0))
+    capacity, t_out = _plan(run, known)
+    start = Start(0.0, ready.y0, ready.quad, -1, p)
+    n_observables = len(module.OBSERVABLES)
     while True:
-        outcome = entry.integrate(
-            METHODS[run["method"]], module, p, modes.tables(module), ready.y0, run["t_end"], rtol=run["rtol"],
-            atol=run["atol"], t_out=t_out, max_events=run["max_events"], quad=ready.quad, hmax=run["hmax"],
-            max_steps=run["max_steps"], steps=capacity, summary=summary,
-            call=_direct_in_a_thread if interruptible else _direct)
-        needed = tuple(outcome[-1].count.tolist())
-        if len(_STEPS_NEEDED) >= 256:
-            _STEPS_NEEDED.clear()
-        _STEPS_NEEDED[key] = needed
+        outcome, arrays = entry.run(ready.method, module, ready.tables, start, ready.settings, t_out,
+                                    Sizes(ready.width, p.size, n_observables, *capacity, run["max_events"]),
+                                    _direct_in_a_thread if interruptible else _direct)
+        head = arrays.ints[:N_HEAD].tolist()   # the counters, then the step log's count
+        needed = tuple(head[N_COUNTERS:])
+        if needed != known:
+            if len(_STEPS_NEEDED) >= 256:
+                _STEPS_NEEDED.clear()
+            _STEPS_NEEDED[ready.steps_key] = known = needed
         if t_out.size or (needed[0] <= capacity[0] and needed[1] <= capacity[1]):
-            return (*outcome, outcome[6] if t_out.size else None)
+            return outcome, arrays, head[:N_COUNTERS], bool(t_out.size)
         capacity, t_out = _plan(run, needed)
         p[len(module.PARAM_NAMES):] = math.inf  # the latches unset again
 
 
+N_COUNTERS = entry.N_COUNTERS
+N_HEAD = N_COUNTERS + 2
 _NO_TIMES = np.empty(0)
 
 
@@ -384,23 +444,20 @@ def simulate(model: str | ModuleType, params: dict | None = None, *, interruptib
     ready = prepared(module, overrides)
     run, width = ready.run, ready.width
     method_step(run["method"])
-    summary = np.empty(2 * width)
-    status, t_stop, n_ev, last, need, first, _, log, mon, counters, steps, written = _integrate(
-        module, p, ready, interruptible, summary)
-    rows = Rows(module, steps, run["t_end"], run["points"], p, written)
+    (status, t_stop, n_ev, last, need, first), arrays, counts, wrote = _integrate(module, p, ready, interruptible)
+    head = arrays.floats[:2 * width + 3 * len(module.OBSERVABLES)].tolist()
+    largest, final, maxima = head[:width], head[width:2 * width], head[2 * width:]
+    rows = Rows(module, arrays, run["t_end"], run["points"], p, wrote)
     found = last_point = None
     # (a run that stopped at its start, first < 0, integrated nothing: its maxima are NaN, no defect)
-    finite_maxima = all(map(math.isfinite, mon[:, 1].tolist()))
-    if status != INCONSISTENT and first >= 0 and (status == NOT_FINITE or not finite_maxima):
+    if status != INCONSISTENT and first >= 0 and (status == NOT_FINITE or not all(map(math.isfinite, maxima[1::3]))):
         values = {k: v for k, v in rows.values().items() if k not in ("mode", "p", "y", "x2", "v2")}
         t_kept = values.pop("t")
-        found = _first_non_finite(module, t_kept, values, mon)
+        found = _first_non_finite(module, t_kept, values, maxima)
         last_point = (float(t_kept[-1]), {k: float(v[-1]) for k, v in values.items()}) if t_kept.size else None
-    largest_and_final = summary.tolist()
     if found is not None:
         status = NOT_FINITE
     else:
-        check_atol_scale(module, run["atol"], largest_and_final[:width])
-    record = RunRecord(module, p, mon, log, n_ev, first, last, status, need, ready.y0, found, last_point)
-    return Result.build(record, run, rows, dict(zip(state_names(module, width), largest_and_final[width:])),
-                        counters, t_stop=t_stop)
+        check_atol_scale(module, run["atol"], largest)
+    record = RunRecord(module, p, arrays, n_ev, first, last, status, need, ready.y0, found, last_point)
+    return Result.build(record, run, rows, dict(zip(ready.names, final)), maxima, counts, t_stop)
