@@ -1,5 +1,5 @@
 """Drive trains with a torque switch and a valve side against a reference written here by hand: Newton
-per body, Coulomb per stage (tests/test_chain_sim.py's HandChain), the motor cut by the switch, the
+per body, Coulomb per stage (tests/chains.py's HandChain), the motor cut by the switch, the
 valve's friction and seat typed in directly, integrated by scipy's DOP853 at rtol 1e-12 from event to
 event, its modes found by enumerating every flank combination."""
 from __future__ import annotations
@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp, trapezoid
 
-from tests.test_chain_sim import TIGHT, HandChain, chain_module, wedges  # noqa: F401 (fixture)
+from tests.chains import DEG, TIGHT, HandChain, wedges
 from tswm_runtime.simulation.chain import simulate_chain
 
 ARMED, PICKED, TRIPPED = "armed", "picked", "tripped"
@@ -239,8 +239,6 @@ def test_trip_peak_and_hold_at_the_seat_as_the_hand_model(chain_module, chain, v
     assert result.q0[-1] == pytest.approx(hand["y"][0], rel=1e-9)
     assert result.v0[-1] == pytest.approx(hand["y"][1], abs=1e-9)
 
-
-DEG = math.pi / 180
 
 
 def test_energy_over_a_trip_and_coast_run(chain_module):
