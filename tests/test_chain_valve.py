@@ -355,4 +355,4 @@ def test_tswm_sweep_mov_gives_a_sizing_table_and_keeps_failed_cases(tmp_path, ca
         == pytest.approx(0.64, rel=1e-12)
     assert list(table["holds"][:2]) == ["holds", "holds"]
     assert main(["sweep", "mov", "--grid", "mu_3=0.1"]) == 2
-    assert "--grid 'mu_3=0.1': a chain sweeps voltage and mu_1 .. mu_2" in capsys.readouterr().err
+    assert "--grid 'mu_3': a chain sweeps voltage and mu_1 .. mu_2" in capsys.readouterr().err
