@@ -86,3 +86,18 @@ def test_the_derived_switching_function_holds_no_friction_angle_of_its_own_stage
         phi = dyn.sliding(1, regimes).switching
         assert two.rho[0] not in phi[0].free_symbols and two.rho[1] in phi[0].free_symbols
         assert two.rho[1] not in phi[1].free_symbols and two.rho[0] in phi[1].free_symbols
+
+
+def test_tswm_simulate_and_derive_print_the_example(tmp_path, capsys, monkeypatch):
+    """The CLI says "1 stage" (not "1 stages"), the regimes and the closed form's switch time."""
+    from tswm_runtime.cli import main
+
+    monkeypatch.setenv("TSWM_CACHE", str(tmp_path / "cache"))
+    path = str(EXAMPLES / "msl108.toml")
+    assert main(["derive", path]) == 0
+    assert "msl108.toml): 1 stage (tswm simulate runs it)" in capsys.readouterr().out
+    assert main(["simulate", path]) == 0
+    out = capsys.readouterr().out
+    assert out.startswith("chain msl108-overrun (1 stage, ")
+    assert f"    switches at: {hand()['t_switch']:.9g} s" in out
+    assert "    inverse-tractive  b  0 s .. " in out and "t = 0 s, start: (start) -> forward: inverse-tractive (b)" in out
