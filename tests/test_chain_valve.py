@@ -273,6 +273,29 @@ def test_energy_over_a_trip_and_coast_run(chain_module):
     assert kinetic == pytest.approx(motor + load - losses - valve, abs=1e-6 * motor)
 
 
+PACKING = dict(gammas=(30.0,), mus=(0.1,), masses=(1.0, 1.0), forces=(0.0, 0.0))
+PACKING_KEYS = 'packing = "2 N"\ndp = "1 bar"\npacking_dp = "20 mm^2"\narea = "10 cm^2"\nvalve_factor = 0.01\n'
+
+
+def test_the_packing_friction_grows_with_the_pressure_as_the_hand_model(chain_module):
+    """packing 2 N + packing_dp dp = 20 mm^2 x 1 bar = 2 N, and the disc's 0.01 x 1 bar x 10 cm^2 = 1 N: 5 N
+    against the stem's motion (by hand). The module's friction at that dp is 5 N; a wedge coasting from 1 m/s
+    against it stops and rests when and where the hand model (Newton per body, Coulomb per stage, the
+    5 N typed in) does, to 1e-9."""
+    friction = 2.0 + 20e-6 * 1e5 + 0.01 * 1e5 * 10e-4
+    assert friction == pytest.approx(5.0, rel=1e-14)
+    text = wedges("packing-dp", **PACKING, v0=1.0, t_end=0.5)
+    last = text.rindex("[[body]]\n") + len("[[body]]\n")
+    module = chain_module(text[:last] + PACKING_KEYS + text[last:])
+    assert module.LOAD_FRICTION == pytest.approx(friction, rel=1e-14)
+    result = simulate_chain(module, **TIGHT)
+    log, _, y, _, _ = HandValve(**PACKING, friction=friction).run(1.0, 0.5)
+    assert [(p.regime, p.flank) for p in result.stages[0].phases] == [("tractive", "a"), ("resting", "")]
+    assert [s for _, s, _ in log] == [1, 0]
+    assert result.stages[0].switches[0] == pytest.approx(log[1][0], rel=1e-9)
+    assert result.q0[-1] == pytest.approx(y[0], rel=1e-9) and result.v0[-1] == 0.0
+
+
 def test_the_shipped_mov_module_is_fresh():
     """generated/mov.py is what the generator makes of derivation/chain/scenes/mov.toml today."""
     from pathlib import Path
@@ -297,6 +320,8 @@ def test_switch_and_valve_keys_are_refused_with_their_names():
             ("delay = 0.002", "delay = -1.0", ("switch.delay",)),
             ('seat_stiffness = "100 N/mm"\n', "", ("seat_stiffness", "missing required key")),
             ('dp = "1 kPa"', 'dp = "1 kg"', ("dp",)),
+            ('dp = "1 kPa"', 'dp = "1 kPa"\npacking_dp = "-1 mm^2"', ("body[2].packing_dp = -1 mm^2", ">= 0")),
+            ('dp = "1 kPa"', 'dp = "1 kPa"\npacking_dp = "1 N"', ("body[2].packing_dp", "force unit")),
             ("[switch]", "[switch]\ncolour = 1", ("switch.colour: unknown key",))):
         assert old in good, old
         with pytest.raises(SceneError) as err:
