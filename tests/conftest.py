@@ -87,3 +87,17 @@ def scene_module(module_once):
     """scene_module(toml_text) -> the generated, imported module (compiled once per test run)."""
     return lambda text: module_once(text, lambda folder: write_module(build_model(parse_scene(text, "test scene")),
                                                                       folder))
+
+
+@pytest.fixture(scope="session")
+def chain_module(module_once):
+    """chain_module(toml_text) -> the generated, imported chain module (compiled once per test run)."""
+    from derivation.chain.codegen import generate_chain_module
+    from derivation.chain.scene import parse_chain
+
+    def write(text, folder):
+        chain = parse_chain(text, "test chain")
+        path = folder / f"{chain.name.replace('-', '_')}.py"
+        path.write_text(generate_chain_module(chain))
+        return path
+    return lambda text: module_once(text, lambda folder: write(text, folder))

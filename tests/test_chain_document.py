@@ -4,16 +4,15 @@ written by hand; scene text reaches LaTeX only escaped."""
 from __future__ import annotations
 
 import math
-from pathlib import Path
 
 import pytest
 
 from derivation.chain.document import build_chain_document
 from derivation.chain.scene import load_chain, parse_chain
 from derivation.document import render
+from tests.chains import DEG, EXAMPLES
 
-MSL = Path(__file__).parent.parent / "docs" / "examples" / "msl4000.toml"
-DEG = math.pi / 180
+MSL = EXAMPLES / "msl4000.toml"
 
 
 def _sections(doc: dict) -> dict:

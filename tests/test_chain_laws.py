@@ -14,33 +14,14 @@ nut moves its stem by L per turn, a wedge its output at tan(gamma) times its inp
 from __future__ import annotations
 
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
 
-from derivation.chain.codegen import generate_chain_module
 from derivation.chain.scene import parse_chain
 from derivation.chain.selector import decide
-from tswm_runtime.model.contract import load_module
+from tests.chains import DEG, EXAMPLES, TIGHT, HandChain, wedges
 from tswm_runtime.simulation.chain import simulate_chain
-
-DEG = math.pi / 180
-TIGHT = {"rtol": 1e-11, "atol": 1e-13}
-
-
-@pytest.fixture(scope="module")
-def chain_module(tmp_path_factory):
-    """chain_module(toml_text) -> the generated, imported chain module."""
-    directory = tmp_path_factory.mktemp("chain_laws")
-
-    def make(text: str):
-        chain = parse_chain(text, "test chain")
-        path = directory / f"{chain.name.replace('-', '_')}.py"
-        path.write_text(generate_chain_module(chain))
-        return load_module(path)
-    return make
-
 
 # ---- a worm gear, a stem nut and a wedge in series, by hand -----------------------------------------
 
@@ -197,28 +178,7 @@ def test_back_drivable_iff_no_stage_self_locks(stage):
 
 # ---- energy balance per stage over a run with mode changes ---------------------------------------------
 
-SWITCHING = """name = "energy-switching"
-[[stage]]
-kind = "wedge"
-gamma = "30 deg"
-mu = 0.1
-[[stage]]
-kind = "wedge"
-gamma = "25 deg"
-mu = 0.12
-[[body]]
-mass = "1 kg"
-force = "5 N"
-[[body]]
-mass = "1.5 kg"
-[[body]]
-mass = "1 kg"
-force = "20 N"
-stiffness = "1000 N/m"
-[run]
-t_end = 0.5
-v0 = 1.0
-"""
+SWITCHING = wedges("energy-switching", (30.0, 25.0), (0.1, 0.12), (1.0, 1.5, 1.0), (5.0, 0.0, 20.0), spring=1000.0)
 GAMMA, MU, MASS, FORCE, STIFFNESS = (30 * DEG, 25 * DEG), (0.1, 0.12), (1.0, 1.5, 1.0), (5.0, 0.0, 20.0), 1000.0
 
 
@@ -269,7 +229,7 @@ def test_kinetic_energy_change_is_input_work_less_each_stages_friction_work(chai
 
 # ---- MSL issue 4000: a lifting table held by its gears with both drive and load applied --------------
 
-MSL = Path(__file__).parent.parent / "docs" / "examples" / "msl4000.toml"
+MSL = EXAMPLES / "msl4000.toml"
 MSL_LAMBDA = math.atan(0.010 / (math.pi * 0.016))
 MSL_GAMMA = (20 * DEG, MSL_LAMBDA)
 MSL_TAN_RHO = (0.05 / math.cos(20 * DEG), 0.05 / math.cos(math.atan(math.tan(15 * DEG) * math.cos(MSL_LAMBDA))))
@@ -303,8 +263,6 @@ def test_msl4000_rests_and_started_upward_stops_and_stays_as_the_hand_model(chai
     """From rest the run rests to its end (one decision: the only consistent mode); started lifting at
     20 rad/s it slows down in the tractive mode, stops when Newton per body with Coulomb per stage says,
     and stays: the table does not lower itself."""
-    from test_chain_sim import HandChain
-
     module = chain_module(MSL.read_text())
     held = simulate_chain(module)
     assert held.status == "finished" and [e["to"] for e in held.events] == ["resting"]

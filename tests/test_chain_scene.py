@@ -6,37 +6,10 @@ import pytest
 from derivation.chain.scene import load_chain, parse_chain
 from derivation.chain.selector import decide
 from derivation.scene import SceneError, parse_scene
+from tests.chains import DEG
+from tswm_runtime.bench.chain import worm_and_nut
 
-DEG = math.pi / 180
-VALVE = '''
-name = "valve-chain"
-
-[[stage]]
-kind = "worm_gear"
-lead_angle = "4.76 deg"
-pressure_angle = "20 deg"
-worm_radius = "25 mm"
-wheel_radius = "80 mm"
-mu = 0.05
-
-[[stage]]
-kind = "power_screw"
-lead = "4 mm"
-flank_angle = "15 deg"
-mean_diameter = "18 mm"
-mu = 0.15
-
-[[body]]
-inertia = "0.0069 kg m^2"
-torque = "5 N m"
-
-[[body]]
-inertia = "0.02 kg m^2"
-
-[[body]]
-mass = "20 kg"
-force = "-20 kN"
-'''
+VALVE = worm_and_nut("valve-chain", drive='torque = "5 N m"')
 
 
 def test_valve_chain_converts_to_equivalent_wedges():

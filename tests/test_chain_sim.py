@@ -1,152 +1,16 @@
-"""Simulated chains of wedge stages against references written here by hand: the one-stage model of the
-same numbers, and Newton per body with Coulomb per stage integrated by scipy's DOP853 at rtol 1e-12,
-its modes found by enumerating every flank combination at each event."""
+"""Simulated chains of wedge stages against references written by hand: the one-stage model of the same
+numbers, and Newton per body with Coulomb per stage (tests/chains.py's HandChain)."""
 from __future__ import annotations
 
-import itertools
 import math
 
 import numpy as np
 import pytest
-from scipy.integrate import solve_ivp
 
-from derivation.chain.codegen import generate_chain_module
 from derivation.chain.scene import parse_chain
+from tests.chains import DEG, TIGHT, HandChain, assert_like_hand, wedges
+from tswm_runtime.bench.chain import worm_and_nut
 from tswm_runtime.simulation.chain import simulate_chain
-
-DEG = math.pi / 180
-TIGHT = {"rtol": 1e-11, "atol": 1e-13}
-
-
-@pytest.fixture(scope="session")
-def chain_module(module_once):
-    """chain_module(toml_text) -> the generated, imported chain module (compiled once per test run)."""
-    def write(text, folder):
-        chain = parse_chain(text, "test chain")
-        path = folder / f"{chain.name.replace('-', '_')}.py"
-        path.write_text(generate_chain_module(chain))
-        return path
-    return lambda text: module_once(text, lambda folder: write(text, folder))
-
-
-def wedges(name: str, gammas, mus, masses, forces, spring: float = 0.0, v0: float = 1.0, t_end: float = 0.5) -> str:
-    """A chain scene of plain wedges (levers 1), a spring on the last body."""
-    text = f'name = "{name}"\n'
-    for g, mu in zip(gammas, mus):
-        text += f'[[stage]]\nkind = "wedge"\ngamma = "{g!r} deg"\nmu = {mu!r}\n'
-    for j, (m, f) in enumerate(zip(masses, forces)):
-        text += f'[[body]]\nmass = "{m!r} kg"\nforce = "{f!r} N"\n'
-        if j == len(masses) - 1 and spring:
-            text += f'stiffness = "{spring!r} N/m"\n'
-    return text + f"[run]\nt_end = {t_end!r}\nv0 = {v0!r}\n"
-
-
-class HandChain:
-    """Wedges in series: body i-1 moves x1 = r_in q_{i-1}, body i x2 = r_out q_i = tan(gamma_i) x1. Stage i's flank
-    has the normal n = (sin g, cos g) and the slip direction t = (-cos g, sin g) in (x1, x2); its force on
-    body i is sigma N n - mu N s t (sigma = +1 flank a, -1 flank b, N >= 0, s = sign of the slip = sign
-    v0), on body i-1 the opposite; a body feels the force along its motion times its lever. ``mus`` are
-    the coefficients in the wedge plane (a helical flank's mu / cos(alpha_n), typed in by the caller)."""
-
-    def __init__(self, gammas, mus, masses, forces, spring=0.0, levers=None, motor=None):
-        self.g = np.radians(gammas)
-        self.mu, self.m, self.F = np.array(mus), np.array(masses), np.array(forces, dtype=float)
-        self.n = len(gammas)
-        self.r_in, self.r_out = np.array(levers or [(1.0, 1.0)] * self.n).T   # x1 = r_in q_{i-1}, x2 = r_out q_i
-        self.c = np.cumprod([1.0, *(self.r_in * np.tan(self.g) / self.r_out)])   # v_j / v_0
-        self.k = np.zeros(self.n + 1)
-        self.k[-1] = spring
-        self.motor = motor            # (speeds, torques, U / U_n) on body 0: np.interp of the table times (U/U_n)^2
-
-    def forces(self, q0, v0):
-        F = self.F - self.k * self.c * q0
-        if self.motor:
-            speeds, torques, voltage = self.motor
-            F[0] += voltage**2 * np.interp(v0, speeds, torques)
-        return F
-
-    def solve(self, q0, s, sigma, v0=0.0):
-        """(a_0, N_1..N_n): Newton for every body, with a_j = c_j a_0."""
-        A = np.zeros((self.n + 1, self.n + 1))
-        A[:, 0] = self.m * self.c
-        for i in range(self.n):
-            g, mu = self.g[i], self.mu[i]
-            A[i + 1, 1 + i] = -self.r_out[i] * (sigma[i] * math.cos(g) - mu * s * math.sin(g))   # x2 part, body i
-            A[i, 1 + i] = self.r_in[i] * (sigma[i] * math.sin(g) + mu * s * math.cos(g))   # minus the x1 part, i-1
-        x = np.linalg.solve(A, self.forces(q0, v0))
-        return x[0], x[1:]
-
-    def consistent(self, q0, s, at_rest, noise=1e-9, v0=0.0):
-        """Flank combinations with every N >= 0, within ``noise`` [N] of the event's location (from rest:
-        leaving it in direction s)."""
-        found = []
-        for sigma in itertools.product((1, -1), repeat=self.n):
-            a, N = self.solve(q0, s, sigma, v0)
-            if np.all(N >= -noise) and (not at_rest or s * a > 0):
-                found.append(sigma)
-        return found
-
-    def run(self, v0, t_end):
-        """[(t, s, sigma)] of each sliding phase, or (t, 0, None) for rest; and the final (t, y)."""
-        t, y, log = 0.0, np.array([0.0, v0]), []
-        while t < t_end:
-            if y[1] == 0.0:
-                moves = [(s, sg) for s in (1, -1) for sg in self.consistent(y[0], s, True)]
-                if not moves:
-                    log.append((t, 0, None))
-                    return log, t_end, y
-                assert len(moves) == 1, moves
-                s, sigma = moves[0]
-            else:
-                s = 1 if y[1] > 0 else -1
-                found = self.consistent(y[0], s, False, v0=y[1])
-                sigma = found[0] if len(found) == 1 else [f for f in found if f != log[-1][2]][0]
-            log.append((t, s, sigma))
-            events = [self._normal(i, s, sigma) for i in range(self.n)] + [self._stop(s)]
-            sol = solve_ivp(lambda t, y: [y[1], self.solve(y[0], s, sigma, y[1])[0]], (t, t_end), y, method="DOP853",
-                            rtol=1e-12, atol=1e-14, events=events)
-            t, y = sol.t[-1], sol.y[:, -1].copy()
-            if sol.status == 1 and len(sol.t_events[-1]):
-                y[1] = 0.0
-        return log, t, y
-
-    def _normal(self, i, s, sigma):
-        def event(t, y):
-            return self.solve(y[0], s, sigma, y[1])[1][i]
-        event.terminal, event.direction = True, -1
-        return event
-
-    @staticmethod
-    def _stop(s):
-        def event(t, y):
-            return y[1]
-        event.terminal, event.direction = True, -s
-        return event
-
-
-def regimes(hand_log, stage):
-    """(t, regime, flank) of a stage from the hand log: tractive where sigma s = +1."""
-    out = []
-    for t, s, sigma in hand_log:
-        entry = ("resting", "") if sigma is None else (
-            "tractive" if sigma[stage] * s > 0 else "inverse-tractive", "a" if sigma[stage] > 0 else "b")
-        if not out or out[-1][1:] != entry:
-            out.append((t, *entry))
-    return out
-
-
-def assert_like_hand(result, hand: HandChain, v0: float, t_end: float, tol: float = 1e-9):
-    log, t_stop, y = hand.run(v0, t_end)
-    for k in range(hand.n):
-        expected = regimes(log, k)
-        got = [(p.t_start, p.regime, p.flank) for p in result.stages[k].phases]
-        assert [g[1:] for g in got] == [e[1:] for e in expected], (k, got, expected)
-        assert np.allclose([g[0] for g in got], [e[0] for e in expected], rtol=tol, atol=tol), (got, expected)
-    assert result.status == "finished"
-    assert result.q0[-1] == pytest.approx(y[0], rel=tol, abs=tol)
-    assert result.v0[-1] == pytest.approx(y[1], rel=tol, abs=tol)
-    return log
-
 
 SWITCHING = dict(gammas=(30.0, 25.0), mus=(0.1, 0.1), masses=(1.0, 1.0, 1.0), forces=(5.0, 0.0, 20.0), spring=1000.0)
 
@@ -201,7 +65,8 @@ def test_a_self_locking_stage_holds_the_load(chain_module):
     result = simulate_chain(module, **TIGHT)
     assert_like_hand(result, HandChain(**HOLD), 1.0, 0.5)
     assert [p.regime for p in result.stages[1].phases] == ["tractive", "resting"]
-    assert result.events[-1]["to"] == "resting" and "statically undetermined" in result.events[-1]["reason"]
+    # no force on body 0 and stage 1 not self-locking (tan 30 deg > 0.1): it holds no force, X_1 = 0 exactly
+    assert result.events[-1]["to"] == "resting" and "determine the internal forces: X_1 = 0;" in result.events[-1]["reason"]
 
 
 def test_the_load_back_drives_the_chain_when_no_stage_self_locks(chain_module):
@@ -265,7 +130,14 @@ def test_cli_simulates_a_chain_file(tmp_path, capsys, monkeypatch):
     assert main(["simulate", str(path), "--rtol", "1e-10", "--atol", "1e-12", "-o", str(tmp_path)]) == 0
     out = capsys.readouterr().out
     assert "status: finished" in out and "stage 2 (wedge, body 1 -> body 2):" in out
-    assert "resting" in out and "statically undetermined" in out and "max |normal force| while sliding" in out
+    assert "resting" in out and "all stuck: the statics determine the internal forces: X_1 = 0;" in out
+    hand = HandChain(**HOLD)                    # coasting forward, both stages on flank a: constant forces
+    normal = hand.solve(0.0, 1, (1, 1))[1]
+    on_input = [-(math.sin(g) + mu * math.cos(g)) * n for g, mu, n in zip(hand.g, hand.mu, normal)]
+    assert all(f < 0 for f in on_input)         # the stage holds its input body back: printed as |.| and signed
+    for f, n in zip(on_input, normal):
+        assert f"max |input force| while sliding: {-f:.6g} N at t = " in out and f"(the force is {f:.6g} N)" in out
+        assert f"max |normal force| while sliding: {n:.6g} N at t = " in out
     assert (tmp_path / "hold-summary.json").exists()
     painleve = tmp_path / "painleve.toml"
     painleve.write_text(wedges("painleve", **PAINLEVE))
@@ -281,32 +153,8 @@ def test_cli_simulates_a_chain_file(tmp_path, capsys, monkeypatch):
 
 
 def valve(worm_mu: float, screw_mu: float) -> str:
-    name = f"valve-{worm_mu}-{screw_mu}".replace(".", "")
-    return f"""name = "{name}"
-[[stage]]
-kind = "worm_gear"
-lead_angle = "4.76 deg"
-pressure_angle = "20 deg"
-worm_radius = "25 mm"
-wheel_radius = "80 mm"
-mu = {worm_mu!r}
-[[stage]]
-kind = "power_screw"
-lead = "4 mm"
-flank_angle = "15 deg"
-mean_diameter = "18 mm"
-mu = {screw_mu!r}
-[[body]]
-inertia = "0.0069 kg m^2"
-[[body]]
-inertia = "0.02 kg m^2"
-[[body]]
-mass = "20 kg"
-force = "-20 kN"
-[run]
-t_end = 3.0
-v0 = 150.0
-"""
+    return worm_and_nut(f"valve-{worm_mu}-{screw_mu}".replace(".", ""), worm_mu=worm_mu, screw_mu=screw_mu,
+                        run="t_end = 3.0\nv0 = 150.0")
 
 
 def hand_valve(worm_mu: float, screw_mu: float) -> HandChain:
@@ -367,21 +215,23 @@ def test_a_bad_motor_table_is_named(motor, parts):
         assert part in str(err.value), str(err.value)
 
 
-def test_the_mov_example_settles_where_the_motor_meets_the_load_through_both_stages(chain_module):
-    """docs/examples/mov.toml: the motor starts the valve from rest against 15 kN and settles where its
-    table's torque equals the load's torque at the worm by handbook formulas, the screw's
-    F d_m/2 tan(lambda + rho_2') times the worm gear's r1/r2 tan(gamma + rho_1'): 1.2223 N m at
-    313.55681 rad/s (falling branch of the table); both stages stay tractive on flank a."""
-    from pathlib import Path
+def test_the_shipped_motor_settles_where_it_meets_the_load_through_both_stages(chain_module):
+    """The shipped mov's motor (its table, derivation/chain/scenes/mov.toml) starts the worm and nut from rest
+    against 15 kN and settles where its table's torque equals the load's torque at the worm by handbook
+    formulas, the screw's F d_m/2 tan(lambda + rho_2') times the worm gear's r1/r2 tan(gamma + rho_1');
+    both stages stay tractive on flank a."""
+    from derivation.chain.scene import load_chain
 
-    text = (Path(__file__).parent.parent / "docs" / "examples" / "mov.toml").read_text()
-    result = simulate_chain(chain_module(text), t_end=1.0)
-    lam = math.atan(0.004 / (math.pi * 0.016))
+    motor = load_chain("mov").bodies[0].motor
+    table = f"motor = {{ speed = {list(motor.speed)!r}, torque = {list(motor.torque)!r}, voltage = 1.0 }}"
+    result = simulate_chain(chain_module(worm_and_nut("motor-nut", drive=table, load='force = "-15 kN"',
+                                                      run="t_end = 1.0\nv0 = 0.0")), **TIGHT)
+    lam = math.atan(0.004 / (math.pi * 0.018))
     alpha_n = math.atan(math.tan(15 * DEG) * math.cos(lam))
-    at_worm = (15000 * 0.008 * math.tan(lam + math.atan(0.15 / math.cos(alpha_n)))
+    at_worm = (15000 * 0.009 * math.tan(lam + math.atan(0.15 / math.cos(alpha_n)))
                * 0.025 / 0.08 * math.tan(4.76 * DEG + math.atan(0.05 / math.cos(20 * DEG))))
-    speeds, torques = (260.75, 280.0, 300.0, 310.0, 314.16), (54.45, 49.43, 26.98, 8.43, 0.0)
-    steady = np.interp(-at_worm, [-x for x in torques], speeds)
+    falling = np.argmax(motor.torque)                       # the table's falling branch, past its pull-out
+    steady = np.interp(-at_worm, -np.array(motor.torque[falling:]), motor.speed[falling:])
     assert result.status == "finished"
     assert [(p.regime, p.flank) for s in result.stages for p in s.phases] == [("tractive", "a")] * 2
     assert result.v0[-1] == pytest.approx(steady, rel=1e-7)

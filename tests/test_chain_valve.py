@@ -1,5 +1,5 @@
 """Drive trains with a torque switch and a valve side against a reference written here by hand: Newton
-per body, Coulomb per stage (tests/test_chain_sim.py's HandChain), the motor cut by the switch, the
+per body, Coulomb per stage (tests/chains.py's HandChain), the motor cut by the switch, the
 valve's friction and seat typed in directly, integrated by scipy's DOP853 at rtol 1e-12 from event to
 event, its modes found by enumerating every flank combination."""
 from __future__ import annotations
@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp, trapezoid
 
-from tests.test_chain_sim import TIGHT, HandChain, chain_module, wedges  # noqa: F401 (fixture)
+from tests.chains import DEG, TIGHT, HandChain, wedges
 from tswm_runtime.simulation.chain import simulate_chain
 
 ARMED, PICKED, TRIPPED = "armed", "picked", "tripped"
@@ -240,8 +240,6 @@ def test_trip_peak_and_hold_at_the_seat_as_the_hand_model(chain_module, chain, v
     assert result.v0[-1] == pytest.approx(hand["y"][1], abs=1e-9)
 
 
-DEG = math.pi / 180
-
 
 def test_energy_over_a_trip_and_coast_run(chain_module):
     """Kinetic energy change = motor work + the load's work - the stages' Coulomb losses - the valve's work
@@ -275,6 +273,29 @@ def test_energy_over_a_trip_and_coast_run(chain_module):
     assert kinetic == pytest.approx(motor + load - losses - valve, abs=1e-6 * motor)
 
 
+PACKING = dict(gammas=(30.0,), mus=(0.1,), masses=(1.0, 1.0), forces=(0.0, 0.0))
+PACKING_KEYS = 'packing = "2 N"\ndp = "1 bar"\npacking_dp = "20 mm^2"\narea = "10 cm^2"\nvalve_factor = 0.01\n'
+
+
+def test_the_packing_friction_grows_with_the_pressure_as_the_hand_model(chain_module):
+    """packing 2 N + packing_dp dp = 20 mm^2 x 1 bar = 2 N, and the disc's 0.01 x 1 bar x 10 cm^2 = 1 N: 5 N
+    against the stem's motion (by hand). The module's friction at that dp is 5 N; a wedge coasting from 1 m/s
+    against it stops and rests when and where the hand model (Newton per body, Coulomb per stage, the
+    5 N typed in) does, to 1e-9."""
+    friction = 2.0 + 20e-6 * 1e5 + 0.01 * 1e5 * 10e-4
+    assert friction == pytest.approx(5.0, rel=1e-14)
+    text = wedges("packing-dp", **PACKING, v0=1.0, t_end=0.5)
+    last = text.rindex("[[body]]\n") + len("[[body]]\n")
+    module = chain_module(text[:last] + PACKING_KEYS + text[last:])
+    assert module.LOAD_FRICTION == pytest.approx(friction, rel=1e-14)
+    result = simulate_chain(module, **TIGHT)
+    log, _, y, _, _ = HandValve(**PACKING, friction=friction).run(1.0, 0.5)
+    assert [(p.regime, p.flank) for p in result.stages[0].phases] == [("tractive", "a"), ("resting", "")]
+    assert [s for _, s, _ in log] == [1, 0]
+    assert result.stages[0].switches[0] == pytest.approx(log[1][0], rel=1e-9)
+    assert result.q0[-1] == pytest.approx(y[0], rel=1e-9) and result.v0[-1] == 0.0
+
+
 def test_the_shipped_mov_module_is_fresh():
     """generated/mov.py is what the generator makes of derivation/chain/scenes/mov.toml today."""
     from pathlib import Path
@@ -299,6 +320,8 @@ def test_switch_and_valve_keys_are_refused_with_their_names():
             ("delay = 0.002", "delay = -1.0", ("switch.delay",)),
             ('seat_stiffness = "100 N/mm"\n', "", ("seat_stiffness", "missing required key")),
             ('dp = "1 kPa"', 'dp = "1 kg"', ("dp",)),
+            ('dp = "1 kPa"', 'dp = "1 kPa"\npacking_dp = "-1 mm^2"', ("body[2].packing_dp = -1 mm^2", ">= 0")),
+            ('dp = "1 kPa"', 'dp = "1 kPa"\npacking_dp = "1 N"', ("body[2].packing_dp", "force unit")),
             ("[switch]", "[switch]\ncolour = 1", ("switch.colour: unknown key",))):
         assert old in good, old
         with pytest.raises(SceneError) as err:
@@ -357,4 +380,4 @@ def test_tswm_sweep_mov_gives_a_sizing_table_and_keeps_failed_cases(tmp_path, ca
         == pytest.approx(0.64, rel=1e-12)
     assert list(table["holds"][:2]) == ["holds", "holds"]
     assert main(["sweep", "mov", "--grid", "mu_3=0.1"]) == 2
-    assert "--grid 'mu_3=0.1': a chain sweeps voltage and mu_1 .. mu_2" in capsys.readouterr().err
+    assert "--grid 'mu_3': a chain sweeps voltage and mu_1 .. mu_2" in capsys.readouterr().err

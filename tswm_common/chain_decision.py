@@ -85,8 +85,7 @@ def _verdict(consistent: list, rejected: list, internal: tuple[Intervals, ...], 
         name, accel, _ = consistent[0]
         reason = f"the only consistent mode; rejected: {' | '.join(rejected) or 'none'}"
         if name == STUCK and stages > 1:
-            reason = ("all stuck: internal force split statically undetermined; admissible "
-                      + ", ".join(f"X_{j + 1} in {show(s)}" for j, s in enumerate(internal)) + "; " + reason)
+            reason = f"all stuck: {internal_forces(internal)}; {reason}"
         return Decision("unique", names, accel, reason, internal if name == STUCK else ())
     accels = [a for _, a, _ in consistent]
     if STUCK not in names and max(accels) - min(accels) <= SAME * max(1.0, *map(abs, accels)):
@@ -95,10 +94,10 @@ def _verdict(consistent: list, rejected: list, internal: tuple[Intervals, ...], 
     negative = [f"{n} (D = {d:.6g})" for n, _, d in consistent if d < 0]
     if STUCK in names and not negative:
         return Decision("several", names, None, "several modes are consistent: resting with internal forces "
-                        + ", ".join(f"X_{j + 1} in {show(s)}" for j, s in enumerate(internal))
-                        + " and breaking away as " + ", ".join(n for n in names if n != STUCK)
-                        + "; the internal force split is statically undetermined, so the rigid chain does not "
-                        "decide (the prestress its stages' compliance holds does)", internal)
+                        + admissible(internal) + " and breaking away as " + ", ".join(n for n in names if n != STUCK)
+                        + ("; the rigid chain does not decide" if all(map(determined, internal)) else
+                           "; the internal force split is statically undetermined, so the rigid chain does not "
+                           "decide (the prestress its stages' compliance holds does)"), internal)
     return Decision("several", names, None, "several modes are consistent (a Painleve-type ambiguity: "
                     f"rigid contact with friction does not decide); reduced inertia D < 0 in: "
                     f"{', '.join(negative) or 'none'}; consistent: {', '.join(names)}", internal)
@@ -192,3 +191,21 @@ def _merged(parts: list) -> Intervals:
 
 def show(intervals: Intervals) -> str:
     return " u ".join(f"[{lo:.6g}, {hi:.6g}]" for lo, hi in intervals) or "the empty set"
+
+
+def determined(intervals: Intervals) -> bool:
+    """The set is one point: the statics fix that internal force."""
+    return len(intervals) == 1 and intervals[0][0] == intervals[0][1]
+
+
+def admissible(internal: tuple[Intervals, ...]) -> str:
+    """"X_1 = 0, X_2 in [a, b]": a point as its value, a wider set as its intervals."""
+    return ", ".join(f"X_{j + 1} = {xs[0][0]:.6g}" if determined(xs) else f"X_{j + 1} in {show(xs)}"
+                     for j, xs in enumerate(internal))
+
+
+def internal_forces(internal: tuple[Intervals, ...]) -> str:
+    """What the statics say of a resting chain's internal forces, true also when they fix them."""
+    if all(determined(xs) for xs in internal):
+        return f"the statics determine the internal forces: {admissible(internal)}"
+    return f"internal force split statically undetermined; admissible {admissible(internal)}"

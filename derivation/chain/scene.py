@@ -34,7 +34,8 @@ SPRING = Rule("stiffness", 0.0, lo_in=True, default=0.0)    # translating bodies
 MOTOR_POINTS = 100
 VALVE = {"packing": Rule("force", 0.0, lo_in=True, default=0.0), "dp": Rule("pressure", 0.0, lo_in=True, default=0.0),
          "area": Rule("area", 0.0, lo_in=True, default=0.0),
-         "valve_factor": Rule("dimensionless", 0.0, 10.0, lo_in=True, hi_in=True, default=1.0)}
+         "valve_factor": Rule("dimensionless", 0.0, 10.0, lo_in=True, hi_in=True, default=1.0),
+         "packing_dp": Rule("area", 0.0, lo_in=True, default=0.0)}     # packing friction per dp: N/Pa = m^2
 SEAT = {"seat": Rule("length"), "seat_stiffness": Rule("stiffness", 0.0)}
 SWITCH_TIMES = {"delay": Rule("time", 0.0, lo_in=True, default=0.0)}
 VOLTAGE = Rule("dimensionless", 0.0, 2.0, hi_in=True, default=1.0)   # U / U_n
@@ -65,12 +66,14 @@ class Body:
 @dataclass(frozen=True)
 class Valve:
     """The valve side of the last (translating) body: a Coulomb friction of constant magnitude
-    packing + valve_factor dp area against its motion, and a seat at travel ``seat`` (a spring of
+    packing + packing_dp dp + valve_factor dp area against its motion (the packing's part grows with the
+    differential pressure by packing_dp, in N/Pa = m^2), and a seat at travel ``seat`` (a spring of
     ``seat_stiffness`` beyond it; None: no seat)."""
     packing: Param
     dp: Param
     area: Param
     valve_factor: Param
+    packing_dp: Param
     seat: Param | None
     seat_stiffness: Param | None
 

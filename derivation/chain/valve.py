@@ -30,9 +30,11 @@ def drive(motor: sp.Expr) -> sp.Expr:
 
 
 def coulomb(valve: Valve) -> sp.Expr:
-    """The magnitude of the valve's friction: the packing's constant force and the differential
-    pressure's force dp area on the disc times its valve (friction) factor."""
-    return symbol(valve.packing) + symbol(valve.valve_factor) * symbol(valve.dp) * symbol(valve.area)
+    """The magnitude of the valve's friction: the packing's force, a constant part and one proportional to
+    the differential pressure (packing_dp dp: the pressure presses the packing onto the stem), and the
+    differential pressure's force dp area on the disc times its valve (friction) factor."""
+    return (symbol(valve.packing) + symbol(valve.packing_dp) * symbol(valve.dp)
+            + symbol(valve.valve_factor) * symbol(valve.dp) * symbol(valve.area))
 
 
 def valve_force(valve: Valve, travel: sp.Expr, direction: sp.Expr) -> sp.Expr:

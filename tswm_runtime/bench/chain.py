@@ -26,33 +26,25 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.integrate import solve_ivp
 
-SCENE = """name = "bench-worm-nut-spring"
-description = "Worm gear and stem nut driving a stem into a seat and swinging back and forth"
-[[stage]]
-kind = "worm_gear"
-lead_angle = "4.76 deg"
-pressure_angle = "20 deg"
-worm_radius = "25 mm"
-wheel_radius = "80 mm"
-mu = 0.05
-[[stage]]
-kind = "power_screw"
-lead = "4 mm"
-flank_angle = "15 deg"
-mean_diameter = "18 mm"
-mu = 0.02
-[[body]]
-inertia = "0.0069 kg m^2"
-[[body]]
-inertia = "0.02 kg m^2"
-[[body]]
-mass = "20 kg"
-force = "-2 kN"
-stiffness = "2e8 N/m"
-[run]
-t_end = 5.0
-v0 = 150.0
-"""
+
+def worm_and_nut(name: str, *, worm_mu: float = 0.05, screw_mu: float = 0.15, drive: str = "",
+                 load: str = 'force = "-20 kN"', run: str = "", description: str = "") -> str:
+    """Chain scene text: the paper's worm (lead angle 4.76 deg, radii 25 and 80 mm, rotor 0.0069 kg m^2)
+    turning a wheel (0.02 kg m^2) with a Tr 18x4 stem nut (d_m 18 mm) on a 20 kg stem. ``drive`` and
+    ``load`` are TOML lines of body 0 and of the stem, ``run`` those of [run] (none: no [run] table)."""
+    return (f'name = "{name}"\n' + (f'description = "{description}"\n' if description else "") +
+            f'[[stage]]\nkind = "worm_gear"\nlead_angle = "4.76 deg"\npressure_angle = "20 deg"\n'
+            f'worm_radius = "25 mm"\nwheel_radius = "80 mm"\nmu = {worm_mu!r}\n'
+            f'[[stage]]\nkind = "power_screw"\nlead = "4 mm"\nflank_angle = "15 deg"\nmean_diameter = "18 mm"\n'
+            f'mu = {screw_mu!r}\n'
+            f'[[body]]\ninertia = "0.0069 kg m^2"\n{drive}' + ("\n" if drive else "") +
+            f'[[body]]\ninertia = "0.02 kg m^2"\n[[body]]\nmass = "20 kg"\n{load}\n' +
+            (f"[run]\n{run}\n" if run else ""))
+
+
+SCENE = worm_and_nut("bench-worm-nut-spring", screw_mu=0.02, load='force = "-2 kN"\nstiffness = "2e8 N/m"',
+                     run="t_end = 5.0\nv0 = 150.0",
+                     description="Worm gear and stem nut driving a stem into a seat and swinging back and forth")
 T_END, V0 = 5.0, 150.0
 PEERS = ("RK45", "DOP853", "LSODA")
 REFERENCE_RTOL, REFERENCE_ATOL = 1e-13, 1e-16

@@ -43,10 +43,11 @@ def _derive_chain(args: argparse.Namespace) -> int:
     from derivation.chain.dynamics import reachable
     from derivation.chain.scene import load_chain
     from derivation.chain.selector import decide
+    from tswm_runtime.common.words import plural
 
     chain = load_chain(args.scene)
     values = chain.values()
-    print(f"chain {chain.name} ({chain.source}): {len(chain.stages)} stages (tswm simulate runs it)")
+    print(f"chain {chain.name} ({chain.source}): {plural(len(chain.stages), 'stage')} (tswm simulate runs it)")
     for k, stage in enumerate(chain.stages):
         locks = "self-locking" if values.rho[k] >= values.gamma[k] else "not self-locking"
         print(f"  stage {k + 1}: {stage.kind}, gamma {math.degrees(values.gamma[k]):.6g} deg, "

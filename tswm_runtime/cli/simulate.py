@@ -115,7 +115,7 @@ def _run_chain(args: argparse.Namespace) -> int:
         result = simulate_chain(module, method=METHODS[method], **overrides)
     except SimulationInputError as error:
         raise setting_error(error, overrides) from None
-    print(f"chain {module.SCENE} ({module.STAGES} stages, {_origin(args.scene, module)})")
+    print(f"chain {module.SCENE} ({plural(module.STAGES, 'stage')}, {_origin(args.scene, module)})")
     print(f"  run: t_end = {result.t[-1]:g} s, v0(0) = {module.RUN['v0']:g} (body 0, SI), {method}")
     print("\n".join(summary(result, module)))
     if args.output:

@@ -14,7 +14,7 @@ from types import ModuleType
 import numpy as np
 
 from tswm_runtime.hybrid.chain import RESTING, ChainRun, run_chain
-from tswm_runtime.simulation.drive_train import answers
+from tswm_runtime.simulation.drive_train import UNITS, answers, drive_train_lines
 from tswm_runtime.simulation.simulate import (ATOL_RANGE, DEFAULT_MAX_EVENTS, DEFAULT_POINTS, MAX_EVENTS, MAX_POINTS,
                                               MAX_STEPS, RTOL_RANGE, _check, _finite)
 
@@ -159,9 +159,6 @@ def _events(module: ModuleType, run: ChainRun) -> tuple[dict, ...]:
                  for e in run.events)
 
 
-UNITS = {"rotation": "N m", "translation": "N"}
-
-
 def summary(result: ChainResult, module: ModuleType) -> list[str]:
     """The run at a glance, as printed by ``tswm simulate``: status, per stage its regimes, switch
     times and force maxima, the events with the decisions' outcomes."""
@@ -173,7 +170,8 @@ def summary(result: ChainResult, module: ModuleType) -> list[str]:
         lines.append("    switches at: " + (", ".join(f"{t:.9g} s" for t in stage.switches) or "none"))
         units = (UNITS[module.BODY_MOTIONS[k]], UNITS[module.BODY_MOTIONS[k + 1]], "N")
         for (name, peak), unit in zip(stage.peaks.items(), units):
-            shown = "- (never slid)" if peak is None else f"{peak.value:.6g} {unit} at t = {peak.t:.6g} s"
+            shown = "- (never slid)" if peak is None else f"{abs(peak.value):.6g} {unit} at t = {peak.t:.6g} s" + (
+                f" (the force is {peak.value:.6g} {unit})" if peak.value < 0 else "")
             lines.append(f"    max |{name} force| while sliding: {shown}")
     lines += drive_train_lines(result.answers, module)
     lines.append(f"  decisions ({len(result.events)}):")
@@ -182,46 +180,4 @@ def summary(result: ChainResult, module: ModuleType) -> list[str]:
                      f"[{e['outcome']}]")
         if e["outcome"] != "unique" or (e["to"] == "resting" and module.STAGES > 1):
             lines.append(f"      {e['reason']}")
-    return lines
-
-
-def drive_train_lines(answers: dict, module: ModuleType) -> list[str]:
-    """The drive train's answers as printed: trip, peak after it, extra travel, hold, stall margin."""
-    if module.SWITCH_ON < 0 and not module.HAS_SEAT:
-        return []
-    thrust_unit = UNITS[module.BODY_MOTIONS[-1]]
-    torque_unit = UNITS[module.BODY_MOTIONS[0]]
-    travel_unit = "m" if module.BODY_MOTIONS[-1] == "translation" else "rad"
-    lines = ["  drive train:"]
-    trip = answers["trip"]
-    if trip is None:
-        lines.append("    switch: did not trip (the motor was never cut)")
-    else:
-        thrust = ("undetermined (the chain rested: statically undetermined split)" if trip["thrust"] is None
-                  else f"{trip['thrust']:.6g} {thrust_unit}")
-        lines.append(f"    trip at t = {trip['t']:.9g} s: thrust {thrust}, drive {trip['drive']:.6g} {torque_unit}, "
-                     f"travel {trip['travel']:.6g} {travel_unit}")
-        peak = answers["peak_after_trip"]
-        if peak is not None:
-            lines.append(f"    peak thrust after the trip: {peak['thrust']:.6g} {thrust_unit} at t = {peak['t']:.9g} s")
-        lines.append(f"    extra travel after the trip: {answers['extra_travel']:.6g} {travel_unit}")
-    holds = answers["holds"]
-    locking = ", ".join(f"stage {k} ({module.STAGE_KINDS[k - 1]}, Psi_i = {module.PSI[k - 1][1]:.6g} <= 0)"
-                        for k in holds["self_locking"]) or "none"
-    lines.append(f"    after power off: {holds['verdict']}; self-locking: {locking}")
-    intervals = holds["undetermined"]
-    if intervals and all(len(xs) == 1 and xs[0][0] == xs[0][1] for xs in intervals):
-        lines.append("    all stages stuck: the statics leave one internal force: " + ", ".join(
-            f"X_{j + 1} = {xs[0][0]:.6g}" for j, xs in enumerate(intervals)))
-    elif intervals:
-        lines.append("    all stages stuck: the split of the internal force between the stages is statically "
-                     "undetermined; admissible " + ", ".join(
-                         f"X_{j + 1} in " + " u ".join(f"[{lo:.6g}, {hi:.6g}]" for lo, hi in xs)
-                         for j, xs in enumerate(intervals)))
-    if answers["stall_margin"] is not None:
-        lines.append(f"    stall margin: {answers['stall_margin']:.4g} (pull-out {answers['pull_out']:.6g} {torque_unit} "
-                     f"at U/U_n = {answers['voltage']:g} over {answers['needed']:.6g} {torque_unit} needed at the trip "
-                     "thrust)")
-    elif answers["pull_out"] is not None:
-        lines.append(f"    stall margin: - (pull-out {answers['pull_out']:.6g} {torque_unit}; no trip thrust)")
     return lines

@@ -16,7 +16,10 @@ from __future__ import annotations
 import math
 from types import ModuleType
 
+from tswm_common.chain_decision import internal_forces
 from tswm_runtime.hybrid.chain import RESTING, ChainRun
+
+UNITS = {"rotation": "N m", "translation": "N"}
 
 
 def answers(module: ModuleType, run: ChainRun, voltage: float | None = None) -> dict:
@@ -62,15 +65,60 @@ def _holds(module: ModuleType, run: ChainRun) -> dict:
     last = run.phases[-1] if run.phases else None
     resting = last is not None and last.mode == RESTING and run.status == "finished"
     seated = bool(module.HAS_SEAT and last is not None and last.latches[module.P_SEATED] > 0.5)
+    ever_seated = bool(module.HAS_SEAT and any(p.latches[module.P_SEATED] > 0.5 for p in run.phases))
     rest = next((e.decision for e in reversed(run.events) if e.to_mode == RESTING), None) if resting else None
     undetermined = [list(map(list, xs)) for xs in rest.internal] if rest is not None and module.STAGES > 1 else []
     if run.trip is None:
         verdict = "no trip: the motor was not cut"
     elif not module.HAS_SEAT:
         verdict = "no seat in the scene"
-    elif resting and seated:
-        verdict = "holds" if locking else "holds by the valve's friction alone (no stage self-locks)"
-    else:
+    elif run.status != "finished":
+        verdict = f"undecided: the run stopped ({run.status})"
+    elif seated:
+        verdict = ("holds" if locking else "holds, though no stage self-locks") if resting else \
+            "undecided: still moving on the seat at the end of the run"
+    elif ever_seated:
         verdict = "seat lost: no stage self-locks" if not locking else "seat lost"
+    else:
+        verdict = "rests before the seat (never reached it)" if resting else \
+            "undecided: still moving before the seat at the end of the run"
     return {"verdict": verdict, "self_locking": locking, "seated": seated, "resting": resting,
             "undetermined": undetermined}
+
+
+def drive_train_lines(answers: dict, module: ModuleType) -> list[str]:
+    """The drive train's answers as printed: trip, peak after it, extra travel, hold, stall margin."""
+    if module.SWITCH_ON < 0 and not module.HAS_SEAT:
+        return []
+    thrust_unit = UNITS[module.BODY_MOTIONS[-1]]
+    torque_unit = UNITS[module.BODY_MOTIONS[0]]
+    travel_unit = "m" if module.BODY_MOTIONS[-1] == "translation" else "rad"
+    lines = ["  drive train:"]
+    trip = answers["trip"]
+    if trip is None:
+        lines.append("    switch: did not trip (the motor was never cut)")
+    else:
+        thrust = ("undetermined (the chain rested: statically undetermined split)" if trip["thrust"] is None
+                  else f"{trip['thrust']:.6g} {thrust_unit}")
+        lines.append(f"    trip at t = {trip['t']:.9g} s: thrust {thrust}, drive {trip['drive']:.6g} {torque_unit}, "
+                     f"travel {trip['travel']:.6g} {travel_unit}")
+        peak = answers["peak_after_trip"]
+        if peak is not None:
+            lines.append(f"    peak thrust after the trip: {peak['thrust']:.6g} {thrust_unit} at t = {peak['t']:.9g} s")
+        lines.append(f"    extra travel after the trip: {answers['extra_travel']:.6g} {travel_unit}")
+    holds = answers["holds"]
+    locking = ", ".join(f"stage {k} ({module.STAGE_KINDS[k - 1]}, Psi_i = {module.PSI[k - 1][1]:.6g} <= 0)"
+                        for k in holds["self_locking"]) or "none"
+    lines.append(f"    after power off: {holds['verdict']}; self-locking: {locking}")
+    if holds["undetermined"]:
+        internal = tuple(tuple(map(tuple, xs)) for xs in holds["undetermined"])
+        lines.append(f"    all stages stuck: {internal_forces(internal)}")
+    if answers["stall_margin"] is not None:
+        lines.append(f"    stall margin: {answers['stall_margin']:.4g} (pull-out {answers['pull_out']:.6g} {torque_unit} "
+                     f"at U/U_n = {answers['voltage']:g} over {answers['needed']:.6g} {torque_unit} needed at the trip "
+                     "thrust)")
+    elif answers["pull_out"] is not None:
+        why = ("no trip thrust" if answers["needed"] is None else
+               f"the trip thrust needs {answers['needed']:.6g} {torque_unit} <= 0 at body 0")
+        lines.append(f"    stall margin: - (pull-out {answers['pull_out']:.6g} {torque_unit}; {why})")
+    return lines

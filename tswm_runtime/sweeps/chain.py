@@ -13,10 +13,9 @@ import math
 import re
 from pathlib import Path
 
-import numpy as np
-
 from tswm_runtime.model.scenes import load_chain_variant
 from tswm_runtime.simulation.chain import simulate_chain
+from tswm_runtime.sweeps.grid import GridError, parse_items
 
 NAME = re.compile(r"voltage|mu_[1-9]")
 COLUMNS = ("status", "t_trip [s]", "thrust at trip", "peak after trip", "extra travel", "holds", "stall margin")
@@ -27,31 +26,25 @@ class ChainSweepError(ValueError):
 
 
 def parse_grid(specs: list[str], stages: int) -> dict[str, list[float]]:
-    """NAME=START:STOP:COUNT, NAME=V1,V2,... or NAME=VALUE for voltage and mu_1 .. mu_N (plain numbers)."""
-    grid: dict[str, list[float]] = {}
-    for spec in specs:
-        name, _, values = spec.partition("=")
-        if not NAME.fullmatch(name) or (name.startswith("mu_") and int(name[3:]) > stages):
-            raise ChainSweepError(f"--grid {spec!r}: a chain sweeps voltage and mu_1 .. mu_{stages}")
-        if name in grid:
-            raise ChainSweepError(f"--grid {spec!r}: {name} given twice")
-        try:
-            if values.count(":") == 2:
-                start, stop, count = values.split(":")
-                if not count.isdigit() or not 1 <= int(count) <= 1000:
-                    raise ValueError("COUNT must be an integer in [1, 1000]")
-                numbers = [float(x) for x in np.linspace(float(start), float(stop), int(count))]
-            else:
-                numbers = [float(x) for x in values.split(",")]
-        except ValueError as error:
-            raise ChainSweepError(f"--grid {spec!r}: expected NAME=START:STOP:COUNT or NAME=V1,V2,... ({error})") \
-                from None
-        if not all(math.isfinite(x) for x in numbers):
-            raise ChainSweepError(f"--grid {spec!r}: values must be finite")
-        grid[name] = numbers
+    """The --grid items over voltage and mu_1 .. mu_N (sweeps/grid.py: ranges, lists or one value; plain
+    numbers, both being dimensionless)."""
+    def unknown(name: str) -> str | None:
+        known = NAME.fullmatch(name) and (name == "voltage" or int(name[3:]) <= stages)
+        return None if known else f"a chain sweeps voltage and mu_1 .. mu_{stages}"
+    try:
+        grid = parse_items(specs, _plain, unknown, "mu_2=0.1:0.2:3")
+    except GridError as error:
+        raise ChainSweepError(str(error)) from None
     if not grid:
         raise ChainSweepError("--grid: give voltage=... and/or mu_k=... for a chain")
-    return grid
+    return {name: values.tolist() for name, values in grid.items()}
+
+
+def _plain(name: str, text: str) -> float:
+    try:
+        return float(text)
+    except ValueError:
+        raise ValueError(f"{name} = {text!r}: expected a plain number (dimensionless)") from None
 
 
 def sizing(scene: str | Path, grid: dict[str, list[float]], overrides: dict, notice=lambda text: None):

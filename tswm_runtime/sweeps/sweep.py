@@ -63,13 +63,14 @@ from tswm_runtime.model.values import ValueInputError, si_value
 from tswm_common.files import write_atomic
 from tswm_runtime.simulation.simulate import settings, unknown_parameter
 from tswm_runtime.sweeps import chunks, cluster, columns
+from tswm_runtime.sweeps.grid import MAX_CASES, GridError, parse_items
 from tswm_runtime.sweeps.rows import case_table, run_cases  # noqa: F401  (run_cases: the fit's evaluations)
 
 LOG = logging.getLogger("tswm_runtime.sweep")
 # Size bounds (docs/promises.md): above LARGE_SWEEP cases a sweep states its size and needs --large;
 # MAX_SWEEP_CASES is refused outright, and so is a sweep that would write more than MAX_CHUNKS chunk files.
 LARGE_SWEEP = 10**6
-MAX_SWEEP_CASES = 10**7
+MAX_SWEEP_CASES = MAX_CASES
 MAX_CHUNK_SIZE = 10**6
 MAX_CHUNKS = 10**5
 MAX_SEED = 2**63 - 1
@@ -156,31 +157,14 @@ def spec_items(specs, option: str) -> list[str]:
 
 
 def parse_grid(items: list[str], module: ModuleType) -> dict[str, np.ndarray]:
-    """``name=start:stop:count`` (count points, both ends included) or ``name=value``; values are
-    numbers in SI or numbers with a unit of the parameter's quantity ("-15 kN")."""
-    grid = {}
-    for item in items:
-        name, sep, spec = (s.strip() for s in item.partition("="))
-        if not sep or not name or not spec:
-            raise SweepInputError(f"--grid {item!r}: expected NAME=START:STOP:COUNT, e.g. F2=-15000:0:11")
-        _free(module, name, "--grid")
-        if name in grid:
-            raise SweepInputError(f"--grid {item!r}: {name} is given twice")
-        parts = spec.split(":")
-        if len(parts) == 1:
-            grid[name] = np.array([_number(module, name, parts[0], f"--grid {item!r}")])
-            continue
-        if len(parts) != 3:
-            raise SweepInputError(f"--grid {item!r}: expected NAME=START:STOP:COUNT, e.g. F2=-15000:0:11")
-        start, stop = (_number(module, name, v, f"--grid {item!r}") for v in parts[:2])
-        try:
-            count = int(parts[2])
-        except ValueError:
-            raise SweepInputError(f"--grid {item!r}: count {parts[2]!r} is not an integer") from None
-        if not 1 <= count <= MAX_SWEEP_CASES:
-            raise SweepInputError(f"--grid {item!r}: count {count} must be in [1, {MAX_SWEEP_CASES:.0e}]")
-        grid[name] = np.linspace(start, stop, count)
-    return grid
+    """The --grid items over the module's free parameters (sweeps/grid.py: ranges, lists or one value;
+    numbers in SI or with a unit of the parameter's quantity, "-15 kN")."""
+    def unknown(name: str) -> str | None:
+        return None if name in module.PARAM_NAMES else unknown_parameter(module, name)
+    try:
+        return parse_items(items, lambda name, text: si_value(module, name, text), unknown, "F2=-15000:0:11")
+    except GridError as error:
+        raise SweepInputError(str(error)) from None
 
 
 def parse_ranges(items: list[str], module: ModuleType) -> dict[str, tuple[float, float]]:
