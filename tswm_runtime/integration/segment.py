@@ -447,7 +447,7 @@ def _rising_to_end(fns, seg, k, mon, s):
     the cubic Hermite interpolant of |observable| through the step's two ends, with the slopes of
     one-sided differences on the dense output (``events.RATE_STEP`` of the step), peaks at the end,
     and the dense output there finds no more than the step's own end state gave. 4 observable calls
-    instead of Brent's 40 or so, which on a rising observable close in on the end by golden sections."""
+    instead of Brent's search, which on a rising observable closes in on the end (15 calls or so)."""
     win = s.win
     t_a, t_hi = win.f[k, 0, 0], win.f[k, 0, 2]
     width = t_hi - t_a
