@@ -66,3 +66,17 @@ def test_the_sweep_batch_maxima_cover_the_rows_and_the_held_tail():
         assert abs(row["S1m"]) >= np.abs(r.S1).max() * (1.0 - 1e-14)
         assert abs(row["S2m"]) >= np.abs(r.S2).max() * (1.0 - 1e-14)
         assert abs(row["S2m"]) == pytest.approx(abs(row["F2_after"]), rel=1e-10)
+
+
+
+@pytest.mark.parametrize("t_end", [0.05, 0.0790, 0.0796, 0.0797, 0.0798, 0.0799, 0.0801, 0.2])
+def test_a_maximum_at_the_end_or_inside_a_step_is_the_reference_s(t_end):
+    """m2 = 200 kg, no load: |S1| and |S2| rise to smooth peaks at 79.60 and 79.84 ms and fall. A
+    run that ends before a peak has that maximum at t_end, where |S| still rises (taken from the
+    end's state, no search: ``segment._rising_to_end``); one that ends after it has it inside a
+    step, in the last one or earlier. Both against the quadrature reference of the same interval."""
+    from tswm_runtime.reference import quadrature as q
+    ref = q.solve(q.paper_wedge(200.0), [(0.0, 0.0)], 0.0, t_end).S_extrema()
+    r = simulate("paper-runup", {"m2": 200.0, "F2_after": 0.0}, t_end=t_end, rtol=1e-10, atol=1e-13)
+    for name, peak in (("S1", r.S1_max), ("S2", r.S2_max)):
+        assert peak == pytest.approx(float(ref[name][0]), rel=1e-9), name

@@ -157,3 +157,18 @@ def test_mode_sequences_are_spelt_per_case_and_long_ones_end_in_an_ellipsis():
     regimes, codes = np.array(distinct_regimes)[which], np.array(distinct_codes)[which]
     assert list(regimes) == ["TS", "TG" * (SEQ_LEN // 2), "TG" * (SEQ_LEN // 2) + "…", ""]
     assert list(codes) == ["0 1", " ".join(["0 2"] * (SEQ_LEN // 2)), " ".join(["0 2"] * (SEQ_LEN // 2)) + " …", ""]
+
+
+def test_cases_that_share_a_record_do_not_see_each_other():
+    """hybrid/batch.py runs each chunk of CHUNK_CASES cases on one record and parameter vector, reset
+    per case: a row is the one its case gets alone, whatever ran before it on that record (here an
+    inconsistent case's infinite maxima and latched parameters, finished runs' counts and maxima)."""
+    from tswm_runtime.hybrid.batch import CHUNK_CASES
+    module = load_module("paper")
+    P = np.array([[5000.0, 30000.0], [200.0, -15000.0], [200.0, -1000.0]] * (CHUNK_CASES // 3 + 2))
+    table = sweep(module, P, {"v1": 0.05}, chunk_size=len(P)).table
+    backwards = sweep(module, P[::-1], {"v1": 0.05}, chunk_size=len(P)).table[::-1].reset_index(drop=True)
+    pd.testing.assert_frame_equal(table, backwards)
+    alone = sweep(module, P[:3], {"v1": 0.05}, chunk_size=1).table
+    for k in range(len(P)):
+        assert table.iloc[k].equals(alone.iloc[k % 3]), k

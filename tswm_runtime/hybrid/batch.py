@@ -2,7 +2,8 @@
 
 ``run_batch`` integrates case after case (one row of parameters each) with
 ``hybrid.integrate_hybrid``, in a ``prange`` loop: every case has its own work
-arrays (parameter copy, event log, monitor, counters), one output point (t_end),
+arrays (parameter copy, event log, monitor, counters; allocated once per chunk of CHUNK_CASES
+cases and reset per case), one output point (t_end),
 and writes one row of results. The functions come as addresses (``entry.functions``:
 the mode machine, the method's step, the model's, the segment kernel), so, like ``integrate_hybrid``, the
 batch function is compiled once with an explicit signature, cached on disk and reused
@@ -49,6 +50,8 @@ N_I = 10
 #: Where run_batch writes, one row per case: out_f (N_F floats), out_i (N_I integers), seq.
 Results = namedtuple("Results", "f i seq")
 RESULTS = types.NamedTuple((MATRIX, types.int64[:, ::1], types.int64[:, ::1]), Results)
+
+CHUNK_CASES = 64  # cases that share one record (its ~20 arrays allocated once per chunk, not per case)
 
 #: The mode machine at its address (the C wrapper: a case's failure is its status).
 _machine_at = function_at(types.FunctionType(HYBRID_SIG))
@@ -125,27 +128,42 @@ def _write_sequence(row_f, row_i, seq_row, first, n_ev, log):
     row_i[I_IMPACTS], row_f[F_IMPACT_E] = impacts, lost
 
 
+@njit(error_model="numpy")
+def _reset(record, p, row):
+    """The chunk's record made ready for its next case (no maxima, no counts, no row written; the
+    mode machine resets the step log and the rows' modes), and the case's parameters into p."""
+    record.mon[:, :] = 0.0
+    record.counters[:] = 0
+    record.out.y[:, :] = np.nan
+    copy_into(p, row)
+
+
 @cache_guard.compile_cached(BATCH_SIG, parallel=True, error_model="numpy")
 def run_batch(functions, tables, P, start, settings, max_events, n_obs, results):
-    """Integrate every row of P from ``start`` to settings.t_end; results into ``results``."""
+    """Integrate every row of P from ``start`` to settings.t_end; results into ``results``. The cases
+    go in chunks of CHUNK_CASES, each with one record and parameter vector, reset per case."""
     n = start.y.size
     width = n + start.quad.size
     # The prange body takes a named tuple only as an argument or built by a call: no tuple of
     # tuples, none unpacked from one.
     method, t_end, max_steps = settings.method, settings.t_end, settings.max_steps
     tol = Tolerances(settings.tol.rtol, settings.tol.atol, settings.tol.hmin, settings.tol.hmax)
-    for c in prange(P.shape[0]):
+    n_cases = P.shape[0]
+    for chunk in prange((n_cases + CHUNK_CASES - 1) // CHUNK_CASES):
         record = _case_record(t_end, width, P.shape[1], max_events, n_obs)
-        case = Start(start.t, start.y, start.quad, start.mode, P[c].copy())
-        integrate = _machine_at(functions[0])
-        status, t_stop, n_ev, last, need, first = integrate(addressed.model_functions(functions),
-                                                            addressed.segment_function(functions), tables, case,
-                                                            Settings(method, t_end, tol, max_steps), record)
-        _write_floats(results.f[c], t_stop, n_ev, n, record, case)
-        out_i = results.i[c]
-        out_i[I_STATUS], out_i[I_EVENTS] = status, n_ev
-        for k in range(4):
-            out_i[I_STEPS + k] = record.counters[k]
-        out_i[I_FIRST] = first
-        out_i[I_SWITCHES] = record.counters[segment.N_SWITCHES]
-        _write_sequence(results.f[c], out_i, results.seq[c], first, n_ev, record.log)
+        p = np.empty(P.shape[1])
+        for c in range(chunk * CHUNK_CASES, min((chunk + 1) * CHUNK_CASES, n_cases)):
+            _reset(record, p, P[c])
+            case = Start(start.t, start.y, start.quad, start.mode, p)
+            integrate = _machine_at(functions[0])
+            status, t_stop, n_ev, last, need, first = integrate(addressed.model_functions(functions),
+                                                                addressed.segment_function(functions), tables,
+                                                                case, Settings(method, t_end, tol, max_steps), record)
+            _write_floats(results.f[c], t_stop, n_ev, n, record, case)
+            out_i = results.i[c]
+            out_i[I_STATUS], out_i[I_EVENTS] = status, n_ev
+            for k in range(4):
+                out_i[I_STEPS + k] = record.counters[k]
+            out_i[I_FIRST] = first
+            out_i[I_SWITCHES] = record.counters[segment.N_SWITCHES]
+            _write_sequence(results.f[c], out_i, results.seq[c], first, n_ev, record.log)

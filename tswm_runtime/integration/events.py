@@ -104,7 +104,7 @@ def guard_rates(guards, mode, t, y, f, p, g, h, y_tmp, g_tmp, rates):
 
 
 @njit(error_model="numpy")
-def _hermite_lowest(s, g_a, g_b, slope_a, slope_b):
+def hermite_lowest(s, g_a, g_b, slope_a, slope_b):
     """Lowest value of s H(theta) on [0, 1], H the cubic with H(0) = g_a, H(1) = g_b,
     H'(0) = slope_a, H'(1) = slope_b (slopes per unit theta): its ends and the roots of H'.
     The coefficients are scaled by a power of two near their largest magnitude first (exact),
@@ -142,7 +142,7 @@ def _hermite_lowest_scaled(s, g_a, g_b, slope_a, slope_b):
 @njit(error_model="numpy")
 def _dip_bound(s, slope_a, slope_b):
     """An upper bound of how far s H(theta) dips below the smaller end value on [0, 1] (H as in
-    ``_hermite_lowest``): with the Hermite basis, H = (1 - w) g_a + w g_b + slope_a theta (1 -
+    ``hermite_lowest``): with the Hermite basis, H = (1 - w) g_a + w g_b + slope_a theta (1 -
     theta)^2 - slope_b theta^2 (1 - theta), w in [0, 1], and both cubic weights are at most 4/27.
     NaN if a slope is (the caller then takes the full test)."""
     toward = 0.0  # the end slopes' parts that point to zero
@@ -166,7 +166,7 @@ def clear_of_zero(g_a, g_b, rate_a, rate_b, h, sgn, gtol):
             return False
         if _dip_bound(s, h * rate_a[k], h * rate_b[k]) <= CLEAR_MARGIN * distance:
             continue  # the cheap bound suffices: no need for the lowest point itself
-        if not _hermite_lowest(s, g_a[k], g_b[k], h * rate_a[k], h * rate_b[k]) >= (1.0 - CLEAR_MARGIN) * distance:
+        if not hermite_lowest(s, g_a[k], g_b[k], h * rate_a[k], h * rate_b[k]) >= (1.0 - CLEAR_MARGIN) * distance:
             return False
     return True
 

@@ -106,8 +106,9 @@ def no_jacobian(mode, t, y, p, J, dfdt):
 
 @njit(error_model="numpy")
 def _all_finite(x):
-    """True if no entry of x (any shape) is NaN or infinite."""
-    for v in x.ravel():
+    """True if no entry of x (any shape) is NaN or infinite (``flat``: ``ravel`` made a view, its
+    reference counted, at every call)."""
+    for v in x.flat:
         if not np.isfinite(v):
             return False
     return True
@@ -440,18 +441,40 @@ def _brent_max(fns, seg, k, s, a, b, x):
 
 
 @njit(error_model="numpy")
+def _rising_to_end(fns, seg, k, mon, s):
+    """True if |observable k| rises to its largest value at the end of its window's single step
+    (``win.s[k] == 1``: the largest step end is the segment's last), so that no maximum lies inside:
+    the cubic Hermite interpolant of |observable| through the step's two ends, with the slopes of
+    one-sided differences on the dense output (``events.RATE_STEP`` of the step), peaks at the end,
+    and the dense output there finds no more than the step's own end state gave. 4 observable calls
+    instead of Brent's search, which on a rising observable closes in on the end (15 calls or so)."""
+    win = s.win
+    t_a, t_hi = win.f[k, 0, 0], win.f[k, 0, 2]
+    width = t_hi - t_a
+    d = min(max(events.RATE_STEP * width, 64.0 * (np.nextafter(t_hi, np.inf) - t_hi)), 0.5 * width)
+    v_hi = _window_value(fns, seg, k, t_hi, s)
+    if not (width > 0.0 and v_hi <= mon[k, 0]):
+        return False
+    v_a = _window_value(fns, seg, k, t_a, s)
+    slope_a = (_window_value(fns, seg, k, t_a + d, s) - v_a) * (width / d)
+    slope_b = (v_hi - _window_value(fns, seg, k, t_hi - d, s)) * (width / d)
+    return -events.hermite_lowest(-1.0, v_a, v_hi, slope_a, slope_b) <= v_hi
+
+
+@njit(error_model="numpy")
 def _refine(fns, seg, mon, s):
-    """Locate max |observable| in each pending window (Brent, from the largest step end) and
-    reset them."""
+    """Locate max |observable| in each pending window (Brent, from the largest step end, unless it
+    rises to the window's end: ``_rising_to_end``) and reset them."""
     win = s.win
     for k in range(mon.shape[0]):
         if win.s[k] == 0:
             continue
-        lo, hi, t_m = win.f[k, 0, 0], win.f[k, win.s[k] - 1, 2], mon[k, 2]
-        t_best, best = _brent_max(fns, seg, k, s, lo, hi, min(max(t_m, lo), hi))
-        if best > mon[k, 0]:
-            _window_value(fns, seg, k, t_best, s)
-            mon[k, 0], mon[k, 1], mon[k, 2] = best, s.obs[k], t_best
+        if win.s[k] == 2 or not _rising_to_end(fns, seg, k, mon, s):
+            lo, hi, t_m = win.f[k, 0, 0], win.f[k, win.s[k] - 1, 2], mon[k, 2]
+            t_best, best = _brent_max(fns, seg, k, s, lo, hi, min(max(t_m, lo), hi))
+            if best > mon[k, 0]:
+                _window_value(fns, seg, k, t_best, s)
+                mon[k, 0], mon[k, 1], mon[k, 2] = best, s.obs[k], t_best
         win.s[k] = 0
 
 
