@@ -63,13 +63,13 @@ def test_generate_rows_take_the_slowest_scene_and_compare_the_guards_call():
                  gen("schedule", "load-t-steps-3", 3, 2.0), gen("schedule", "load-t-steps-999", 999, 3.0)]
     events = [{"breakpoints": 3, "events": 3, "run_s": 0.1, "guards_call_s": 1.0e-9},
               {"breakpoints": 999, "events": 999, "run_s": 0.5, "guards_call_s": 1.2e-9}]
-    shipped, schedule, event = targets.generate_rows(generated, events)
+    shipped, schedule, event = targets.generate_rows({"runs": generated, "events": events})
     assert shipped["verdict"] == "missed" and "mesh" in shipped["measured"]
     assert shipped["remaining"].startswith("1 s over on mesh")
     assert schedule["verdict"] == "met" and event["verdict"] == "met"
     generated[-1]["outcome"] = "exit 1"
     events[1]["guards_call_s"] = 2e-9
-    _, schedule, event = targets.generate_rows(generated, events)
+    _, schedule, event = targets.generate_rows({"runs": generated, "events": events})
     assert schedule["verdict"] == "missed" and "failed: load-t-steps-999" in schedule["measured"]
     assert event["verdict"] == "missed" and event["remaining"] == "a guards() call costs 2x"
 

@@ -319,7 +319,7 @@ def main(quick: bool = False, output: str | os.PathLike = "tswm-report/bench", c
     import pandas as pd
 
     from tswm_common.files import write_atomic
-    from tswm_runtime.bench import chain, generation, sweeps, targets
+    from tswm_runtime.bench import targets
 
     out = Path(output)
     out.mkdir(parents=True, exist_ok=True)
@@ -344,28 +344,15 @@ def main(quick: bool = False, output: str | os.PathLike = "tswm-report/bench", c
                 fatal=True)
     flat = flat_cost(rows)
     first_calls = _part(done, "first call in a fresh process", cold_start, log, fatal=True)
-    run = {name: name not in skip for name in PARTS}
-    target_cases = [CASES[n] for n in targets.TARGET_CASES]
-    fixed = _part(done, "fixed cost", lambda: [fixed_cost(c, 300 if quick else 2000) for c in target_cases],
-                  log) if run["fixed cost"] else None
-    ends = _part(done, "sweeps", lambda: {
-        "processes": sweeps.processes(repeats=1 if quick else 3, log=log, fraction=0.1 if quick else 1.0),
-        "diffrax": sweeps.versus_diffrax(cases=1000 if quick else 10_000, repeats=1 if quick else 3, log=log)},
-        log) if run["sweeps"] else None
-    generated = _part(done, "generate", lambda: generation.generate_runs(
-        scenes=generation.SLOWEST_SCENES if quick else None, sizes=targets.SCHEDULE_BREAKPOINTS,
-        shapes=generation.SHAPES[:1] if quick else generation.SHAPES, log=log), log) if run["generate"] else None
-    events = _part(done, "events", lambda: generation.event_runs(targets.SCHEDULE_BREAKPOINTS, log),
-                   log) if run["generate"] else None
-    empty = _part(done, "empty cache", lambda: empty_cache(log, FORCED_COMPILE if quick else None),
-                  log) if run["empty cache"] else None
-    trains = _part(done, "chain", lambda: chain.run(1 if quick else 3, chain.TOLS[::2] if quick else chain.TOLS, log),
-                   log) if run["chain"] else None
+    parts = {"speedup": verdicts, "auto": auto_comparisons(rows)}
+    for name, measure_part in _parts(quick, log).items():
+        if name not in skip:
+            parts[name] = _part(done, name, measure_part, log)
+            for r in targets.ROWS[name](parts[name], "failed"):
+                log(f"  {r['figure']}: {r['measured']} (target {r['target']}): {r['verdict']}")
     info = machine(load_before, os.getloadavg())
-    if ends and "versions" in ends["diffrax"]:
-        info |= ends["diffrax"]["versions"]
-    parts = {"fixed cost": fixed, "speedup": verdicts, "auto": auto_comparisons(rows), "sweeps": ends,
-             "generate": generated, "events": events, "empty cache": empty, "chain": trains}
+    if parts.get("sweeps") and "versions" in parts["sweeps"]["diffrax"]:
+        info |= parts["sweeps"]["diffrax"]["versions"]
     why = {name: "left out of this run" for name in PARTS} | {
         p["part"]: f"failed: {p['error']}" for p in done if p["error"]}
     rows_of_targets = targets.all_rows(parts, why)
@@ -378,9 +365,10 @@ def main(quick: bool = False, output: str | os.PathLike = "tswm-report/bench", c
     refs = [{"case": c.name, "scene": c.scene, "params": dict(c.params), "v1(0)": c.v0, "t_end": c.t_end,
              "m1": c.m1, "S1_max": reference(c).S1, "v1_end": reference(c).v_end, "x1_end": reference(c).x_end,
              "events": ", ".join(f"{k} {t:.12g}" for k, t in reference(c).events) or "none"} for c in chosen]
-    chain_table = _chain_table(trains)
-    details = {"fixed_cost": fixed, "auto": parts["auto"], "generate": generated, "events": events,
-               "chain": chain_table, "parts": done, "plots": plots}
+    generation, empty, ends = parts.get("generate") or {}, parts.get("empty cache"), parts.get("sweeps")
+    details = {"fixed_cost": parts.get("fixed cost"), "auto": parts["auto"], "generate": generation.get("runs"),
+               "events": generation.get("events"), "chain": _chain_table(parts.get("chain")), "parts": done,
+               "plots": plots}
     md = _markdown(info, refs, t_ref, rows, verdicts, thr, flat, first_calls, empty, tols, repeats, sweep_n,
                    time.perf_counter() - start, ends, rows_of_targets, details)
     write_atomic(out / "work-precision.md", md)
@@ -393,6 +381,25 @@ def main(quick: bool = False, output: str | os.PathLike = "tswm-report/bench", c
     log(f"wrote {out / 'work-precision.md'}, targets.csv, runs.csv, verdicts.csv, bench.json, work-precision.png "
         f"and {plural(len(plots), 'plot')} per case")
     return 0
+
+
+def _parts(quick: bool, log) -> dict:
+    """PARTS' measurements as calls, with ``quick``'s smaller counts."""
+    from tswm_runtime.bench import chain, generation, sweeps, targets
+
+    def sweeps_end_to_end():
+        return {"processes": sweeps.processes(repeats=1 if quick else 3, log=log, fraction=0.1 if quick else 1.0),
+                "diffrax": sweeps.versus_diffrax(cases=1000 if quick else 10_000, repeats=1 if quick else 3, log=log)}
+
+    def generate():
+        return {"runs": generation.generate_runs(scenes=generation.SLOWEST_SCENES if quick else None,
+                                                 sizes=targets.SCHEDULE_BREAKPOINTS,
+                                                 shapes=generation.SHAPES[:1] if quick else generation.SHAPES, log=log),
+                "events": generation.event_runs(targets.SCHEDULE_BREAKPOINTS, log)}
+    return {"fixed cost": lambda: [fixed_cost(CASES[n], 300 if quick else 2000) for n in targets.TARGET_CASES],
+            "sweeps": sweeps_end_to_end, "generate": generate,
+            "empty cache": lambda: empty_cache(log, FORCED_COMPILE if quick else None),
+            "chain": lambda: chain.run(1 if quick else 3, chain.TOLS[::2] if quick else chain.TOLS, log)}
 
 
 def _chain_table(result) -> list[dict] | None:

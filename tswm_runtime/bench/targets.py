@@ -12,6 +12,7 @@ from __future__ import annotations
 import math
 
 from tswm_runtime.bench import report
+from tswm_runtime.common.words import plural
 
 FIXED_COST_TARGET_US = 60.0
 TARGET_CASES = ("run-up then load", "decelerate-and-stick", "stiff drive m1=0.05")
@@ -44,7 +45,7 @@ def fixed_cost_rows(fixed: list[dict] | None, why: str = "") -> list[dict]:
     out = []
     for f in fixed:
         measured = (f"{f['fixed_us']:.4g} us (whole call {f['whole_us']:.4g} us, kernel {f['kernel_us']:.4g} us, "
-                    f"{f['steps']} step, median of {f['calls']} calls; 90th percentile {f['fixed_p90_us']:.4g} us)")
+                    f"{plural(f['steps'], 'step')}, median of {f['calls']} calls; 90th percentile {f['fixed_p90_us']:.4g} us)")
         out.append(row("1", f"fixed cost of simulate() reading status, maxima, final state: {f['case']}", target,
                        measured, f["fixed_us"] <= FIXED_COST_TARGET_US,
                        f"{f['fixed_us'] - FIXED_COST_TARGET_US:.3g} us of Python around the kernel over the target"))
@@ -134,9 +135,11 @@ def sweep_rows(ends: dict | None, why: str = "") -> list[dict]:
     return out
 
 
-def generate_rows(generated: list[dict] | None, events: list[dict] | None, why: str = "") -> list[dict]:
+def generate_rows(generation: dict | None, why: str = "") -> list[dict]:
     """Item 4: the slowest shipped scene's ``tswm generate``, the slowest 999-breakpoint schedule's, and
-    what a guards() call (made at every event-location sample) costs with 999 breakpoints against 3."""
+    what a guards() call (made at every event-location sample) costs with 999 breakpoints against 3
+    (``generation``: {"runs": ``generation.generate_runs``, "events": ``generation.event_runs``})."""
+    generated, events = (generation or {}).get("runs"), (generation or {}).get("events")
     shipped_t, sched_t = f"<= {GENERATE_TARGET_S:g} s from empty caches", f"<= {SCHEDULE_TARGET_S:g} s"
     n_few, n_many = SCHEDULE_BREAKPOINTS
     event_t = f"the same as with {n_few} breakpoints (at most {EVENT_COST_SAME:g}x)"
@@ -148,7 +151,7 @@ def generate_rows(generated: list[dict] | None, events: list[dict] | None, why: 
     every = len(shipped_scenes())
     for rows, figure, target, limit in ((shipped, f"tswm generate of every shipped scene ({len(shipped)} of {every})",
                                          shipped_t, GENERATE_TARGET_S),
-                                        (many, f"tswm generate of a {n_many}-breakpoint schedule ({len(many)} kinds)",
+                                        (many, f"tswm generate of a {n_many}-breakpoint schedule ({plural(len(many), 'kind')})",
                                          sched_t, SCHEDULE_TARGET_S)):
         if not rows:
             out.append(row("4", figure, target, None, remaining=why))
@@ -220,14 +223,11 @@ def chain_rows(chain: dict | None, why: str = "") -> list[dict]:
     return out
 
 
+ROWS = {"fixed cost": fixed_cost_rows, "speedup": speedup_rows, "auto": auto_rows, "sweeps": sweep_rows,
+        "generate": generate_rows, "empty cache": cold_rows, "chain": chain_rows}  # part -> its rows
+
+
 def all_rows(parts: dict, why: dict) -> list[dict]:
-    """Every item's rows from ``parts`` (name -> result, None where not run; ``why[name]`` says why)."""
-    def w(name):
-        return why.get(name, "not run")
-    return (fixed_cost_rows(parts.get("fixed cost"), w("fixed cost"))
-            + speedup_rows(parts.get("speedup"), w("speedup"))
-            + auto_rows(parts.get("auto"), w("auto"))
-            + sweep_rows(parts.get("sweeps"), w("sweeps"))
-            + generate_rows(parts.get("generate"), parts.get("events"), w("generate"))
-            + cold_rows(parts.get("empty cache"), w("empty cache"))
-            + chain_rows(parts.get("chain"), w("chain")))
+    """Every item's rows from ``parts`` (ROWS' names -> result, None or absent where not run; ``why[name]``
+    says why)."""
+    return [r for name, rows in ROWS.items() for r in rows(parts.get(name), why.get(name, "not run"))]
