@@ -345,11 +345,11 @@ def main(quick: bool = False, output: str | os.PathLike = "tswm-report/bench", c
     flat = flat_cost(rows)
     first_calls = _part(done, "first call in a fresh process", cold_start, log, fatal=True)
     parts = {"speedup": verdicts, "auto": auto_comparisons(rows)}
+    _say(log, targets.speedup_rows(verdicts) + targets.auto_rows(parts["auto"]))
     for name, measure_part in _parts(quick, log).items():
         if name not in skip:
             parts[name] = _part(done, name, measure_part, log)
-            for r in targets.ROWS[name](parts[name], "failed"):
-                log(f"  {r['figure']}: {r['measured']} (target {r['target']}): {r['verdict']}")
+            _say(log, targets.ROWS[name](parts[name], "failed"))
     info = machine(load_before, os.getloadavg())
     if parts.get("sweeps") and "versions" in parts["sweeps"]["diffrax"]:
         info |= parts["sweeps"]["diffrax"]["versions"]
@@ -381,6 +381,12 @@ def main(quick: bool = False, output: str | os.PathLike = "tswm-report/bench", c
     log(f"wrote {out / 'work-precision.md'}, targets.csv, runs.csv, verdicts.csv, bench.json, work-precision.png "
         f"and {plural(len(plots), 'plot')} per case")
     return 0
+
+
+def _say(log, rows) -> None:
+    """Target rows as log lines, as soon as their part has ended (a run stopped later has printed them)."""
+    for r in rows:
+        log(f"  {r['figure']}: {r['measured']} (target {r['target']}): {r['verdict']}")
 
 
 def _parts(quick: bool, log) -> dict:
