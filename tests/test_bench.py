@@ -6,7 +6,7 @@ import math
 import pandas as pd
 import pytest
 
-from tswm_runtime.bench import bench
+from tswm_runtime.bench import bench, targets
 from tswm_runtime.bench import report as bench_report
 from tswm_runtime.bench.cases import CASES, errors, reference, run_peer
 from tswm_runtime.bench.peers import PeerGaveUp, available_methods, peer_run
@@ -123,9 +123,12 @@ def test_rounds_time_every_configuration_once_each_in_its_own_order():
     assert len({tuple(r) for r in rounds}) == 3 and any(len(p) > 1 for p in predecessors.values())
 
 
+TINY = dict(quick=True, case_names=["decelerate-and-stick"], peers=("RK45",), tols=(1e-5, 1e-8), repeats=1, sweep_n=2,
+            cases=16)
+
+
 def test_tiny_run_writes_the_report(tmp_path, capsys):
-    assert bench.main(quick=True, output=tmp_path, case_names=["decelerate-and-stick"], peers=("RK45",),
-                      tols=(1e-5, 1e-8), repeats=1, sweep_n=2, cases=16) == 0
+    assert bench.main(output=tmp_path, skip=bench.PARTS, **TINY) == 0
     runs = pd.read_csv(tmp_path / "runs.csv")
     assert set(runs["solver"]) == {"tswm simulate", "tswm simulate rosenbrock23", "tswm simulate rodas4",
                                    "tswm simulate auto",
@@ -142,6 +145,12 @@ def test_tiny_run_writes_the_report(tmp_path, capsys):
     assert "loadavg_before" in md and "cpu" in md and "cases/s" in md
     assert (tmp_path / "work-precision.png").stat().st_size > 1000
     assert "Targets" in capsys.readouterr().out
+    table = pd.read_csv(tmp_path / "targets.csv", keep_default_na=False)
+    assert set(table["item"]) == {1, 2, 3, 4, 5, 6} and (table["target"] != "").all()
+    assert set(table["verdict"]) <= {"met", "missed", "not measured"}
+    assert (table[table["item"] == 2]["verdict"] != "not measured").all()  # from the work-precision rows
+    assert (table[table["item"] == 3]["remaining"] == "left out of this run").all()
+    assert (tmp_path / "work-precision-decelerate-and-stick.png").stat().st_size > 1000
 
 
 def test_every_timed_call_gets_new_parameters(monkeypatch):
@@ -207,12 +216,26 @@ def test_empty_cache_rows_time_the_message_and_the_first_result(monkeypatch, tmp
         assert 0 < row["message_s"] < row["first_result_s"] <= row["process_s"]
         assert row["message_verdict"].startswith(("met", "missed")) and row["result_verdict"].startswith("met")
         assert row["over_target_s"] == 0.0
-    assert background["process_s"] < background["cache_filled_s"] and background["next_run_silent"] is True
-    assert background["next_run_s"] > 0.2 and math.isnan(foreground["next_run_s"])
-    assert bench.main(quick=True, output=tmp_path, case_names=["decelerate-and-stick"], peers=("RK45",),
-                      tols=(1e-5, 1e-8), repeats=1, sweep_n=2, cases=16, cold=True, log=lambda *a: None) == 0
+    assert background["process_s"] < background["cache_filled_s"]
+    for row in (background, foreground):
+        assert row["next_run_silent"] is True and row["next_run_s"] > 0.2
+    monkeypatch.setattr(bench, "FORCED_COMPILE", bench.EMPTY_CACHE[1:])
+    assert bench.main(output=tmp_path, skip=set(bench.PARTS) - {"empty cache"}, log=lambda *a: None, **TINY) == 0
     md = (tmp_path / "work-precision.md").read_text()
     assert "First run with an empty numba cache" in md and "stand-in" in md and "tswm: compiling the stand-in" in md
+    table = pd.read_csv(tmp_path / "targets.csv", keep_default_na=False)
+    cold = table[table["item"] == 5]
+    assert len(cold) == 2 and set(cold["verdict"]) <= {"met", "missed"}
+    assert cold["figure"].iloc[0].startswith("a forced compile leaves a cache that the next run finds (stand-in)")
+
+
+def test_a_forced_compile_whose_next_run_compiles_again_misses_its_target(monkeypatch):
+    """The stand-in never fills its cache: the next run prints its notice again."""
+    fake = "import sys; print('tswm: compiling', file=sys.stderr); print('status: x')"
+    monkeypatch.setattr(bench, "EMPTY_CACHE", [("never cached", "foreground", ["-c", fake], "status:")])
+    rows = bench.empty_cache(log=lambda *a: None)
+    assert rows[0]["next_run_silent"] is False
+    assert targets.cold_rows(rows)[0]["verdict"] == "missed"
 
 
 def test_an_empty_cache_that_prints_nothing_is_reported_as_such(monkeypatch):

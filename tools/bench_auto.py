@@ -41,22 +41,10 @@ def configurations(cases, tols, peers):
 
 
 def comparisons(rows):
-    """Per case and error level: the time each tswm method needs for that error and the fastest
-    peer's (``report.cost_at`` on each work-precision front: NaN where a front does not reach
-    it), and each other's time over auto's (> 1: auto is faster)."""
-    out = []
-    peers = [s for s in dict.fromkeys(r["solver"] for r in rows) if not s.startswith("tswm")]
-    for case in dict.fromkeys(r["case"] for r in rows):
-        for level in LEVELS:
-            def cost(solver):
-                return report.cost_at([(r["err"], r["t_med"]) for r in rows
-                                       if r["case"] == case and r["solver"] == solver], level)
-            row = {"case": case, "error": level} | {f"{m}_s": cost(f"tswm {m}") for m in METHODS}
-            peer_costs = {p: c for p in peers if not math.isnan(c := cost(p))}
-            best = min(peer_costs, key=peer_costs.get) if peer_costs else None
-            row |= {"fastest_peer": best, "peer_s": peer_costs.get(best, math.nan)}
-            row |= {f"{k}_over_auto": row[f"{k}_s"] / row["auto_s"] for k in ("dopri5", "rosenbrock23", "rodas4", "peer")}
-            out.append(row)
+    """``report.versus_peers`` for each tswm method, and each other's time over auto's (> 1: auto is faster)."""
+    out = report.versus_peers(rows, lambda case: {m: f"tswm {m}" for m in METHODS}, LEVELS)
+    for row in out:
+        row |= {f"{k}_over_auto": row[f"{k}_s"] / row["auto_s"] for k in ("dopri5", "rosenbrock23", "rodas4", "peer")}
     return out
 
 

@@ -6,21 +6,13 @@ errors 1e-6 and 1e-9 against the 20x target. Run:
     PYTHONPATH=. .venv/bin/python tools/bench_chain.py [ROUNDS]
 """
 import sys
-import tempfile
-from pathlib import Path
 
 from tswm_runtime.bench import chain
 from tswm_runtime.common import provenance
-from tswm_runtime.model.scenes import load_chain_model
 
 ROUNDS = int(sys.argv[1]) if len(sys.argv) > 1 else 5
 
-with tempfile.TemporaryDirectory() as tmp:
-    scene = Path(tmp) / "bench-worm-nut-spring.toml"
-    scene.write_text(chain.SCENE)
-    module = load_chain_model(scene)
-    chain.tswm_run(module, 1e-6, 1e-9)                   # compile, untimed
-    result = chain.measure(module, ROUNDS, log=lambda line: print(line, file=sys.stderr))
+result = chain.run(ROUNDS, log=lambda line: print(line, file=sys.stderr))
 box = provenance.machine()
 print(f"{box['cpu']}, {box['cores']} cores; 1-minute load {result['load'][0]:.1f} before, {result['load'][1]:.1f} after; "
       f"rounds {result['rounds']}; reference: q0(t_end) = {result['reference'].q_end:.12g} rad, "

@@ -1,8 +1,7 @@
-"""Work-precision report: tswm (simulate(), sweep()) against careful-user peers (scipy's
-solve_ivp, SUNDIALS CVODE via scikit-sundae), error against the independent quadrature
-reference versus median wall time per whole call, sweep throughput, and the issue-13
-targets with measured factors. The code lives in tswm_runtime/bench/bench.py (also behind
-`tswm bench`). Run:
+"""The bench: every speed figure beside its target, with the work-precision report (tswm's
+simulate() and sweep() against careful-user peers, scipy's solve_ivp and SUNDIALS CVODE via
+scikit-sundae, error against the independent quadrature reference versus median wall time per
+whole call). The code lives in tswm_runtime/bench/bench.py (also behind `tswm bench`). Run:
     .venv/bin/python tools/bench_work_precision.py [--quick] [-o DIR] [--cases N]
 """
 from __future__ import annotations

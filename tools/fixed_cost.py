@@ -13,6 +13,7 @@ import time
 
 import numpy as np
 
+from tswm_runtime.bench.cases import timed_calls
 from tswm_runtime.common import provenance
 from tswm_runtime.simulation import simulate as S
 
@@ -22,34 +23,10 @@ N = int(args[1]) if len(args) > 1 else 2000
 t_end = float(args[2]) if len(args) > 2 else 1.0
 rng = np.random.default_rng(1)
 
-kernel_ns = []
-direct = S._direct
-
-
-def timed_direct(kernel, kernel_args, counters):
-    t0 = time.perf_counter_ns()
-    try:
-        return direct(kernel, kernel_args, counters)
-    finally:
-        kernel_ns.append(time.perf_counter_ns() - t0)
-
-
-S._direct = timed_direct
-
 
 def calls(n):
-    """n whole calls: (wall ns, thread-CPU ns, kernel ns) each, and the last Result."""
-    wall, cpu = [], []
-    kernel_ns.clear()
-    for _ in range(n):
-        F = -rng.uniform(5e3, 2e4)
-        c0 = time.thread_time_ns()
-        t0 = time.perf_counter_ns()
-        r = S.simulate(scene, {"F2_after": F}, t_end=t_end)
-        (r.status, r.S1_max, r.S2_max, r.final_state["v1"])
-        wall.append(time.perf_counter_ns() - t0)
-        cpu.append(time.thread_time_ns() - c0)
-    return wall, cpu, list(kernel_ns), r
+    """n whole calls (``bench.cases.timed_calls``): wall, thread-CPU and kernel ns each, and the last Result."""
+    return timed_calls(scene, lambda: {"F2_after": -rng.uniform(5e3, 2e4)}, n, t_end=t_end)
 
 
 def med(ns):

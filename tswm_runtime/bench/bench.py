@@ -19,6 +19,10 @@ order the peers would always follow another scipy call and each tswm variant the
 neighbour. Medians with min and max. The cold-start target is reported with the
 measured factor, never asserted.
 
+Beside these rounds, ``main`` runs the other parts of the bench (PARTS: the fixed cost, the sweeps
+end to end, ``tswm generate``, the empty cache, the drive train) and prints every figure beside its
+target (``targets``).
+
 Run: ``tswm bench [--quick] [-o DIR]`` or ``python tools/bench_work_precision.py``.
 """
 from __future__ import annotations
@@ -37,9 +41,10 @@ from pathlib import Path
 from tswm_runtime.bench import report
 from tswm_runtime.common import provenance
 from tswm_runtime.common.words import plural
-from tswm_runtime.bench.cases import (CASES, FIXED_COST_T_END, errors, reference, run_fixed_cost, run_peer,
-                                           run_simulate, run_sweep)
+from tswm_runtime.bench.cases import (CASES, FIXED_COST_T_END, errors, fixed_cost, reference, run_fixed_cost,
+                                      run_peer, run_simulate, run_sweep)
 from tswm_runtime.bench.peers import available_methods
+from tswm_runtime.bench.targets import MESSAGE_TARGET_S
 
 TOLS_FULL = (1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8, 1e-9, 1e-10, 1e-11)
 TOLS_QUICK = (1e-4, 1e-6, 1e-8, 1e-10)
@@ -171,7 +176,6 @@ def cold_start() -> list[dict]:
 
 
 COLD_TARGET_S = 15.0     # with an empty cache, the first result within 15 s
-MESSAGE_TARGET_S = 1.0   # ... and a message within 1 s saying what is compiled and about how long
 EMPTY_CACHE = [  # (name, TSWM_COLD_START, command line after the interpreter, the output line that is the first result)
     ("tswm simulate paper", "background", ["-m", "tswm_runtime.cli", "simulate", "paper"], "status:"),
     ("tswm sweep paper (100 samples)", "background",
@@ -209,33 +213,33 @@ def _timed_run(argv, env, result_mark) -> dict:
             "process_s": time.perf_counter() - t0, "exit": code, "stderr": errors}
 
 
-def empty_cache(log=print) -> list[dict]:
-    """Each EMPTY_CACHE command in a fresh process with a fresh, empty NUMBA_CACHE_DIR, as a
-    first run on a new machine or in CI: seconds from starting the process to its message on
-    stderr and to the first result line, against the targets (interpreter start-up included:
-    that is what the user waits for). In the default mode (background) also when the background
-    compile it started has filled the cache, and the same command run again then: warm, silent."""
+def empty_cache(log=print, commands=None) -> list[dict]:
+    """Each of ``commands`` (default EMPTY_CACHE) in a fresh process with a fresh, empty
+    NUMBA_CACHE_DIR, as a first run on a new machine or in CI: seconds from starting the process to
+    its message on stderr and to the first result line, against the targets (interpreter start-up
+    included: that is what the user waits for). Then the same command again in the default mode,
+    which finds what the first run compiled, or says what it does not find: after a forced compile
+    (foreground) at once, after a background one when that has filled the cache."""
     import tempfile
 
     out = []
-    for name, cold_start_mode, argv, result_mark in EMPTY_CACHE:
+    for name, cold_start_mode, argv, result_mark in EMPTY_CACHE if commands is None else commands:
         with tempfile.TemporaryDirectory() as cache:
             env = {**os.environ, "NUMBA_CACHE_DIR": cache, "TSWM_COLD_START": cold_start_mode}
             load = os.getloadavg()[0]
             t0 = time.perf_counter()
             first = _timed_run(argv, env, result_mark)
-            compiled = again = None
+            compiled = None
             if cold_start_mode == "background":
                 subprocess.run([sys.executable, "-c", WAIT_FOR_BACKGROUND], env=env, check=True)
                 compiled = time.perf_counter() - t0
-                again = _timed_run(argv, env, result_mark)
+            again = _timed_run(argv, {**env, "TSWM_COLD_START": "background"}, result_mark)
         result = first["first_result_s"]
         row = {"command": name, "TSWM_COLD_START": cold_start_mode, "message_s": first["message_s"],
                "first_result_s": result, "over_target_s": max(result - COLD_TARGET_S, 0.0),
                "process_s": first["process_s"], "exit": first["exit"],
                "cache_filled_s": math.nan if compiled is None else compiled,
-               "next_run_s": math.nan if again is None else again["process_s"],
-               "next_run_silent": "" if again is None else not again["stderr"],
+               "next_run_s": again["process_s"], "next_run_silent": not again["stderr"],
                "loadavg_1min_before": load,
                "message": first["stderr"][0].strip() if first["stderr"] else "",
                "message_verdict": ("none printed" if math.isnan(first["message_s"]) else report.threshold_text(
@@ -243,7 +247,8 @@ def empty_cache(log=print) -> list[dict]:
                "result_verdict": report.threshold_text(result, COLD_TARGET_S, "s", higher_is_better=False)}
         log(f"empty cache, {name} ({cold_start_mode}): message after {row['message_s']:.2f} s, first result "
             f"after {result:.1f} s ({row['result_verdict']})"
-            + (f"; cache filled after {compiled:.1f} s, next run {row['next_run_s']:.2f} s" if compiled else ""))
+            + (f"; cache filled after {compiled:.1f} s" if compiled else "")
+            + f"; next run {row['next_run_s']:.2f} s, {'silent' if row['next_run_silent'] else 'not silent'}")
         out.append(row)
     return out
 
@@ -270,21 +275,55 @@ def _print(*args):
     print(*args, flush=True)
 
 
+PARTS = ("fixed cost", "sweeps", "generate", "empty cache", "chain")  # beside the work-precision rounds
+FORCED_COMPILE = [c for c in EMPTY_CACHE if c[1] == "foreground"]
+
+
+def _part(record: list, name: str, measure, log, fatal: bool = False):
+    """Run one part of the bench: its result (None if it failed: the error in ``record``, the bench goes
+    on, unless ``fatal``); its seconds and the 1-minute load before and after in ``record``."""
+    load, t0 = os.getloadavg()[0], time.perf_counter()
+    log(f"== {name} (1-minute load {load:.1f})")
+    done = {"part": name, "error": ""}
+    try:
+        out = measure()
+    except Exception as error:  # noqa: BLE001 - a failing part is reported beside its targets, not fatal
+        out, done["error"] = None, f"{type(error).__name__}: {error}"
+        log(f"{name} failed: {done['error']}")
+        if fatal:
+            raise
+    record.append(done | {"seconds": time.perf_counter() - t0, "load_before": load, "load_after": os.getloadavg()[0]})
+    return out
+
+
+def auto_comparisons(rows) -> list[dict]:
+    """``report.versus_peers`` for method auto (the scene's own method where that is auto)."""
+    from tswm_runtime.model.scenes import load_model
+
+    def solvers(case):
+        own = load_model(CASES[case].scene).RUN["method"]
+        return {"auto": report.TSWM_SIMULATE if own == "auto" else "tswm simulate auto"}
+    return report.versus_peers(rows, solvers)
+
+
 def main(quick: bool = False, output: str | os.PathLike = "tswm-report/bench", cases: int | None = None,
          case_names=None, peers=None, tols=None, repeats: int | None = None, sweep_n: int | None = None,
-         log=_print, cold: bool | None = None, end_to_end: bool | None = None) -> int:
-    """Run the benchmark and write DIR/work-precision.md, runs.csv, verdicts.csv, bench.json
-    and work-precision.png. cases: size of the throughput grid; cold: measure the first run
-    with an empty numba cache (``empty_cache``, about 2.5 min on 2 cores; default: not with
-    ``quick``); end_to_end: ``tswm sweep`` as whole processes and against a vmapped diffrax batch
-    (``sweeps``, a few minutes; default: not with ``quick``); the other keywords narrow the run (tests)."""
+         log=_print, skip=()) -> int:
+    """Run the benchmark and write DIR/work-precision.md, targets.csv, runs.csv, verdicts.csv, bench.json,
+    work-precision.png and one work-precision-CASE.png per case. The parts (PARTS; ``skip`` leaves
+    some out, their targets then "not measured"): the work-precision rounds with the sweep throughput
+    (``cases``: its grid) and the first calls; the fixed cost; ``tswm sweep`` as whole processes and
+    against a vmapped diffrax batch; ``tswm generate`` of the shipped scenes and of schedules, and the
+    schedule's events; the first run on an empty numba cache; the two-stage drive train. ``quick``:
+    smaller counts of each; the other keywords narrow the work-precision part (tests)."""
     import pandas as pd
 
     from tswm_common.files import write_atomic
+    from tswm_runtime.bench import targets
 
     out = Path(output)
     out.mkdir(parents=True, exist_ok=True)
-    start, load_before = time.perf_counter(), os.getloadavg()
+    start, load_before, done = time.perf_counter(), os.getloadavg(), []
     chosen = [CASES[n] for n in (case_names or CASES)]
     peers = tuple(peers or available_methods())
     tols = tuple(tols or (TOLS_QUICK if quick else TOLS_FULL))
@@ -298,30 +337,83 @@ def main(quick: bool = False, output: str | os.PathLike = "tswm-report/bench", c
     t_ref = time.perf_counter() - t0
     log(f"references for {plural(len(chosen), 'case')} in {t_ref:.1f} s; {plural(len(tols), 'tolerance')}, peers "
         f"{', '.join(peers)}, {plural(repeats, 'round')}")
-    rows = measure(configurations(chosen, tols, peers, sweep_n), repeats, log)
+    rows = _part(done, "work-precision", lambda: measure(configurations(chosen, tols, peers, sweep_n), repeats, log),
+                 log, fatal=True)
     verdicts = report.speedup_verdicts(rows)
-    thr = throughput(cases or (1000 if quick else 10_000), log=log)
+    thr = _part(done, "sweep() throughput", lambda: throughput(cases or (1000 if quick else 10_000), log=log), log,
+                fatal=True)
     flat = flat_cost(rows)
-    first_calls = cold_start()
-    empty = empty_cache(log) if (not quick if cold is None else cold) else []
-    ends = _end_to_end(log) if (not quick if end_to_end is None else end_to_end) else None
+    first_calls = _part(done, "first call in a fresh process", cold_start, log, fatal=True)
+    parts = {"speedup": verdicts, "auto": auto_comparisons(rows)}
+    _say(log, targets.speedup_rows(verdicts) + targets.auto_rows(parts["auto"]))
+    for name, measure_part in _parts(quick, log).items():
+        if name not in skip:
+            parts[name] = _part(done, name, measure_part, log)
+            _say(log, targets.ROWS[name](parts[name], "failed"))
     info = machine(load_before, os.getloadavg())
+    if parts.get("sweeps") and "versions" in parts["sweeps"]["diffrax"]:
+        info |= parts["sweeps"]["diffrax"]["versions"]
+    why = {name: "left out of this run" for name in PARTS} | {
+        p["part"]: f"failed: {p['error']}" for p in done if p["error"]}
+    rows_of_targets = targets.all_rows(parts, why)
+    write_atomic(out / "targets.csv", pd.DataFrame(rows_of_targets).to_csv(index=False))
     write_atomic(out / "runs.csv", pd.DataFrame(rows).to_csv(index=False))
     write_atomic(out / "verdicts.csv", pd.DataFrame(verdicts).to_csv(index=False))
-    report.plot(rows, out / "work-precision.png", report.machine_note(info))
+    note = report.machine_note(info)
+    report.plot(rows, out / "work-precision.png", note)
+    plots = report.plot_per_case(rows, out, note)
     refs = [{"case": c.name, "scene": c.scene, "params": dict(c.params), "v1(0)": c.v0, "t_end": c.t_end,
              "m1": c.m1, "S1_max": reference(c).S1, "v1_end": reference(c).v_end, "x1_end": reference(c).x_end,
              "events": ", ".join(f"{k} {t:.12g}" for k, t in reference(c).events) or "none"} for c in chosen]
+    generation, empty, ends = parts.get("generate") or {}, parts.get("empty cache"), parts.get("sweeps")
+    details = {"fixed_cost": parts.get("fixed cost"), "auto": parts["auto"], "generate": generation.get("runs"),
+               "events": generation.get("events"), "chain": _chain_table(parts.get("chain")), "parts": done,
+               "plots": plots}
     md = _markdown(info, refs, t_ref, rows, verdicts, thr, flat, first_calls, empty, tols, repeats, sweep_n,
-                   time.perf_counter() - start, ends)
+                   time.perf_counter() - start, ends, rows_of_targets, details)
     write_atomic(out / "work-precision.md", md)
-    write_atomic(out / "bench.json", json.dumps({"machine": info, "references": refs, "verdicts": verdicts,
-                                                 "throughput": thr, "flat_cost": flat, "cold_start": first_calls,
-                                                 "empty_cache": empty, "sweeps_end_to_end": ends},
+    write_atomic(out / "bench.json", json.dumps({"machine": info, "targets": rows_of_targets, "references": refs,
+                                                 "verdicts": verdicts, "throughput": thr, "flat_cost": flat,
+                                                 "cold_start": first_calls, "empty_cache": empty,
+                                                 "sweeps_end_to_end": ends, **details},
                                                 indent=2, default=str))
-    log(md[md.index("## Targets"):md.index("## All runs")])
-    log(f"wrote {out / 'work-precision.md'}, runs.csv, verdicts.csv, bench.json, work-precision.png")
+    log(md[md.index("## Targets"):md.index("### simulate() with default output")])
+    log(f"wrote {out / 'work-precision.md'}, targets.csv, runs.csv, verdicts.csv, bench.json, work-precision.png "
+        f"and {plural(len(plots), 'plot')} per case")
     return 0
+
+
+def _say(log, rows) -> None:
+    """Target rows as log lines, as soon as their part has ended (a run stopped later has printed them)."""
+    for r in rows:
+        log(f"  {r['figure']}: {r['measured']} (target {r['target']}): {r['verdict']}")
+
+
+def _parts(quick: bool, log) -> dict:
+    """PARTS' measurements as calls, with ``quick``'s smaller counts."""
+    from tswm_runtime.bench import chain, generation, sweeps, targets
+
+    def sweeps_end_to_end():
+        return {"processes": sweeps.processes(repeats=1 if quick else 3, log=log, fraction=0.1 if quick else 1.0),
+                "diffrax": sweeps.versus_diffrax(cases=1000 if quick else 10_000, repeats=1 if quick else 3, log=log)}
+
+    def generate():
+        return {"runs": generation.generate_runs(scenes=generation.SLOWEST_SCENES if quick else None,
+                                                 sizes=targets.SCHEDULE_BREAKPOINTS,
+                                                 shapes=generation.SHAPES[:1] if quick else generation.SHAPES, log=log),
+                "events": generation.event_runs(targets.SCHEDULE_BREAKPOINTS, log)}
+    return {"fixed cost": lambda: [fixed_cost(CASES[n], 300 if quick else 2000) for n in targets.TARGET_CASES],
+            "sweeps": sweeps_end_to_end, "generate": generate,
+            "empty cache": lambda: empty_cache(log, FORCED_COMPILE if quick else None),
+            "chain": lambda: chain.run(1 if quick else 3, chain.TOLS[::2] if quick else chain.TOLS, log)}
+
+
+def _chain_table(result) -> list[dict] | None:
+    """The chain part's runs as rows: solver, rtol, error, median seconds."""
+    if result is None:
+        return None
+    return [{"solver": solver, "rtol": rtol, "err": err, "t_med": result["median_s"].get((solver, rtol), math.nan)}
+            for (solver, rtol), err in result["errors"].items()]
 
 
 def _end_to_end(log) -> dict:
@@ -336,7 +428,7 @@ def _end_to_end_markdown(ends) -> list[str]:
 
     head = "### Sweeps end to end: `tswm sweep` as whole processes, and against a vmapped diffrax batch"
     if ends is None:
-        return [head, "", "not measured (--quick; the full bench measures it)", ""]
+        return [head, "", "not measured (left out of this run, or failed: see the parts)", ""]
     dx = ends["diffrax"]
     md = [head, "", f"Whole processes (warm numba cache, tables written with -o; targets: "
           f"{', '.join(f'{n} cases >= {t:g} cases/s' for n, t in sweeps.PROCESS_TARGETS.items())}, start-up "
@@ -365,8 +457,39 @@ def _end_to_end_markdown(ends) -> list[str]:
     return md
 
 
+def _details_markdown(details) -> list[str]:
+    """The fixed cost, method auto, tswm generate and the chain, as measured (their targets' rows come first)."""
+    us = {k: "{:.1f}" for k in ("whole_us", "cpu_us", "kernel_us", "fixed_us", "fixed_p90_us")}
+    seconds = {k: "{:.3e}" for k in ("auto_s", "peer_s", "t_med")} | {"error": "{:.0e}", "rtol": "{:.0e}",
+                                                                     "err": "{:.2e}"}
+    md = ["### The fixed cost of a simulate() call", ""]
+    md += [("Back-to-back whole calls to t_end = "
+            f"{FIXED_COST_T_END:g} s (one step) that read the status, the maxima and the final state, a new m2 on "
+            "every call; the kernel timed where simulate() calls it; fixed = whole - kernel, medians (us):\n\n"
+            + report.md_table(details["fixed_cost"], list(details["fixed_cost"][0]), us))
+           if details["fixed_cost"] else "not measured", ""]
+    md += ["### Method auto against the fastest peer at equal error, every case", "",
+           report.md_table(details["auto"], list(details["auto"][0]), seconds) if details["auto"] else "no rows", ""]
+    md += ["### `tswm generate` from empty caches, and a schedule's events", ""]
+    if details["generate"]:
+        md += ["A fresh process each, writing no bytecode, no stored derivation (`tswm_runtime/bench/generation.py`):",
+               "", report.md_table(details["generate"], list(details["generate"][0]),
+                                   {"wall_s": "{:.2f}", "cpu_s": "{:.2f}", "load_1min": "{:.1f}"}), ""]
+    if details["events"]:
+        md += ["A frictionless wedge whose drive steps N times in 1 s (compiled, warm, best of 3 runs), and one call "
+               "of its guards() from compiled code:", "",
+               report.md_table(details["events"], list(details["events"][0]),
+                               {"run_s": "{:.4f}", "events_per_s": "{:.0f}", "guards_call_s": "{:.3e}",
+                                "load_1min": "{:.1f}"}), ""]
+    md += ["### Two-stage drive train (`tswm_runtime/bench/chain.py`): errors against the DOP853 reference at rtol "
+           "1e-13, median seconds of whole calls", "",
+           report.md_table(details["chain"], list(details["chain"][0]), seconds) if details["chain"] else
+           "not measured", ""]
+    return md
+
+
 def _markdown(info, refs, t_ref, rows, verdicts, thr, flat, cold, empty, tols, repeats, sweep_n, total,
-              ends=None) -> str:
+              ends, rows_of_targets, details) -> str:
     fmt = {"rtol": "{:.0e}", "atol": "{:.0e}"} | {k: "{:.2e}" for k in ("err_S1", "err_v1", "err_x1", "err_t", "err")} \
         | {k: "{:.3e}" for k in ("t_med", "t_min", "t_max")}
     vfmt = {"error": "{:.0e}", "tswm_s": "{:.3e}", "peer_s": "{:.3e}", "target_allows_s": "{:.3e}",
@@ -395,6 +518,14 @@ def _markdown(info, refs, t_ref, rows, verdicts, thr, flat, cold, empty, tols, r
           "reference's; NaN: the sweep reports no event times); err the largest of them.", "",
           report.md_table(refs, list(refs[0]), {"S1_max": "{:.12g}", "v1_end": "{:.12g}", "x1_end": "{:.12g}"}), "",
           "## Targets (reported, not asserted)", "",
+          f"### Every figure beside its target: {sum(r['verdict'] == 'met' for r in rows_of_targets)} met, "
+          f"{sum(r['verdict'] == 'missed' for r in rows_of_targets)} missed, "
+          f"{sum(r['verdict'] == 'not measured' for r in rows_of_targets)} not measured", "",
+          "For a miss, `remaining` is the measured cost that stands between the figure and its target.", "",
+          report.md_table(rows_of_targets, ["item", "figure", "measured", "target", "verdict", "remaining"]), "",
+          "The parts of this run, with the 1-minute load before and after each:", "",
+          report.md_table(details["parts"], ["part", "seconds", "load_before", "load_after", "error"],
+                          {"seconds": "{:.1f}", "load_before": "{:.1f}", "load_after": "{:.1f}"}), "",
           f"### simulate() with default output vs the fastest peer at equal error: {n_met} of "
           f"{len(verdicts)} met", "",
           "Time to reach the error: log-log interpolation on each solver's work-precision front "
@@ -414,6 +545,7 @@ def _markdown(info, refs, t_ref, rows, verdicts, thr, flat, cold, empty, tols, r
           report.md_table([thr], list(thr), {"cases_per_s": "{:.0f}", "s_median": "{:.3f}", "s_min": "{:.3f}",
                                             "s_max": "{:.3f}"}), "",
           *_end_to_end_markdown(ends),
+          *_details_markdown(details),
           f"### Cost on an equilibrium tail: T = 100 s over T = 1 s (target ratio <= {report.FLAT_TARGET:g})", "",
           report.md_table(flat, list(flat[0])) if flat else "not measured (needs both run-up cases at rtol 1e-6)", "",
           "### First call in a fresh process (imports, numba cache, first result)", "",
@@ -437,6 +569,7 @@ def _markdown(info, refs, t_ref, rows, verdicts, thr, flat, cold, empty, tols, r
           report.md_table(rows, ["case", "solver", "rtol", "err_S1", "err_v1", "err_x1", "err_t", "err", "t_med",
                                  "t_min", "t_max", "events", "nfev", "status"], fmt), "",
           "Plot: work-precision.png (error vs median time per call, log-log, one panel per case, one curve per "
-          "tswm method and per peer; its title names the machine and the load).",
+          "tswm method and per peer; its title names the machine and the load), and one per case: "
+          + ", ".join(details["plots"]) + ".",
           f"Total bench time {total:.1f} s."]
     return "\n".join(md) + "\n"

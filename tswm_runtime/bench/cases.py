@@ -14,6 +14,8 @@ from __future__ import annotations
 
 import itertools
 import math
+import statistics
+import time
 from dataclasses import dataclass
 from functools import lru_cache
 
@@ -126,6 +128,52 @@ def run_fixed_cost(case: Case, rtol: float, atol: float) -> Outcome:
     """``run_simulate`` to t_end = FIXED_COST_T_END: what a call costs without integrating
     (checks, one step, the Result; no row is read). Its Outcome is not compared with the reference."""
     return run_simulate(case, rtol, atol, t_end=FIXED_COST_T_END)
+
+
+def timed_calls(scene: str, params, n: int, **settings) -> tuple[list[int], list[int], list[int], object]:
+    """n whole ``simulate(scene, params(), **settings)`` calls back to back, each reading the status, the
+    maxima and the final state: per call wall ns, thread-CPU ns and the kernel's ns (its compiled entry
+    timed where simulate() calls it, ``simulate._direct``, its arguments' unboxing included; empty if
+    simulate() has no such hook any more), and the last Result."""
+    from tswm_runtime.simulation import simulate as S
+
+    direct, kernel, wall, cpu = getattr(S, "_direct", None), [], [], []
+
+    def timed_direct(*args):
+        t0 = time.perf_counter_ns()
+        try:
+            return direct(*args)
+        finally:
+            kernel.append(time.perf_counter_ns() - t0)
+    if direct is not None:
+        S._direct = timed_direct
+    try:
+        for _ in range(n):
+            c0, t0 = time.thread_time_ns(), time.perf_counter_ns()
+            r = S.simulate(scene, params(), **settings)
+            (r.status, r.S1_max, r.S2_max, r.final_state["v1"])
+            wall.append(time.perf_counter_ns() - t0)
+            cpu.append(time.thread_time_ns() - c0)
+    finally:
+        if direct is not None:
+            S._direct = direct
+    return wall, cpu, kernel, r
+
+
+def fixed_cost(case: Case, calls: int, warmup: int = 50) -> dict:
+    """The fixed cost of the case's simulate() call to t_end = FIXED_COST_T_END (one step) with a new m2
+    each (``timed_calls``, after ``warmup`` untimed calls): medians in us of the whole call, its thread
+    CPU, the kernel, and the fixed cost = whole call - kernel (the whole call if the kernel is not timed)."""
+    def params():
+        return {**dict(case.params), "m2": new_m2(case)}
+    settings = {**case.overrides(), "t_end": FIXED_COST_T_END}
+    timed_calls(case.scene, params, warmup, **settings)
+    wall, cpu, kernel, r = timed_calls(case.scene, params, calls, **settings)
+    fixed = [w - k for w, k in zip(wall, kernel)] if kernel else wall
+    return {"case": case.name, "scene": case.scene, "calls": calls, "steps": r.n_steps,
+            "whole_us": statistics.median(wall) / 1e3, "cpu_us": statistics.median(cpu) / 1e3,
+            "kernel_us": statistics.median(kernel) / 1e3 if kernel else math.nan,
+            "fixed_us": statistics.median(fixed) / 1e3, "fixed_p90_us": float(np.percentile(fixed, 90)) / 1e3}
 
 
 def run_sweep(case: Case, rtol: float, atol: float, n: int) -> Outcome:

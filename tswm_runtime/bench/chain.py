@@ -163,14 +163,30 @@ def error(outcome: Outcome, reference: Outcome) -> float:
                abs(outcome.t_rest - reference.t_rest) / T_END)
 
 
-def measure(module, rounds: int = 5, log=print) -> dict:
+def run(rounds: int = 5, tols=TOLS, log=print) -> dict:
+    """``measure`` on the case's module: SCENE written to a temporary file, its module generated and
+    compiled by one untimed call."""
+    import tempfile
+    from pathlib import Path
+
+    from tswm_runtime.model.scenes import load_chain_model
+
+    with tempfile.TemporaryDirectory() as tmp:
+        scene = Path(tmp) / "bench-worm-nut-spring.toml"
+        scene.write_text(SCENE)
+        module = load_chain_model(scene)
+        tswm_run(module, 1e-6, 1e-9)
+        return measure(module, rounds, tols, log)
+
+
+def measure(module, rounds: int = 5, tols=TOLS, log=print) -> dict:
     """Errors against the reference, then ``rounds`` interleaved shuffled rounds of every (solver, rtol),
     whole calls, one process; medians; the cost at equal error and tswm's factor over the fastest peer."""
     from tswm_runtime.bench.report import cost_at
 
     reference = peer_run("DOP853", REFERENCE_RTOL, REFERENCE_ATOL)
-    calls = {("tswm", r): (lambda r=r: tswm_run(module, r, r * 1e-3)) for r in TOLS}
-    calls.update({(p, r): (lambda p=p, r=r: peer_run(p, r, r * 1e-3)) for p in PEERS for r in TOLS})
+    calls = {("tswm", r): (lambda r=r: tswm_run(module, r, r * 1e-3)) for r in tols}
+    calls.update({(p, r): (lambda p=p, r=r: peer_run(p, r, r * 1e-3)) for p in PEERS for r in tols})
     errors = {}
     for key, call in calls.items():
         try:

@@ -62,6 +62,23 @@ def speedup_verdicts(rows, tswm=TSWM_SIMULATE, levels=SPEEDUP_LEVELS, target=SPE
     return out
 
 
+def versus_peers(rows, solvers, levels=SPEEDUP_LEVELS) -> list[dict]:
+    """Per case and error level: the time each of ``solvers(case)`` ({label: solver}) needs for that
+    error and the fastest peer's (``cost_at`` on each work-precision front: NaN where a front does
+    not reach it), as {label}_s, fastest_peer, peer_s."""
+    out = []
+    peers = [s for s in dict.fromkeys(r["solver"] for r in rows) if not s.startswith("tswm")]
+    for case in dict.fromkeys(r["case"] for r in rows):
+        for level in levels:
+            row = {"case": case, "error": level}
+            row |= {f"{label}_s": cost_at(_points(rows, case, solver), level)
+                    for label, solver in solvers(case).items()}
+            costs = {p: c for p in peers if not math.isnan(c := cost_at(_points(rows, case, p), level))}
+            best = min(costs, key=costs.get) if costs else None
+            out.append(row | {"fastest_peer": best, "peer_s": costs.get(best, math.nan)})
+    return out
+
+
 def _smallest(rows, case, solver) -> str:
     """The smallest error the solver reached on the case, and which component it was."""
     runs = [r for r in rows if r["case"] == case and r["solver"] == solver and math.isfinite(r["err"])]
@@ -161,6 +178,18 @@ def work_precision_figure(rows, note: str = ""):
 def plot(rows, path, note: str = "") -> None:
     """The work-precision figure (``note``: the machine and its load) written as a PNG."""
     work_precision_figure(rows, note).savefig(path, dpi=90)
+
+
+def plot_per_case(rows, directory, note: str = "") -> list[str]:
+    """``plot`` of each case alone, as work-precision-CASE.png in ``directory`` (CASE: the case's name in
+    lower-case letters, digits and dashes); the file names."""
+    import re
+
+    names = []
+    for case in dict.fromkeys(r["case"] for r in rows):
+        names.append(f"work-precision-{re.sub(r'[^a-z0-9]+', '-', case.lower()).strip('-')}.png")
+        plot([r for r in rows if r["case"] == case], directory / names[-1], note)
+    return names
 
 
 def machine_note(info: dict) -> str:

@@ -1,4 +1,4 @@
-"""``tswm bench``: work-precision against scipy and SUNDIALS, and sweep throughput."""
+"""``tswm bench``: every speed figure beside its target."""
 from __future__ import annotations
 
 import argparse
@@ -8,16 +8,20 @@ from tswm_runtime.cli.common import UsageError, output_directory
 
 def add_parser(sub) -> None:
     bench = sub.add_parser(
-        "bench", help="work-precision benchmark against scipy and SUNDIALS, and sweep throughput",
-        description="Error against an independent quadrature reference versus median wall time per whole "
-                    "call for tswm (simulate(), sweep()) and careful-user peers (scipy solve_ivp, CVODE via "
-                    "scikit-sundae) on five cases, configurations interleaved; sweep throughput; `tswm sweep` as "
-                    "whole processes (10,000 and 100,000 cases, start-up) and against a vmapped diffrax batch "
-                    "(optional: jax, or an interpreter in TSWM_BENCH_JAX_PYTHON) at equal accuracy; the "
-                    "targets reported with the measured factor. Writes DIR/work-precision.md, runs.csv, "
-                    "verdicts.csv, bench.json and work-precision.png.")
+        "bench", help="every speed figure beside its target: work-precision against scipy and SUNDIALS, sweeps, "
+             "generate, cold start, drive train",
+        description="Every speed figure beside its target (DIR/targets.csv and the first table of "
+                    "DIR/work-precision.md): the fixed cost of simulate(); error against an independent "
+                    "quadrature reference versus median wall time per whole call for tswm (simulate(), sweep()) "
+                    "and careful-user peers (scipy solve_ivp, CVODE via scikit-sundae), configurations "
+                    "interleaved, and method auto against them; `tswm sweep` as whole processes and against a "
+                    "vmapped diffrax batch (optional: jax, or an interpreter in TSWM_BENCH_JAX_PYTHON) at equal "
+                    "accuracy; `tswm generate` of the shipped scenes and of a 999-breakpoint schedule, and its "
+                    "events; the first run on an empty numba cache; a two-stage drive train against scipy. "
+                    "Also writes runs.csv, verdicts.csv, bench.json and the work-precision plots.")
     bench.add_argument("--quick", action="store_true",
-                       help="four tolerances, two rounds, a 1000-case throughput grid (about a minute)")
+                       help="smaller counts for every row: four tolerances, two rounds, a tenth of the sweep "
+                            "cases, the forced compile only (a few minutes)")
     bench.add_argument("-o", "--output", default="tswm-report/bench", metavar="DIR",
                        help="output directory (default tswm-report/bench)")
     bench.add_argument("--cases", type=int, metavar="N",
