@@ -192,6 +192,7 @@ def generate_chain_module(chain: ChainScene) -> str:
         lever_out=[str(s) for s in code.sym.lever_out], guards=guards,
         contact_targets=", ".join(f"g[{k}]" for k in range(n + 2)),
         force_targets=", ".join(f"out[{k}]" for k in range(3 * n)),
+        body_targets=", ".join(f"out[{j}]" for j in range(n + 1)),
         switch={"SWITCH_SETTING": switch.setting.name, "SWITCH_HYSTERESIS": switch.hysteresis.name,
                 "SWITCH_DELAY": switch.delay.name} if switch else {"SWITCH_SETTING": "math.inf",
                                                                   "SWITCH_HYSTERESIS": "0.0", "SWITCH_DELAY": "0.0"},
