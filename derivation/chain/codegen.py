@@ -4,7 +4,9 @@ Every formula comes from derivation/chain/: each stage's equivalent wedge (stage
 sliding mode's reduced equation of motion, normal forces, denominator and stage forces
 (dynamics.py); the scene's values enter only as named module constants printed by ``inert``. The
 module's rhs, jac and guards take the runtime's explicit signatures, so the compiled step loop
-(tswm_runtime/integration/single.py) runs it; tswm_runtime/hybrid/chain.py decides its modes.
+(tswm_runtime/integration/segment.py) runs it; tswm_runtime/hybrid/chain_kernel.py decides its modes. A mode
+and its mirror image (the same regimes on the other flanks, moving the other way) share their functions
+(``_mode_calls``: each expression checked equal or opposite in SymPy), as the single-stage modules do.
 """
 from __future__ import annotations
 
@@ -48,13 +50,14 @@ class _Code:
         self.sym = dyn.symbols(stages)
         self.printer = _Printer()
 
-    def body(self, exprs: list[sp.Expr], direction: int = 0) -> tuple[list[str], list[str]]:
-        """Lines and results; the body forces of a sliding mode in its ``direction``."""
+    def body(self, exprs: list[sp.Expr], direction: str = "0.0") -> tuple[list[str], list[str]]:
+        """Lines and results; the body forces of a sliding mode in ``direction`` (a number or the argument's
+        name)."""
         exprs = [sp.sympify(e) for e in exprs]
         used = set().union(*(e.free_symbols for e in exprs))
         lines = []
         if used & set(self.sym.force):
-            lines.append(f"{', '.join(map(str, self.sym.force))} = body_forces(t, y, p, {direction}.0)")
+            lines.append(f"{', '.join(map(str, self.sym.force))} = body_forces(t, y, p, {direction})")
         if q0 in used:
             lines.append("q_0 = y[0]")
         if MOTOR in used:
@@ -67,7 +70,8 @@ class _Code:
         lines += [f"{s} = {self.printer.doprint(e)}" for s, e in replacements]
         return lines, [self.printer.doprint(e) for e in reduced]
 
-    def function(self, name: str, doc: str, exprs: list[sp.Expr], args: str = "t, y, p", direction: int = 0) -> dict:
+    def function(self, name: str, doc: str, exprs: list[sp.Expr], args: str = "t, y, p",
+                 direction: str = "0.0") -> dict:
         lines, results = self.body(exprs, direction)
         return {"name": name, "args": args, "doc": doc, "lines": lines, "result": ", ".join(results)}
 
@@ -125,17 +129,65 @@ def _jam(code: _Code, mode: dyn.SlidingMode) -> sp.Expr:
                     for k, f in enumerate(mode.flanks)))
 
 
-def _mode_functions(chain: ChainScene, code: _Code, index: int, mode: dyn.SlidingMode) -> list[dict]:
-    name = f"mode {index}: {mode.name}"
-    stage_forces = [e for pair in zip(mode.on_input, mode.on_output, mode.normal) for e in pair]
-    s = mode.direction
-    return [code.function(f"accel_{index}", f"a_0 in {name}", [mode.accel], direction=s),
-            code.function(f"contact_{index}", f"(D, jam, N_1, ..., N_N, measured) in {name}: the denominator, the "
-                          "stages' jam factors' product and each stage's normal force; the mode holds while "
-                          "each is >= 0 (D, jam > 0); what the torque switch measures",
-                          [mode.denominator, _jam(code, mode), *mode.normal, _measured(chain, mode)], direction=s),
-            code.function(f"stage_forces_{index}", f"per stage (on its input body, on its output body, normal "
-                          f"force) in {name}", stage_forces, direction=s)]
+def _mode_exprs(chain: ChainScene, code: _Code, mode: dyn.SlidingMode) -> dict[str, list[sp.Expr]]:
+    """A sliding mode's expressions per generated function: a_0; D, jam, N_k, what the switch measures; per
+    stage the forces on its input and output body and its normal force."""
+    return {"accel": [mode.accel],
+            "contact": [mode.denominator, _jam(code, mode), *mode.normal, _measured(chain, mode)],
+            "stage_forces": [e for pair in zip(mode.on_input, mode.on_output, mode.normal) for e in pair]}
+
+
+def _signs(exprs: dict, shared: dict) -> dict[str, tuple[int, ...]] | None:
+    """Per function, the sign each of a mode's expressions has against the shared function's (equal or opposite:
+    its mirror image, the same regimes on the other flank in the other direction); None when one is neither."""
+    out = {}
+    for name, own in exprs.items():
+        signs = []
+        for e, base in zip(own, shared[name]):
+            if e == base or sp.expand(e - base) == 0:
+                signs.append(1)
+            elif e == -base or sp.expand(e + base) == 0:
+                signs.append(-1)
+            else:
+                return None
+        out[name] = tuple(signs)
+    return out
+
+
+def _mode_calls(chain: ChainScene, code: _Code, modes: list[dyn.SlidingMode]) -> tuple[list[dict], list[dict]]:
+    """The per-mode functions, one set per group of mirror modes (the first mode of a group gives its
+    expressions; the body forces in the direction the caller passes), and per mode the call: the group's
+    functions, its direction and which results change sign."""
+    functions, calls, groups = [], [], []     # groups: (first index, its expressions)
+    for index, mode in enumerate(modes):
+        exprs = _mode_exprs(chain, code, mode)
+        found = next(((first, signs) for first, base in groups
+                      if (signs := _signs(exprs, base)) is not None), None)
+        if found is None:
+            groups.append((index, exprs))
+            found = (index, {name: (1,) * len(e) for name, e in exprs.items()})
+            functions += _group_functions(code, index, modes, exprs)
+        first, signs = found
+        calls.append({"group": first, "direction": f"{mode.direction:.1f}", "accel_sign": "-" if signs["accel"][0] < 0
+                      else "", "contact_flips": [k for k, sg in enumerate(signs["contact"]) if sg < 0],
+                      "force_flips": [k for k, sg in enumerate(signs["stage_forces"]) if sg < 0]})
+    for group, _ in groups:
+        members = [f"{i} ({modes[i].name})" for i, call in enumerate(calls) if call["group"] == group]
+        for f in functions:
+            if f["group"] == group:
+                f["doc"] += "; modes " + ", ".join(members) + " (their body forces in `direction`)"
+    return functions, calls
+
+
+def _group_functions(code: _Code, index: int, modes: list[dyn.SlidingMode], exprs: dict) -> list[dict]:
+    args = "t, y, p, direction"
+    docs = {"accel": "a_0",
+            "contact": "(D, jam, N_1, ..., N_N, measured): the denominator, the stages' jam factors' product and each "
+                       "stage's normal force; the mode holds while each is >= 0 (D, jam > 0); what the torque switch "
+                       "measures",
+            "stage_forces": "per stage (on its input body, on its output body, normal force)"}
+    return [{**code.function(f"{name}_{index}", f"{docs[name]} in mode {index}: {modes[index].name}", e, args=args,
+                             direction="direction"), "group": index} for name, e in exprs.items()]
 
 
 def _jacobian(code: _Code, chain: ChainScene, mode: dyn.SlidingMode) -> tuple[str, str]:
@@ -143,6 +195,15 @@ def _jacobian(code: _Code, chain: ChainScene, mode: dyn.SlidingMode) -> tuple[st
     state dependence; the motor's torque changes with v_0 by its table's slope, ``motor_slope``)."""
     accel = mode.accel.subs(dict(zip(code.sym.force, _forces(chain, code, mode.direction))))
     return code.printer.doprint(sp.diff(accel, q0)), code.printer.doprint(sp.diff(accel, MOTOR))
+
+
+def _jacobians(code: _Code, chain: ChainScene, modes: list[dyn.SlidingMode]) -> list[tuple[list[int], str, str]]:
+    """(the modes, d a_0 / d q_0, d a_0 / d v_0) for each distinct pair of the modes' Jacobian entries (a mode
+    and its mirror image have the same), in the order of their first mode."""
+    found: dict[tuple[str, str], list[int]] = {}
+    for index, mode in enumerate(modes):
+        found.setdefault(_jacobian(code, chain, mode), []).append(index)
+    return [(indices, by_q, by_motor) for (by_q, by_motor), indices in found.items()]
 
 
 def generate_chain_module(chain: ChainScene) -> str:
@@ -158,8 +219,8 @@ def generate_chain_module(chain: ChainScene) -> str:
                                "powered), a spring's part -stiffness q_j with q_j = (v_j/v_0) q_0, the valve's force "
                                "on the last body moving in `direction` (0: at rest, without its friction)",
                                _forces(chain, code, DIRECTION), args="t, y, p, direction")]
-    for index, mode in enumerate(modes):
-        functions += _mode_functions(chain, code, index, mode)
+    shared, calls = _mode_calls(chain, code, modes)
+    functions += shared
     guards = ("D", "jam", *(f"N_{k + 1}" for k in range(n)), "v0", *SWITCHED_GUARDS)
     directions = [tuple([-1] * (n + 2) + [-mode.direction] + [-1] * len(SWITCHED_GUARDS)) for mode in modes]
     switch, valve = chain.switch, chain.bodies[-1].valve
@@ -181,8 +242,8 @@ def generate_chain_module(chain: ChainScene) -> str:
     env.filters["docstring"] = _docstring
     env.filters["comment"] = _comment
     body = env.get_template("chain_module.py.j2").render(
-        chain=chain, n=n, modes=modes, constants={k: inert(v, k) for k, v in constants.items()}, given=given,
-        derived=derived, psi=psi, functions=functions, jacobians=[_jacobian(code, chain, m) for m in modes],
+        chain=chain, n=n, modes=modes, calls=calls, constants={k: inert(v, k) for k, v in constants.items()}, given=given,
+        derived=derived, psi=psi, functions=functions, jacobians=_jacobians(code, chain, modes),
         factors=[code.printer.doprint(f) for f in dyn.speed_factors(code.sym)],
         inertia=[str(s) for s in code.sym.inertia], motor=chain.bodies[0].motor,
         motor_arrays={name: inert(values, name) for name, values in (
@@ -192,6 +253,7 @@ def generate_chain_module(chain: ChainScene) -> str:
         lever_out=[str(s) for s in code.sym.lever_out], guards=guards,
         contact_targets=", ".join(f"g[{k}]" for k in range(n + 2)),
         force_targets=", ".join(f"out[{k}]" for k in range(3 * n)),
+        body_targets=", ".join(f"out[{j}]" for j in range(n + 1)),
         switch={"SWITCH_SETTING": switch.setting.name, "SWITCH_HYSTERESIS": switch.hysteresis.name,
                 "SWITCH_DELAY": switch.delay.name} if switch else {"SWITCH_SETTING": "math.inf",
                                                                   "SWITCH_HYSTERESIS": "0.0", "SWITCH_DELAY": "0.0"},

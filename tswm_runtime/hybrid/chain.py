@@ -1,24 +1,27 @@
-"""A rigid chain of wedge stages run by the generic mode machine, one mode at a time.
+"""A rigid chain of wedge stages run in one compiled call (``chain_kernel.run_chain_at``); here the
+Python that builds its result.
 
 A chain module (derivation/chain/codegen.py) has one coordinate q0 and a sliding mode per direction
-and combination of the stages' flanks. The compiled mode machine (``machine.integrate_hybrid``,
-through ``entry.integrate``) integrates one mode and stops at the first chain event, because the
-chain's guards are given kinds at which it stops without choosing a mode itself: D (G_D: the
-Painleve approach locates D = 0), the stages' jam factor and each stage's normal force (G_JAM: it
-stops in the mode where one reaches 0) and v0 (G_V1 in a model without a stick mode: it stops at
-rest). The next mode is decided here, in Python, for all stages at once by the complementarity
-logic the derivation uses (tswm_common/chain_decision.py), with the module's numbers at the event:
-a flank change, breakaway or rest; no mode or several (a Painleve-type case) stop the run with the
-reason. So a chain needs no kernel of its own: the one compiled for every scene runs it.
+and combination of the stages' flanks. The kernel integrates one mode at a time with the mode
+machine's segment kernel and stops it at the first chain event: D (the Painleve approach locates
+D = 0), the stages' jam factor and each stage's normal force, v0, the seat's contact, the torque
+switch and its delay. At each it decides the next mode in compiled code (``chain_rules``) for
+all stages at once by the complementarity logic the derivation uses (tswm_common/chain_decision.py):
+a flank change, breakaway or rest; no mode or several (a Painleve-type case) stop the run. D or the
+jam factor reaching 0 stops it too (no contact force keeps the stages together).
 
 The torque switch and the valve's seat are latches in the parameter vector p (the module's
-P_NAMES): their guards stop the machine like the others, and here the seat's contact flips, the
-switch picks up (its delay starts), drops out (below setting - hysteresis) or trips (the motor is cut
-for good); then the mode is decided again with the new forces. A resting chain stays at rest: its
-forces depend on q0 (springs, the seat) and v0 (a motor's table), which rest with it, except when a
-picked-up switch's delay ends while it rests: the motor is cut then and the chain decided again. While
-it rests, the switch sees body 0's drive torque; a switch on a stage's force keeps its state (the
-split of a resting chain's forces is statically undetermined).
+P_NAMES): at their events the seat's contact flips, the switch picks up (its delay starts), drops out
+(below setting - hysteresis) or trips (the motor is cut for good); then the mode is decided again with
+the new forces. A resting chain stays at rest: its forces depend on q0 (springs, the seat) and v0 (a
+motor's table), which rest with it, except when a picked-up switch's delay ends while it rests: the
+motor is cut then and the chain decided again. While it rests, the switch sees body 0's drive torque;
+a switch on a stage's force keeps its state (the split of a resting chain's forces is statically
+undetermined).
+
+Each event keeps the state and latches its decision saw; its ``decision`` (with the reason in words
+and, at rest, the admissible internal forces) is the Python decision (``decide``) evaluated there on
+first access, which tests/test_chain_kernel.py checks against the compiled one.
 
 While sliding, every stage force is affine in the bodies' forces; each phase keeps
 the stage forces at its ends and at the output points inside it. Without a motor the bodies'
@@ -27,31 +30,23 @@ at a phase end and the maxima taken from these samples are exact.
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 
-from tswm_common.chain_decision import STUCK, Candidate, Decision, Statics, decide_numbers
+from tswm_common.chain_decision import Candidate, Decision, Statics, decide_numbers
+from tswm_runtime.hybrid import chain_rules as compiled
+from tswm_runtime.hybrid import chain_kernel as kernel
 from tswm_runtime.hybrid import entry
-from tswm_runtime.hybrid import machine as hybrid
-from tswm_runtime.jit.structures import ModeTables
+from tswm_runtime.integration import segment
+from tswm_runtime.jit.signatures import GUARDS_SIG, address
+from tswm_runtime.jit.structures import EventLog, Outputs, Record, Settings, Tolerances
 
-RESTING = -1                 # the mode index of the resting chain (no mode of the module)
-STATUS = {hybrid.STEP_TOO_SMALL: "step-too-small", hybrid.MAX_STEPS: "max-steps", hybrid.NOT_FINITE: "not-finite",
-          hybrid.INVALID_INPUT: "invalid-input"}
-MAX_SAME_TIME = 8            # decisions at one instant before the run stops (chattering)
-
-
-def tables(module) -> ModeTables:
-    """The machine's tables for a chain module: sliding modes only, its guards' kinds."""
-    kinds = {"D": hybrid.G_D, "jam": hybrid.G_JAM, "v0": hybrid.G_V1}
-    guard_kind = np.array([kinds.get(g, hybrid.G_JAM) for g in module.GUARDS], np.int64)   # N_k: G_JAM
-    n_modes, n_guards = len(module.MODES), len(module.GUARDS)
-    return ModeTables(np.full(n_modes, hybrid.M_SLIDING, np.int64), np.zeros(n_modes, np.int64),
-                      np.array(module.MODE_DIRECTION, np.int64), np.ones(n_modes, np.int64),
-                      np.array(module.GUARD_DIRECTIONS, np.int64).reshape(n_modes, n_guards), guard_kind,
-                      np.full(n_guards, -1, np.int64), np.zeros(n_guards, np.int64))
+RESTING = compiled.RESTING   # the mode index of the resting chain (no mode of the module)
+STATUS = {segment.STEP_TOO_SMALL: "step-too-small", segment.MAX_STEPS: "max-steps",
+          segment.NOT_FINITE: "not-finite", segment.INVALID_INPUT: "invalid-input",
+          kernel.TOO_MANY_EVENTS: "too-many-events", kernel.CHATTERING: "chattering"}
 
 
 @dataclass
@@ -62,18 +57,31 @@ class Phase:
     t_start: float
     t_end: float
     latches: np.ndarray                          # p in the phase: switch state, pick-up time, seated
-    samples: list = field(default_factory=list)  # (t, y, stage_forces) at its ends and output points (sliding)
+    table: np.ndarray = field(default_factory=lambda: np.empty((0, 3)), repr=False)  # rows (t, q0, v0, forces)
+
+    @property
+    def samples(self) -> list:
+        """(t, y, stage_forces) at its ends and output points (sliding phases; none at rest)."""
+        return [(float(row[0]), row[1:3], row[3:]) for row in self.table]
 
 
 @dataclass
 class ChainEvent:
-    """What happened at time t: the guard that fired (or "start"), the decision and its reason."""
+    """What happened at time t: the guard that fired (or "start"), the modes before and after, the compiled
+    decision's outcome; ``decision`` (with its reason) is the Python decision at the state and latches it
+    saw, evaluated on first access."""
 
     t: float
     guard: str
     from_mode: int
     to_mode: int | None          # None: the run stops here
-    decision: Decision
+    outcome: str
+    seen: tuple = field(default=(), repr=False)  # (module, y, p) the decision saw; () when given
+    given: Decision | None = field(default=None, repr=False)
+
+    @cached_property
+    def decision(self) -> Decision:
+        return self.given if self.given is not None else decide(self.seen[0], self.t, *self.seen[1:])
 
 
 @dataclass
@@ -86,7 +94,7 @@ class ChainRun:
     t: np.ndarray                # output times, and the states there (NaN after a stop)
     y: np.ndarray
     n_steps: int
-    trip: tuple | None = None    # (t, y, mode, stage forces before the cut) when the switch cut the motor
+    trip: dict | None = None     # t, y, mode, stage forces (None at rest), drive just before the switch cut the motor
 
 
 def latches(module, y: np.ndarray, voltage: float | None = None) -> np.ndarray:
@@ -120,74 +128,47 @@ def decide(module, t: float, y: np.ndarray, p: np.ndarray) -> Decision:
     return decide_numbers(_candidates(module, t, y, p, directions), v, statics)
 
 
-def _switched(module, mode: int, t: float, y: np.ndarray, p: np.ndarray, guard: str) -> bool:
-    """Apply the switch's logic at (t, y) in ``mode`` (a fired ``guard`` forces its transition); True when
-    the motor has just been cut."""
-    if module.SWITCH_ON < 0:
-        return False
-    g = np.full(len(module.GUARDS), np.nan)
-    if mode == RESTING:
-        drive = float(module.body_forces(t, y, p, 0.0)[0]) if module.SWITCH_ON == 0 else np.nan
-        g[-2] = module.switch_gap(drive, p)
-        g[-1] = module.delay_left(t, p)
-    else:
-        module.guards(mode, t, y, p, g)
-    if p[module.P_SWITCH] != module.TRIPPED and (guard == "switch" or g[-2] < 0):
-        p[module.P_SWITCH] = module.PICKED if p[module.P_SWITCH] == module.ARMED else module.ARMED
-        p[module.P_PICK] = t
-    if p[module.P_SWITCH] == module.PICKED and (guard == "delay" or module.delay_left(t, p) <= 0):
-        p[module.P_SWITCH] = module.TRIPPED
-        return True
-    return False
 
 
-def _chosen(module, decision: Decision, current: int) -> int | None:
-    """The mode a decision gives: RESTING, a sliding mode, None (no mode or several: stop). Where
-    modes agree in a_0 (critical: the stages they differ in carry no force) the one that is not
-    the current mode is taken: the event was the current mode's normal force leaving 0."""
-    if decision.outcome == "unique":
-        return RESTING if decision.modes[0] == STUCK else module.MODES.index(decision.modes[0])
-    if decision.outcome == "critical":
-        others = [module.MODES.index(name) for name in decision.modes if module.MODES.index(name) != current]
-        return others[0]
-    return None
+def chain_tables(module) -> compiled.ChainTables:
+    """The compiled decision's numbers of a chain module (remembered per module)."""
+    known = _TABLES.get(module.__name__)
+    if known is None or known[0] is not module:
+        n_modes = len(module.MODES)
+        ints = dict(switch_on=int(module.SWITCH_ON), p_switch=int(module.P_SWITCH), p_pick=int(module.P_PICK),
+                    p_seated=int(module.P_SEATED))
+        floats = dict(slack=float(module.LOAD_FRICTION), delay=float(module.SWITCH_DELAY), armed=float(module.ARMED),
+                      picked=float(module.PICKED), tripped=float(module.TRIPPED))
+        tables = compiled.ChainTables(
+            direction=np.array(module.MODE_DIRECTION, np.int64),
+            guard_direction=np.array(module.GUARD_DIRECTIONS, np.int64).reshape(n_modes, len(module.GUARDS)),
+            psi=np.array(module.PSI, np.float64).reshape(module.STAGES, 2),
+            lever_in=np.array(module.LEVER_IN, np.float64), lever_out=np.array(module.LEVER_OUT, np.float64),
+            **ints, **floats)
+        known = _TABLES[module.__name__] = (module, tables, (address(module.stage_forces, GUARDS_SIG),
+                                                           address(module.body_forces_into, GUARDS_SIG)))
+    return known[1]
 
 
-def _forces(module, mode: int, t: float, y: np.ndarray, p: np.ndarray) -> np.ndarray:
-    out = np.empty(3 * module.STAGES)
-    module.stage_forces(mode, t, y, p, out)
-    return out
+_TABLES: dict = {}
 
 
-def _cut(module, mode: int, t: float, y: np.ndarray, p: np.ndarray) -> dict:
-    """What the chain carried just before the motor's cut (p still powered): mode, state, stage forces
-    (None at rest: undetermined), body 0's drive torque."""
-    direction = 0.0 if mode == RESTING else float(module.MODE_DIRECTION[mode])
-    return {"t": t, "y": y.copy(), "mode": mode,
-            "forces": None if mode == RESTING else _forces(module, mode, t, y, p),
-            "drive": float(module.body_forces(t, y, p, direction)[0])}
+def chain_functions(module) -> tuple[int, int]:
+    """The addresses of the module's stage_forces and body_forces_into, as the kernel takes them."""
+    chain_tables(module)
+    return _TABLES[module.__name__][2]
 
 
-def _settle(module, t: float, y: np.ndarray, p: np.ndarray, mode: int, guard: str) -> tuple[Decision, int | None, dict | None]:
-    """The latches after ``guard`` fired in ``mode`` (the seat's contact flips; the switch moves), then the
-    next mode; a switch that picks up with no delay, or sees its setting already where the chain
-    starts or comes to rest, cuts the motor at once and the mode is decided again. Returns the decision,
-    the mode and what the chain carried at a cut (None: no cut here)."""
-    cut = None
-    before = p.copy()
-    if guard == "seat":
-        p[module.P_SEATED] = 1.0 - p[module.P_SEATED]
-    if guard in ("switch", "delay") and _switched(module, mode, t, y, p, guard):
-        cut = _cut(module, mode, t, y, before)
-    decision = decide(module, t, y, p)
-    new = _chosen(module, decision, mode)
-    if new is not None and (guard == "start" or new == RESTING):
-        before = p.copy()
-        if _switched(module, new, t, y, p, "check"):
-            cut = _cut(module, new, t, y, before)
-            decision = decide(module, t, y, p)
-            new = _chosen(module, decision, new)
-    return decision, new, cut
+def _record(module, t_out: np.ndarray, phases: int, samples: int) -> tuple[Record, kernel.ChainRecord]:
+    n_p, width = len(module.P_NAMES), 3 + 3 * module.STAGES
+    out = Outputs(t_out, np.full((t_out.size, 2), np.nan), np.full(t_out.size, -1, np.int64),
+                  np.empty((t_out.size, n_p)))
+    record = Record(out, EventLog(np.empty(1), np.empty((1, 4), np.int64), np.empty((1, 2)), np.empty((1, 4))),
+                    np.zeros((0, 3)), np.zeros(segment.N_COUNTERS, np.int64), entry.step_log(0, 0, 2, n_p))
+    chain = kernel.ChainRecord(np.empty((phases, 3), np.int64), np.empty((phases, 2 + n_p)),
+                               np.empty((samples, width)), np.empty((phases, 4), np.int64),
+                               np.empty((phases, 3 + n_p)), np.empty(5 + 3 * module.STAGES), np.zeros(3, np.int64))
+    return record, chain
 
 
 def run_chain(module, *, t_end: float, v0: float, rtol: float, atol: float, t_out: np.ndarray,
@@ -195,70 +176,62 @@ def run_chain(module, *, t_end: float, v0: float, rtol: float, atol: float, t_ou
               voltage: float | None = None) -> ChainRun:
     """Integrate the chain from q0 = 0, v0 to t_end through its mode changes and its switch's and seat's
     events; ``voltage`` (U / U_n) replaces the scene's motor voltage."""
-    modes = tables(module)
-    t, y = 0.0, np.array([0.0, float(v0)])
-    p = latches(module, y, voltage)
-    rows = np.full((t_out.size, 2), np.nan)
-    phases, events, steps, same = [], [], 0, 0
-    decision, mode, trip = _settle(module, t, y, p, RESTING, "start")
-    events.append(ChainEvent(t, "start", RESTING, mode, decision))
+    t_out = np.ascontiguousarray(t_out, dtype=np.float64)
+    y0 = np.array([0.0, float(v0)])
+    settings = Settings(int(method), float(t_end), Tolerances(float(rtol), np.full(2, float(atol)), 0.0, np.inf),
+                        int(max_steps))
+    args = (entry.functions(method, module), chain_functions(module), chain_tables(module), settings, y0)
+    phases = min(max_events, 58) + 6
+    while True:   # a record too small for the run's phases and samples: again with twice the room
+        p = latches(module, y0, voltage)
+        record, chain = _record(module, t_out, phases, t_out.size + 3 * phases)
+        code, t_stop = kernel.run_chain_at(*args, p, record, chain, max_events)
+        if code != kernel.RECORD_FULL:
+            break
+        phases *= 2
+    return _result(module, code, t_stop, record, chain)
+
+
+def _result(module, code: int, t_stop: float, record: Record, chain: kernel.ChainRecord) -> ChainRun:
+    n_phases, _, n_events = chain.counts
+    n_p = len(module.P_NAMES)
+    phases = [Phase(int(mode), float(f[0]), float(f[1]), f[2:].copy(), chain.samples[s0:s1])
+              for (mode, s0, s1), f in zip(chain.phases[:n_phases], chain.phase_f[:n_phases])]
+    events = []
+    for (guard, before, after, outcome), f in zip(chain.events[:n_events], chain.event_f[:n_events]):
+        events.append(ChainEvent(float(f[0]), "start" if guard == compiled.START else module.GUARDS[guard],
+                                 int(before), None if after == compiled.NO_MODE else int(after),
+                                 compiled.OUTCOMES[outcome], (module, f[1:3].copy(), f[3:3 + n_p].copy())))
     status, message = "finished", ""
-    while True:
-        if mode is None:
-            status = "indeterminate" if decision.outcome == "several" else "inconsistent"
-            message = decision.reason
-            break
-        if mode == RESTING:
-            t_cut = p[module.P_PICK] + module.SWITCH_DELAY if p[module.P_SWITCH] == module.PICKED else math.inf
-            phases.append(Phase(RESTING, t, min(t_cut, t_end), p.copy()))
-            rows[t_out >= t] = (y[0], 0.0)
-            if t_cut >= t_end:
-                t = t_end
-                break
-            t = t_cut
-            decision, mode, cut = _settle(module, t, y, p, RESTING, "delay")
-            trip = trip or cut
-            events.append(ChainEvent(t, "delay", RESTING, mode, decision))
-            continue
-        if len(events) >= max_events:
-            status, message = "too-many-events", f"{max_events} events"
-            break
-        first = int(np.searchsorted(t_out, t))
-        phase = Phase(mode, t, t, p.copy(), [(t, y.copy(), _forces(module, mode, t, y, p))])
-        code, t_stop, n_ev, _, _, _, out, log, _, counters, _ = entry.integrate(
-            method, module, p, modes, y, t_end, rtol=rtol, atol=atol, t_out=t_out[first:], max_events=1, t0=t,
-            mode0=mode, max_steps=max(max_steps - steps, 1))
-        steps += int(counters[0] + counters[1])
-        done = out.mode >= 0
-        rows[first:][done] = out.y[done]
-        phase.samples += [(t_i, y_i.copy(), _forces(module, mode, t_i, y_i, p))
-                          for t_i, y_i in zip(out.t[done], out.y[done])]
-        same = same + 1 if t_stop == t else 0
-        t = t_stop
-        if n_ev == 0:
-            phase.t_end = t
-            phases.append(phase)
-            if code != hybrid.FINISHED:
-                status, message = STATUS.get(code, f"status {code}"), f"the integrator stopped at t = {t:.9g} s"
-            break
-        y = log.state[0, :2].copy()
-        guard = module.GUARDS[log.index[0, 0]]
-        phase.t_end = t
-        phase.samples.append((t, y.copy(), _forces(module, mode, t, y, p)))
-        phases.append(phase)
-        if guard in ("D", "jam"):
-            status = "inconsistent"
-            message = (f"{guard} reached 0 in mode {module.MODES[mode]} at t = {t:.9g} s: no contact force keeps "
-                       "the stages together (a Painleve-type inconsistency), not integrated through")
-            events.append(ChainEvent(t, guard, mode, None, Decision("none", (), None, message)))
-            break
-        if guard == "v0":
-            y[1] = 0.0
-        decision, new, cut = _settle(module, t, y, p, mode, guard)
-        trip = trip or cut
-        events.append(ChainEvent(t, guard, mode, new, decision))
-        if same >= MAX_SAME_TIME:
-            status, message = "chattering", f"{MAX_SAME_TIME} decisions at t = {t:.9g} s"
-            break
-        mode = new
-    return ChainRun(status, message, t, phases, events, t_out, rows, steps, trip)
+    last = events[-1]
+    if code in (kernel.UNDECIDED, kernel.INDETERMINATE):
+        status = "indeterminate" if code == kernel.INDETERMINATE else "inconsistent"
+        message = last.decision.reason
+    elif code == kernel.SINGULAR:
+        status = "inconsistent"
+        message = (f"{last.guard} reached 0 in mode {module.MODES[last.from_mode]} at t = {t_stop:.9g} s: no contact "
+                   "force keeps the stages together (a Painleve-type inconsistency), not integrated through")
+        last.given = Decision("none", (), None, message)
+    elif code == kernel.INCONSISTENT_START:
+        status = "inconsistent"
+        message = (f"D or the jam factor is <= 0 where mode {module.MODES[phases[-1].mode]} begins at "
+                   f"t = {t_stop:.9g} s: no contact force keeps the stages together")
+    elif code == kernel.TOO_MANY_EVENTS:
+        status, message = STATUS[code], f"{len(events)} events"
+    elif code == kernel.CHATTERING:
+        status, message = STATUS[code], f"{kernel.MAX_SAME_TIME} decisions at t = {t_stop:.9g} s"
+    elif code != kernel.FINISHED:
+        status, message = STATUS.get(code, f"status {code}"), f"the integrator stopped at t = {t_stop:.9g} s"
+    counters = record.counters
+    return ChainRun(status, message, float(t_stop), phases, events, record.out.t, record.out.y,
+                    int(counters[segment.N_STEPS] + counters[segment.N_REJECTED]), _trip(module, chain.trip))
+
+
+def _trip(module, trip: np.ndarray) -> dict | None:
+    """What the chain carried just before the motor's cut (None: no cut): mode, state, stage forces (None at
+    rest: undetermined), body 0's drive torque."""
+    if np.isnan(trip[0]):
+        return None
+    mode = int(trip[-1])
+    return {"t": float(trip[0]), "y": trip[1:3].copy(), "mode": mode,
+            "forces": None if mode == RESTING else trip[4:-1].copy(), "drive": float(trip[3])}

@@ -8,6 +8,7 @@ stages or more (the decision gives their admissible intervals) and are not count
 """
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import asdict, dataclass
 from types import ModuleType
 
@@ -50,7 +51,7 @@ class ChainResult:
     message: str
     t_stop: float
     stages: tuple[StageSummary, ...]
-    events: tuple[dict, ...]     # t, guard, from, to (None: stop), outcome, reason
+    events: tuple[EventRow, ...]  # t, guard, from, to (None: stop), outcome, reason
     t: np.ndarray
     q0: np.ndarray
     v0: np.ndarray
@@ -66,7 +67,8 @@ class ChainResult:
     def to_dict(self) -> dict:
         """The summary as plain data (no arrays)."""
         return {"scene": self.scene, "status": self.status, "message": self.message, "t_stop": self.t_stop,
-                "stages": [asdict(s) for s in self.stages], "events": list(self.events), "n_steps": self.n_steps,
+                "stages": [asdict(s) for s in self.stages], "events": [dict(e) for e in self.events],
+                "n_steps": self.n_steps,
                 "answers": self.answers}
 
 
@@ -151,12 +153,36 @@ def _stage(module: ModuleType, run: ChainRun, k: int) -> StageSummary:
     return StageSummary(module.STAGE_KINDS[k], tuple(phases), tuple(p.t_start for p in phases[1:]), peaks)
 
 
-def _events(module: ModuleType, run: ChainRun) -> tuple[dict, ...]:
-    def name(mode):
-        return None if mode is None else ("resting" if mode == RESTING else module.MODES[mode])
-    return tuple({"t": e.t, "guard": e.guard, "from": name(e.from_mode) if e.guard != "start" else None,
-                  "to": name(e.to_mode), "outcome": e.decision.outcome, "reason": e.decision.reason}
-                 for e in run.events)
+class EventRow(Mapping):
+    """An event as plain data: t, guard, from, to (None: stop), outcome, reason; the reason (the Python
+    decision's words) is evaluated on first access, so a run read for its numbers never evaluates it."""
+
+    KEYS = ("t", "guard", "from", "to", "outcome", "reason")
+
+    def __init__(self, module: ModuleType, event):
+        def name(mode):
+            return None if mode is None else ("resting" if mode == RESTING else module.MODES[mode])
+        self._event = event
+        self._values = {"t": event.t, "guard": event.guard, "from": name(event.from_mode) if event.guard != "start"
+                        else None, "to": name(event.to_mode), "outcome": event.outcome}
+
+    def __getitem__(self, key):
+        if key == "reason":
+            return self._event.decision.reason
+        return self._values[key]
+
+    def __iter__(self):
+        return iter(self.KEYS)
+
+    def __len__(self):
+        return len(self.KEYS)
+
+    def __repr__(self):
+        return f"EventRow({self._values})"
+
+
+def _events(module: ModuleType, run: ChainRun) -> tuple[EventRow, ...]:
+    return tuple(EventRow(module, e) for e in run.events)
 
 
 def summary(result: ChainResult, module: ModuleType) -> list[str]:

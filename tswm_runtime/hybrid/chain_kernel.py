@@ -1,0 +1,201 @@
+"""A chain's whole run in one compiled call: its segments (the mode machine's segment kernel, through its
+address), its events, the decision at each (``chain_rules.settle``: the latches, then the next mode) and
+its resting phases, written into a ChainRecord from which ``hybrid/chain.py`` builds the result.
+
+Per phase (a stretch in one mode, or at rest) the record keeps its mode, times, latches and the
+range of its samples; a sliding phase's samples are (t, q0, v0, stage forces) at its start, at every
+output time inside it and at the event that ends it. Per event: the guard (START at the start), the
+modes before and after (NO_MODE: the run stops), the decision's outcome, the state and the latches
+the decision saw. The trip: what the chain carried just before the switch cut the motor.
+"""
+from collections import namedtuple
+
+import numpy as np
+from numba import types
+
+from tswm_runtime.hybrid.addressed import ADDRESSES, model_functions, segment_function
+from tswm_runtime.hybrid.chain_rules import (NO_MODE, NONE, RESTING, SEVERAL, START, ChainFunctions, ChainTables,
+                                             chain_work, decide, settle)
+from tswm_runtime.integration import segment
+from tswm_runtime.jit import cache_guard
+from tswm_runtime.jit.addresses import guards_at
+from tswm_runtime.jit.arrays import copy_into
+from tswm_runtime.jit.cache_guard import njit
+from tswm_runtime.jit.signatures import MATRIX, VECTOR
+from tswm_runtime.jit.structures import INTS, RECORD, SETTINGS, EventSettings, Segment, State
+
+# Status codes besides FINISHED (0) and the integrator's (segment's negative codes).
+FINISHED = 0
+UNDECIDED = -20       # the decision found no consistent mode
+INDETERMINATE = -21   # the decision found several
+SINGULAR = -22        # D or the jam factor reached 0 in the mode: no contact force keeps the stages together
+TOO_MANY_EVENTS = -23
+CHATTERING = -24
+INCONSISTENT_START = -25  # D or the jam factor <= 0 where a mode begins
+RECORD_FULL = -26     # more phases, events or samples than the record holds: run again with more room
+MAX_SAME_TIME = 8     # decisions at one instant before the run stops
+
+#: Where the run writes (sizes from ``hybrid/chain.py``): phases (mode, first sample, end of samples) and
+#: phase_f (t_start, t_end, p); samples (t, q0, v0, 3 stage forces per stage); events (guard, from, to,
+#: outcome) and event_f (t, q0, v0, p); trip (t, q0, v0, drive, stage forces, mode; t NaN: no cut);
+#: counts (phases, samples, events).
+ChainRecord = namedtuple("ChainRecord", "phases phase_f samples events event_f trip counts")
+INT_MATRIX = types.int64[:, ::1]
+CHAIN_RECORD = types.NamedTuple((INT_MATRIX, MATRIX, MATRIX, INT_MATRIX, MATRIX, VECTOR, INTS), ChainRecord)
+CHAIN_TABLES = types.NamedTuple((INTS, INT_MATRIX, MATRIX, VECTOR, VECTOR, types.float64, types.int64,
+                                 types.float64, types.int64, types.int64, types.int64, types.float64,
+                                 types.float64, types.float64), ChainTables)
+#: run_chain_at(functions, chain functions (stage_forces, body_forces_into), tables, settings, y, p, record,
+#: chain record, max_events) -> (status, t_stop)
+CHAIN_SIG = types.Tuple((types.int64, types.float64))(ADDRESSES, types.UniTuple(types.int64, 2), CHAIN_TABLES,
+                                                       SETTINGS, VECTOR, VECTOR, RECORD, CHAIN_RECORD, types.int64)
+
+
+@njit(error_model="numpy")
+def _sample(chain_fns, rec, mode, t, y, p, forces):
+    """Append (t, y, stage forces in mode) to the samples; False when the record is full."""
+    s = rec.counts[1]
+    if s >= rec.samples.shape[0]:
+        return False
+    row = rec.samples[s]
+    row[0], row[1], row[2] = t, y[0], y[1]
+    chain_fns.stage_forces(mode, t, y, p, forces)
+    copy_into(row[3:], forces)
+    rec.counts[1] = s + 1
+    return True
+
+
+@njit(error_model="numpy")
+def _open(rec, mode, t, p):
+    k = rec.counts[0]
+    rec.phases[k, 0], rec.phases[k, 1], rec.phases[k, 2] = mode, rec.counts[1], rec.counts[1]
+    rec.phase_f[k, 0], rec.phase_f[k, 1] = t, t
+    copy_into(rec.phase_f[k, 2:], p)
+    rec.counts[0] = k + 1
+
+
+@njit(error_model="numpy")
+def _close(rec, t):
+    k = rec.counts[0] - 1
+    rec.phase_f[k, 1] = t
+    rec.phases[k, 2] = rec.counts[1]
+
+
+@njit(error_model="numpy")
+def _event(rec, t, guard, before, after, outcome, y, p):
+    e = rec.counts[2]
+    rec.events[e, 0], rec.events[e, 1], rec.events[e, 2], rec.events[e, 3] = guard, before, after, outcome
+    rec.event_f[e, 0], rec.event_f[e, 1], rec.event_f[e, 2] = t, y[0], y[1]
+    copy_into(rec.event_f[e, 3:], p)
+    rec.counts[2] = e + 1
+
+
+@njit(error_model="numpy")
+def _consistent(guards, mode, t, y, p, g):
+    """D and the jam factor of ``mode`` are > 0 at (t, y)."""
+    guards(mode, t, y, p, g)
+    return g[0] > 0.0 and g[1] > 0.0
+
+
+@njit(error_model="numpy")
+def _slide(fns, run_segment, settings, c, mode, t, y, p, record, i, scratch):
+    """Integrate in ``mode`` from (t, y) to its first event or the end, handing over to the Painleve
+    approach where D heads for 0 and on in t after it; returns (status, t, guard, next output row)."""
+    q, h, singular = np.empty(0), 0.0, True
+    while True:
+        k_singular = 0 if singular and c.guard_direction[mode, 0] != 0 else -1
+        ev = EventSettings(c.guard_direction[mode], 0.0, 0.0, True, k_singular, True)
+        status, t, k, i, h, singular = run_segment(fns, settings, Segment(mode, p, ev), State(t, y, q, h), record, i,
+                                                   scratch)
+        if status != segment.APPROACH:
+            return status, t, k, i
+
+
+@cache_guard.compile_cached(CHAIN_SIG, error_model="numpy", nogil=True)
+def run_chain_at(functions, chain_addresses, c, settings, y0, p, record, rec, max_events):
+    """The chain's run from (0, y0) under latches p (written) to settings.t_end: phases, events and their
+    decisions, the trip, into rec; output rows into record.out.y (q0, v0; a row at an event time keeps the
+    later phase's value, rows after a stop NaN). Returns (status, t_stop)."""
+    fns, run_segment = model_functions(functions), segment_function(functions)
+    chain_fns = ChainFunctions(guards_at(chain_addresses[0]), guards_at(chain_addresses[1]))
+    out, counters = record.out, record.counters
+    stages, n_guards = c.psi.shape[0], c.guard_direction.shape[1]
+    w = chain_work(n_guards, stages, c.direction.size, p.size)
+    scratch = segment.segment_work(2, n_guards, 0, 0)
+    rec.counts[0], rec.counts[1], rec.counts[2] = 0, 0, 0
+    rec.trip[0] = np.nan
+    t, t_end, y = 0.0, settings.t_end, y0.copy()
+    outcome, mode = settle(fns, chain_fns, c, t, y, p, RESTING, START, w, rec.trip)
+    _event(rec, t, START, RESTING, mode, outcome, y, p)
+    status, same = FINISHED, 0
+    while True:
+        if rec.counts[0] + 1 >= rec.phases.shape[0] or rec.counts[2] + 1 >= rec.events.shape[0]:
+            status = RECORD_FULL
+            break
+        if mode == NO_MODE:
+            status = INDETERMINATE if outcome == SEVERAL else UNDECIDED
+            break
+        if mode == RESTING:
+            t_cut = p[c.p_pick] + c.delay if p[c.p_switch] == c.picked else np.inf
+            _open(rec, RESTING, t, p)
+            _close(rec, min(t_cut, t_end))
+            for r in range(out.t.size):
+                if out.t[r] >= t:
+                    out.y[r, 0], out.y[r, 1] = y[0], 0.0
+            if t_cut >= t_end:
+                t = t_end
+                break
+            t = t_cut
+            outcome, mode = settle(fns, chain_fns, c, t, y, p, RESTING, n_guards - 1, w, rec.trip)
+            _event(rec, t, n_guards - 1, RESTING, mode, outcome, y, p)
+            continue
+        if rec.counts[2] >= max_events:
+            status = TOO_MANY_EVENTS
+            break
+        _open(rec, mode, t, p)
+        if not _sample(chain_fns, rec, mode, t, y, p, w.forces):
+            status = RECORD_FULL
+            break
+        if not _consistent(fns.guards, mode, t, y, p, w.g):
+            status = INCONSISTENT_START
+            break
+        i = np.searchsorted(out.t, t)
+        i0 = i
+        counters[segment.N_SWITCHES] = 0  # each phase starts on DOPRI5 (method auto)
+        seg_status, t_new, k, i = _slide(fns, run_segment, settings, c, mode, t, y, p, record, i, scratch)
+        for r in range(i0, i):
+            if not _sample(chain_fns, rec, mode, out.t[r], out.y[r], p, w.forces):
+                status = RECORD_FULL
+        same = same + 1 if t_new == t else 0
+        t = t_new
+        if status != FINISHED or seg_status != segment.EVENT:
+            _close(rec, t)
+            if status == FINISHED and seg_status != segment.REACHED_END:
+                status = seg_status
+            break
+        if k == stages + 2:   # v0 reached 0: at rest exactly
+            y[1] = 0.0
+        if not _sample(chain_fns, rec, mode, t, y, p, w.forces):
+            status = RECORD_FULL
+            break
+        _close(rec, t)
+        if k <= 1:            # D or the jam factor reached 0
+            _event(rec, t, k, mode, NO_MODE, NONE, y, p)
+            status = SINGULAR
+            break
+        outcome, new = settle(fns, chain_fns, c, t, y, p, mode, k, w, rec.trip)
+        _event(rec, t, k, mode, new, outcome, y, p)
+        if same >= MAX_SAME_TIME:
+            status = CHATTERING
+            break
+        mode = new
+    return status, t
+
+
+@njit(cache=True, error_model="numpy", no_cpython_wrapper=False)
+def decide_at(functions, chain_addresses, c, t, y, p, current):
+    """The compiled decision (``chain_rules.decide``) called from Python: (outcome, mode) at (t, y) under p."""
+    fns = model_functions(functions)
+    chain_fns = ChainFunctions(guards_at(chain_addresses[0]), guards_at(chain_addresses[1]))
+    w = chain_work(c.guard_direction.shape[1], c.psi.shape[0], c.direction.size, p.size)
+    return decide(fns, chain_fns, c, t, y, p, current, w)

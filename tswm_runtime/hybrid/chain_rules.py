@@ -1,0 +1,243 @@
+"""A chain's next mode at an event, decided in compiled code, and the torque switch's and seat's latches.
+
+The logic is tswm_common/chain_decision.py's (which the derivation's document uses), over numbers
+from the generated module's functions: every sliding mode in the direction of v0 (both at rest) is a
+candidate, consistent when each stage's normal force is >= 0 and, from rest, it leaves rest in its
+own direction; rest is consistent when the statics admit internal forces inside every stage's stick
+cone (``rest_holds``: the admissible sets propagated stage by stage, as ``chain_decision.rest``).
+One consistent mode is the answer (UNIQUE); several that agree in a_0 and exclude rest are a kink
+(CRITICAL: the one that is not the current mode is taken); none (NONE) or several (SEVERAL, a
+Painleve-type case) are outcomes too, never exceptions. tests/test_chain_kernel.py checks that both
+implementations decide alike.
+
+The functions a decision calls: ``rhs`` (a_0 is dy[1]) and ``guards`` (D, jam, N_k, v0, seat,
+switch, delay; mode RESTING: the last four) from the mode machine's Functions, and the chain
+module's ``stage_forces`` and ``body_forces_into``, all with the contract's GUARDS/RHS signatures.
+"""
+from collections import namedtuple
+
+import numpy as np
+
+from tswm_common.chain_decision import SAME
+from tswm_runtime.jit.arrays import copy_into
+from tswm_runtime.jit.cache_guard import njit
+
+RESTING = -1          # the resting chain (no mode of the module)
+NO_MODE = -2          # no mode: the run stops
+START, CHECK = -1, -3  # the "guards" of the start and of the switch's check on entering a mode
+UNIQUE, CRITICAL, NONE, SEVERAL = 0, 1, 2, 3
+OUTCOMES = ("unique", "critical", "none", "several")
+SET_ROWS = 64         # rows of an interval set's work array (a merged set holds a few)
+
+#: A chain module's numbers for the decision: per mode its direction, per mode and guard the guard's
+#: direction; per stage Psi_t, Psi_i and its levers; the last body's friction magnitude at rest; the
+#: switch (the stage it measures, -1 none; its delay; the slots of p and its states).
+ChainTables = namedtuple("ChainTables", "direction guard_direction psi lever_in lever_out slack switch_on delay "
+                                        "p_switch p_pick p_seated armed picked tripped")
+
+#: What a decision writes: guard values, a rate, the bodies' forces, interval sets (two and a cone),
+#: the candidates' modes and a_0, p before the latches moved, the stage forces at a cut.
+ChainWork = namedtuple("ChainWork", "g f force set_a set_b cone modes accel before forces")
+
+#: The chain module's functions a decision calls besides rhs and guards.
+ChainFunctions = namedtuple("ChainFunctions", "stage_forces body_forces")
+
+
+@njit(error_model="numpy")
+def chain_work(n_guards, n_stages, n_modes, n_params):
+    return ChainWork(np.empty(n_guards), np.empty(2), np.empty(n_stages + 1), np.empty((SET_ROWS, 2)),
+                     np.empty((SET_ROWS, 2)), np.empty((2, 2)), np.empty(n_modes, np.int64), np.empty(n_modes),
+                     np.empty(n_params), np.empty(3 * n_stages))
+
+
+@njit(error_model="numpy")
+def _mul(x, t):
+    return 0.0 if x == 0 or t == 0 else x * t
+
+
+@njit(error_model="numpy")
+def _merge(s, n):
+    """Sort rows [0, n) of s by (lo, hi) and merge those that overlap; returns the new count."""
+    for i in range(1, n):
+        lo, hi = s[i, 0], s[i, 1]
+        j = i - 1
+        while j >= 0 and (s[j, 0] > lo or (s[j, 0] == lo and s[j, 1] > hi)):
+            s[j + 1, 0], s[j + 1, 1] = s[j, 0], s[j, 1]
+            j -= 1
+        s[j + 1, 0], s[j + 1, 1] = lo, hi
+    m = 0
+    for i in range(n):
+        lo, hi = s[i, 0], s[i, 1]
+        if m > 0 and lo <= s[m - 1, 1]:
+            s[m - 1, 1] = max(s[m - 1, 1], hi)
+        else:
+            s[m, 0], s[m, 1] = lo, hi
+            m += 1
+    return m
+
+
+@njit(error_model="numpy")
+def _forward_cone(psi_t, psi_i, cone):
+    """T = {t : (1 + Psi_t t)(1 + Psi_i t) <= 0} into cone; returns its count of intervals."""
+    cone[0, 1] = -1 / psi_t
+    if psi_i > 0:
+        cone[0, 0] = -1 / psi_i
+        return 1
+    cone[0, 0] = -np.inf
+    if psi_i == 0:
+        return 1
+    cone[1, 0], cone[1, 1] = -1 / psi_i, np.inf
+    return 2
+
+
+@njit(error_model="numpy")
+def _scaled(xs, n, cone, n_cone, out):
+    """The union of x T over x in the n intervals of xs into out; returns its count."""
+    unbounded = False
+    for j in range(n_cone):
+        unbounded = unbounded or np.isinf(cone[j, 0]) or np.isinf(cone[j, 1])
+    m = 0
+    for i in range(n):
+        lo, hi = xs[i, 0], xs[i, 1]
+        if lo <= 0 <= hi and unbounded:
+            out[0, 0], out[0, 1] = -np.inf, np.inf
+            return 1
+        for half in range(2):
+            a, b = (lo, min(hi, 0.0)) if half == 0 else (max(lo, 0.0), hi)
+            if a > b:
+                continue
+            for j in range(n_cone):
+                c1, c2, c3, c4 = _mul(a, cone[j, 0]), _mul(a, cone[j, 1]), _mul(b, cone[j, 0]), _mul(b, cone[j, 1])
+                out[m, 0], out[m, 1] = min(c1, c2, c3, c4), max(c1, c2, c3, c4)
+                m += 1
+    return _merge(out, m)
+
+
+@njit(error_model="numpy")
+def _affine(xs, n, offset, scale, out):
+    """{offset + scale x : x in the n intervals of xs} into out; returns its count."""
+    for i in range(n):
+        a, b = offset + _mul(scale, xs[i, 0]), offset + _mul(scale, xs[i, 1])
+        out[i, 0], out[i, 1] = min(a, b), max(a, b)
+    return _merge(out, n)
+
+
+@njit(error_model="numpy")
+def rest_holds(c, force, w):
+    """Whether the resting chain holds under the bodies' forces ``force``: the stage-by-stage propagation
+    of ``chain_decision.rest`` from body 0 meets what the last body's load and friction ask of the last
+    stage."""
+    stages = c.psi.shape[0]
+    a, b = w.set_a, w.set_b
+    a[0, 0] = a[0, 1] = -force[0] / c.lever_in[0]
+    n = 1
+    for i in range(stages):
+        n_cone = _forward_cone(c.psi[i, 0], c.psi[i, 1], w.cone)
+        n = _scaled(a, n, w.cone, n_cone, b)
+        n = _affine(b, n, 0.0, c.lever_out[i], a)
+        if i == stages - 1:
+            lo, hi = -force[stages] - c.slack, -force[stages] + c.slack
+            for j in range(n):
+                if max(a[j, 0], lo) <= min(a[j, 1], hi):
+                    return True
+            return False
+        n = _affine(a, n, -force[i + 1] / c.lever_in[i + 1], -1.0 / c.lever_in[i + 1], b)
+        for j in range(n):
+            a[j, 0], a[j, 1] = b[j, 0], b[j, 1]
+    return False
+
+
+@njit(error_model="numpy")
+def decide(fns, chain_fns, c, t, y, p, current, w):
+    """(outcome, mode) at (t, y) under latches p: the candidates in the direction of v0 (both at rest) and
+    rest; ``current`` is the mode the event ended (a CRITICAL outcome takes another). Mode NO_MODE for
+    NONE and SEVERAL."""
+    v = y[1]
+    stages = c.psi.shape[0]
+    n = 0
+    for m in range(c.direction.size):
+        d = c.direction[m]
+        if not (v == 0.0 or (v > 0.0) == (d > 0)):
+            continue
+        fns.guards(m, t, y, p, w.g)
+        fns.rhs(m, t, y, p, w.f)
+        ok = v != 0.0 or d * w.f[1] > 0
+        for k in range(stages):
+            ok = ok and not w.g[2 + k] < 0
+        if ok:
+            w.modes[n], w.accel[n] = m, w.f[1]
+            n += 1
+    stuck = False
+    if v == 0.0:
+        chain_fns.body_forces(0, t, y, p, w.force)
+        stuck = rest_holds(c, w.force, w)
+    if n + stuck == 0:
+        return NONE, NO_MODE
+    if n + stuck == 1:
+        return UNIQUE, RESTING if stuck else w.modes[0]
+    if not stuck:
+        lo, hi, big = w.accel[0], w.accel[0], 1.0
+        for j in range(n):
+            lo, hi, big = min(lo, w.accel[j]), max(hi, w.accel[j]), max(big, abs(w.accel[j]))
+        if hi - lo <= SAME * big:
+            for j in range(n):
+                if w.modes[j] != current:
+                    return CRITICAL, w.modes[j]
+    return SEVERAL, NO_MODE
+
+
+@njit(error_model="numpy")
+def switched(fns, c, mode, guard, t, y, p, w):
+    """The switch's logic at (t, y) in ``mode`` (RESTING: the module's resting guards); a fired ``guard``
+    (the switch's or its delay's index) forces its transition. True when the motor has just been cut."""
+    if c.switch_on < 0:
+        return False
+    n_guards = w.g.size
+    fns.guards(mode, t, y, p, w.g)
+    if p[c.p_switch] != c.tripped and (guard == n_guards - 2 or w.g[n_guards - 2] < 0):
+        p[c.p_switch] = c.picked if p[c.p_switch] == c.armed else c.armed
+        p[c.p_pick] = t
+    if p[c.p_switch] == c.picked:
+        fns.guards(mode, t, y, p, w.g)
+        if guard == n_guards - 1 or w.g[n_guards - 1] <= 0:
+            p[c.p_switch] = c.tripped
+            return True
+    return False
+
+
+@njit(error_model="numpy")
+def cut(chain_fns, c, mode, t, y, w, trip):
+    """What the chain carried just before the motor's cut, with p still powered (w.before), into trip:
+    t, q0, v0, body 0's drive torque, the stage forces (NaN at rest: undetermined)."""
+    trip[0], trip[1], trip[2] = t, y[0], y[1]
+    chain_fns.body_forces(0 if mode == RESTING else c.direction[mode], t, y, w.before, w.force)
+    trip[3] = w.force[0]
+    if mode == RESTING:
+        w.forces[:] = np.nan
+    else:
+        chain_fns.stage_forces(mode, t, y, w.before, w.forces)
+    copy_into(trip[4:], w.forces)
+    trip[4 + w.forces.size] = mode
+
+
+@njit(error_model="numpy")
+def settle(fns, chain_fns, c, t, y, p, mode, guard, w, trip):
+    """The latches after ``guard`` fired in ``mode`` (the seat's contact flips; the switch moves), then the
+    next mode; a switch that picks up with no delay, or sees its setting already where the chain starts
+    or comes to rest, cuts the motor at once and the mode is decided again. The first cut is written
+    into trip (trip[0] NaN until then). Returns (outcome, mode)."""
+    n_guards = w.g.size
+    copy_into(w.before, p)
+    if guard == n_guards - 3:
+        p[c.p_seated] = 1.0 - p[c.p_seated]
+    if (guard == n_guards - 2 or guard == n_guards - 1) and switched(fns, c, mode, guard, t, y, p, w):
+        if np.isnan(trip[0]):
+            cut(chain_fns, c, mode, t, y, w, trip)
+    outcome, new = decide(fns, chain_fns, c, t, y, p, mode, w)
+    if new != NO_MODE and (guard == START or new == RESTING):
+        copy_into(w.before, p)
+        if switched(fns, c, new, CHECK, t, y, p, w):
+            if np.isnan(trip[0]):
+                cut(chain_fns, c, new, t, y, w, trip)
+            outcome, new = decide(fns, chain_fns, c, t, y, p, new, w)
+    return outcome, new
