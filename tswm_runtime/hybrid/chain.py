@@ -41,7 +41,7 @@ from tswm_runtime.hybrid import chain_kernel as kernel
 from tswm_runtime.hybrid import entry
 from tswm_runtime.integration import segment
 from tswm_runtime.jit.signatures import GUARDS_SIG, address
-from tswm_runtime.jit.structures import EventLog, Outputs, Record, Settings, Tolerances
+from tswm_runtime.jit.structures import EventLog, Outputs, Record, Settings, StepLog, Tolerances
 
 RESTING = compiled.RESTING   # the mode index of the resting chain (no mode of the module)
 STATUS = {segment.STEP_TOO_SMALL: "step-too-small", segment.MAX_STEPS: "max-steps",
@@ -164,11 +164,17 @@ def _record(module, t_out: np.ndarray, phases: int, samples: int) -> tuple[Recor
     out = Outputs(t_out, np.full((t_out.size, 2), np.nan), np.full(t_out.size, -1, np.int64),
                   np.empty((t_out.size, n_p)))
     record = Record(out, EventLog(np.empty(1), np.empty((1, 4), np.int64), np.empty((1, 2)), np.empty((1, 4))),
-                    np.zeros((0, 3)), np.zeros(segment.N_COUNTERS, np.int64), entry.step_log(0, 0, 2, n_p))
+                    np.zeros((0, 3)), np.zeros(segment.N_COUNTERS, np.int64), _no_step_log(n_p))
     chain = kernel.ChainRecord(np.empty((phases, 3), np.int64), np.empty((phases, 2 + n_p)),
                                np.empty((samples, width)), np.empty((phases, 4), np.int64),
                                np.empty((phases, 3 + n_p)), np.empty(5 + 3 * module.STAGES), np.zeros(3, np.int64))
     return record, chain
+
+
+def _no_step_log(n_params: int) -> StepLog:
+    """A StepLog with room for no step: a chain keeps its phases and samples in its own record."""
+    return StepLog(np.empty((0, 4)), np.empty((0, 2), np.int64), np.empty((0, 2)), np.empty((0, 2)),
+                   np.empty((0, 3, 4)), np.empty(0, np.int64), np.empty((0, n_params)), np.zeros(2, np.int64))
 
 
 def run_chain(module, *, t_end: float, v0: float, rtol: float, atol: float, t_out: np.ndarray,
