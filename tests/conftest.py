@@ -1,8 +1,10 @@
 """Shared fixtures: generate a model module from scene text, as a user's new scene would be.
 
 A whole run on pytest-xdist workers first fills numba's cache once (``pytest_configure``):
-each worker imports the kernels while it collects, and with a cold cache every worker
-compiled the same integration kernels (about 100 s of CPU each) and shipped models.
+each worker imports the kernels and every test module while it collects, and with a cold cache
+every worker compiled the same integration kernels (about 100 s of CPU each), shipped models and
+the tests' own compiled code (``integration.single`` and the closed-form models of
+``test_integrators``, 33 s of CPU each, measured in one process at a load of 5).
 """
 from __future__ import annotations
 
@@ -28,7 +30,10 @@ ROOT = Path(__file__).parents[1]
 GENERATED = ROOT / "generated"
 KERNELS = ("import sys; from tswm_runtime.startup.warmup import compile_into_cache; "
            "compile_into_cache(sys.argv[1:], None)")
-MODELS = "import importlib, sys; [importlib.import_module(name) for name in sys.argv[1:]]"   # generated.<scene>
+IMPORTS = "import importlib, sys; [importlib.import_module(name) for name in sys.argv[1:]]"
+# What the test modules compile when they are imported (cached): the one-segment kernel of tests and tools,
+# and through test_integrators its closed-form models; the kernels' check below stands for them all.
+TESTS_COMPILE = ("tswm_runtime.integration.single", "tests.test_integrators")
 
 
 def _whole_run_on_workers(config) -> bool:
@@ -39,15 +44,21 @@ def _whole_run_on_workers(config) -> bool:
 
 def pytest_configure(config):
     """Compile what numba's cache misses once, before the workers start: the kernels in one
-    process, the shipped models in another (the two cores), then every worker loads them."""
+    process, the shipped models in another, the tests' own compiled code in a third (the two
+    cores share them), then every worker loads them."""
     if not _whole_run_on_workers(config):
         return
     from tswm_runtime.jit import coldstart
+    from tswm_runtime.jit.cache_guard import kernel_digest
 
     groups = coldstart.cold_groups(list(coldstart.GROUPS))
     sources = [coldstart.model_source(path.stem) for path in sorted(GENERATED.glob("[!_]*.py"))]
     models = [module for source, module in filter(None, sources) if coldstart.model_cold(source, module)]
-    commands = [[sys.executable, "-c", code, *names] for code, names in ((KERNELS, groups), (MODELS, models)) if names]
+    single = coldstart.is_cached(coldstart.RUNTIME / "integration" / "single.py", "integrate_segment",
+                                 "tswm_runtime.integration.single", True, kernel_digest())
+    tests = () if single else TESTS_COMPILE
+    commands = [[sys.executable, "-c", code, *names]
+                for code, names in ((KERNELS, groups), (IMPORTS, models), (IMPORTS, tests)) if names]
     jobs = [subprocess.Popen(argv, cwd=ROOT, text=True, stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
             for argv in commands]
     for job in jobs:
