@@ -30,10 +30,14 @@ ROOT = Path(__file__).parents[1]
 GENERATED = ROOT / "generated"
 KERNELS = ("import sys; from tswm_runtime.startup.warmup import compile_into_cache; "
            "compile_into_cache(sys.argv[1:], None)")
-IMPORTS = "import importlib, sys; [importlib.import_module(name) for name in sys.argv[1:]]"
+IMPORTS = ("import importlib, sys; sys.path.insert(0, 'tests'); "
+           "[importlib.import_module(name) for name in sys.argv[1:]]")
 # What the test modules compile when they are imported (cached): the one-segment kernel of tests and tools,
 # and through test_integrators its closed-form models; the kernels' check below stands for them all.
-TESTS_COMPILE = ("tswm_runtime.integration.single", "tests.test_integrators")
+# test_integrators by the name pytest imports it under (tests/ first on sys.path, as pytest's rootdir
+# import puts it): numba's cached code names its module, and a cache written under one name fails to
+# load under the other.
+TESTS_COMPILE = ("tswm_runtime.integration.single", "test_integrators")
 
 
 def _whole_run_on_workers(config) -> bool:

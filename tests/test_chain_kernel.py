@@ -7,10 +7,7 @@ from __future__ import annotations
 import itertools
 
 import numpy as np
-import pytest
 
-from derivation.chain.codegen import generate_chain_module
-from derivation.chain.scene import parse_chain
 from tswm_runtime.hybrid import chain_rules as compiled
 from tswm_runtime.hybrid.chain_kernel import decide_at
 from tswm_runtime.hybrid import entry
@@ -41,16 +38,6 @@ ONE_STAGE = ('name = "grid-one"\n'
              '[run]\nt_end = 1.0\nv0 = 0.0\n')
 
 
-@pytest.fixture(scope="module")
-def grid_module(module_once):
-    def write(text, folder):
-        chain = parse_chain(text, "test chain")
-        path = folder / f"{chain.name.replace('-', '_')}.py"
-        path.write_text(generate_chain_module(chain))
-        return path
-    return lambda text: module_once(text, lambda folder: write(text, folder))
-
-
 def python_choice(module, t, y, p, current):
     """(outcome, mode) of the Python decision, as the compiled one reports it."""
     d = decide(module, t, y, p)
@@ -79,15 +66,15 @@ def decisions(module) -> set:
     return seen
 
 
-def test_the_compiled_decision_is_the_python_one_over_a_grid(grid_module):
+def test_the_compiled_decision_is_the_python_one_over_a_grid(chain_module):
     """Two stages: rest, and every flank combination in each direction (modes 0-7) somewhere on the grid."""
-    seen = decisions(grid_module(two_stages("grid-a", 30.0, -30.0))) | decisions(grid_module(two_stages(
+    seen = decisions(chain_module(two_stages("grid-a", 30.0, -30.0))) | decisions(chain_module(two_stages(
         "grid-b", -30.0, 30.0)))
     assert {mode for outcome, mode in seen if outcome == "unique"} == set(range(8)) | {compiled.RESTING}, seen
 
 
-def test_the_compiled_decision_reports_no_mode_and_several_as_the_python_one(grid_module):
-    seen = decisions(grid_module(ONE_STAGE))
+def test_the_compiled_decision_reports_no_mode_and_several_as_the_python_one(chain_module):
+    seen = decisions(chain_module(ONE_STAGE))
     assert {("none", compiled.NO_MODE), ("several", compiled.NO_MODE)} <= seen, seen
 
 

@@ -15,7 +15,7 @@ import pytest
 
 from tswm_runtime.jit import coldstart
 from tswm_runtime.startup import warmup
-from tswm_runtime.sweeps import sweep as sweep_app
+from tswm_runtime.sweeps import rows as sweep_rows
 from tswm_runtime.simulation.simulate import simulate
 from tswm_runtime.cli import main
 from tswm_runtime.model.contract import load_module
@@ -198,7 +198,7 @@ def test_a_sweep_compiles_first_when_interpreting_its_cases_would_take_longer(mo
     assert warmup.interpreting_is_quicker(cold, module, P[:warmup.PROBE_CASES], {}, "dopri5")  # too few to time
     assert warmup.interpreting_is_quicker(warmup.ColdStart((), None, "interpret"), module, P, {}, "dopri5")
     monkeypatch.setattr(coldstart, "estimate", lambda groups, model: 1e9)
-    monkeypatch.setattr(sweep_app, "run_cases", lambda *args: 1.0 / 0.0)   # Python-only arithmetic: compile
+    monkeypatch.setattr(sweep_rows, "case_table", lambda *args: 1.0 / 0.0)   # Python-only arithmetic: compile
     assert not warmup.interpreting_is_quicker(cold, module, P, {}, "dopri5")
 
 
