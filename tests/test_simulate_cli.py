@@ -217,7 +217,10 @@ def test_ctrl_c_stops_a_long_run_at_once():
 
     cmd = [sys.executable, "-m", "tswm_runtime.cli", "simulate", "valve-travel", "--set", "F2_2=-1000",
            "--t-end", "1e9", "--max-steps", "1000000000", "--no-plot", "--method", "dopri5"]
-    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    # SIGINT at its default in the child, as in a terminal: a shell's background job (a CI script run
+    # with &) starts with SIGINT ignored, which Python then keeps (no KeyboardInterrupt at all).
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     try:
         line = proc.stderr.readline()          # the first progress line: the kernel is running
         assert "running:" in line and "Ctrl-C stops" in line, line
