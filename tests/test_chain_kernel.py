@@ -1,4 +1,4 @@
-"""The chain's mode decision in compiled code (tswm_runtime.hybrid.chain_rules.py) against the Python one of
+"""The chain's mode decision in compiled code (tswm_runtime/chains/rules.py) against the Python one of
 tswm_common/chain_decision.py (which the derivation's document uses), over a grid of states and forces that
 reaches every outcome: rest, each flank combination in each direction, no consistent mode, several; and
 every decision of whole runs (the seat's and the switch's latches included) as the Python one."""
@@ -8,10 +8,10 @@ import itertools
 
 import numpy as np
 
-from tswm_runtime.hybrid import chain_rules as compiled
-from tswm_runtime.hybrid.chain_kernel import decide_at
+from tswm_runtime.chains import rules as compiled
+from tswm_runtime.chains.kernel import decide_at
 from tswm_runtime.hybrid import entry
-from tswm_runtime.hybrid.chain import chain_functions, chain_tables, decide, latches, run_chain
+from tswm_runtime.chains.run import chain_functions, chain_tables, decide, latches, run_chain
 from tswm_runtime.model.scenes import load_chain_model
 
 # Body 0 carries a force plus a flat motor table scaled by U^2 = p[voltage]^2 (the drive's force is a run-time

@@ -246,7 +246,7 @@ def test_energy_over_a_trip_and_coast_run(chain_module):
     (its friction and its seat's spring), each written here from the run's states and normal forces:
     motor and friction by the trapezoid rule over 200001 output points, the load and the seat in closed
     form between each phase's ends; they balance to 1e-6 of the motor's work."""
-    from tswm_runtime.hybrid.chain import RESTING, run_chain
+    from tswm_runtime.chains.run import RESTING, run_chain
 
     module = chain_module(scene("valve-hold", VALVE, THRUST_SWITCH, VALVE_KEYS))
     run = run_chain(module, t_end=0.5, v0=0.0, t_out=np.linspace(0.0, 0.5, 200001), **TIGHT)

@@ -104,7 +104,7 @@ def test_architecture_page_names_only_modules_that_exist():
 
 # The rooms of docs/architecture.md, lowest first: a room imports only from rooms before it.
 ROOM_ORDER = ("tswm_common", "tswm_runtime/common", "tswm_runtime/jit", "tswm_runtime/integration",
-              "tswm_runtime/hybrid", "tswm_runtime/model", "tswm_runtime/results", "tswm_runtime/simulation",
+              "tswm_runtime/hybrid", "tswm_runtime/chains", "tswm_runtime/model", "tswm_runtime/results", "tswm_runtime/simulation",
               "tswm_runtime/sweeps", "tswm_runtime/fitting", "tswm_runtime/reference", "tswm_runtime/bench",
               "tswm_runtime/paper", "tswm_runtime/startup", "tswm_runtime/cli")
 # Outside the order: derivation/ and generated/ (scene files and documents, imported lazily by the

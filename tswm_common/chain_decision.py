@@ -1,7 +1,7 @@
 """Which mode a rigid chain of wedge stages is in, decided for all stages at once from numbers.
 
 Shared by the derivation (derivation/chain/selector.py, which evaluates the derived expressions
-with SymPy) and the runtime (tswm_runtime/hybrid/chain.py, which evaluates the generated module's
+with SymPy) and the runtime (tswm_runtime/chains/run.py, which evaluates the generated module's
 functions at an event): one complementarity logic for both. A sliding candidate is consistent when
 each stage's normal force is >= 0 and, from rest, the chain breaks away in the candidate's own
 direction; resting is consistent when the statics admit internal forces inside every stage's stick

@@ -3,4 +3,4 @@
 stages.py turns each stage's kind and geometry into an equivalent wedge (slope, friction angle,
 levers); dynamics.py derives the chain's modes from each stage's kinetostatics in SymPy;
 selector.py decides which mode a state is in; scene.py reads ``[[stage]]`` scene files; codegen.py
-emits a chain scene's numba module (tswm_runtime/hybrid/chain.py runs it)."""
+emits a chain scene's numba module (tswm_runtime/chains/run.py runs it)."""

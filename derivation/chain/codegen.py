@@ -4,7 +4,7 @@ Every formula comes from derivation/chain/: each stage's equivalent wedge (stage
 sliding mode's reduced equation of motion, normal forces, denominator and stage forces
 (dynamics.py); the scene's values enter only as named module constants printed by ``inert``. The
 module's rhs, jac and guards take the runtime's explicit signatures, so the compiled step loop
-(tswm_runtime/integration/segment.py) runs it; tswm_runtime/hybrid/chain_kernel.py decides its modes. A mode
+(tswm_runtime/integration/segment.py) runs it; tswm_runtime/chains/kernel.py decides its modes. A mode
 and its mirror image (the same regimes on the other flanks, moving the other way) share their functions
 (``_mode_calls``: each expression checked equal or opposite in SymPy), as the single-stage modules do.
 """

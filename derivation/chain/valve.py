@@ -2,7 +2,7 @@
 valve's Coulomb friction (packing and differential pressure) and its seat.
 
 The generated module keeps three latches in its parameter vector p, set by the runtime at its events
-(tswm_runtime/hybrid/chain.py): the switch's state (armed, picked up, tripped), the time it picked up,
+(tswm_runtime/chains/run.py): the switch's state (armed, picked up, tripped), the time it picked up,
 and whether the last body presses its seat; a fourth slot holds the motor's voltage U / U_n (the
 scene's by default), so that a sweep over it needs no new module. The forces below read them as the symbols ``powered`` and
 ``seated``; the switch's own logic (which quantity it measures, when it trips) is in the template.

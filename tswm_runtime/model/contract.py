@@ -65,7 +65,7 @@ FUNCTIONS = {
 }
 
 
-# A chain module (derivation/chain/codegen.py, run by tswm_runtime/hybrid/chain.py) provides these instead.
+# A chain module (derivation/chain/codegen.py, run by tswm_runtime/chains/run.py) provides these instead.
 CHAIN_CONSTANTS = {
     "SCENE": "scene name", "SCENE_DIGEST": "sha256 of the scene file", "DESCRIPTION": "the scene's description",
     "STAGES": "number of stages N", "STATES": "('q0', 'v0'): body 0's coordinate and speed",

@@ -1,4 +1,4 @@
-"""Simulate a chain of wedge stages: settings checked, the chain run (``hybrid.chain``), and per stage
+"""Simulate a chain of wedge stages: settings checked, the chain run (``chains.run``), and per stage
 its regimes, switch times and force maxima.
 
 ``simulate_chain(module)`` takes a chain module (``model.scenes.load_chain_model``); its run starts
@@ -14,7 +14,7 @@ from types import ModuleType
 
 import numpy as np
 
-from tswm_runtime.hybrid.chain import RESTING, ChainRun, run_chain
+from tswm_runtime.chains.run import RESTING, ChainRun, run_chain
 from tswm_runtime.simulation.drive_train import UNITS, answers, drive_train_lines
 from tswm_runtime.simulation.simulate import (ATOL_RANGE, DEFAULT_MAX_EVENTS, DEFAULT_POINTS, MAX_EVENTS, MAX_POINTS,
                                               MAX_STEPS, RTOL_RANGE, _check, _finite)

@@ -17,7 +17,7 @@ import math
 from types import ModuleType
 
 from tswm_common.chain_decision import internal_forces
-from tswm_runtime.hybrid.chain import RESTING, ChainRun
+from tswm_runtime.chains.run import RESTING, ChainRun
 
 UNITS = {"rotation": "N m", "translation": "N"}
 

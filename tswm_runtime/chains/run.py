@@ -1,11 +1,11 @@
-"""A rigid chain of wedge stages run in one compiled call (``chain_kernel.run_chain_at``); here the
+"""A rigid chain of wedge stages run in one compiled call (``kernel.run_chain_at``); here the
 Python that builds its result.
 
 A chain module (derivation/chain/codegen.py) has one coordinate q0 and a sliding mode per direction
 and combination of the stages' flanks. The kernel integrates one mode at a time with the mode
 machine's segment kernel and stops it at the first chain event: D (the Painleve approach locates
 D = 0), the stages' jam factor and each stage's normal force, v0, the seat's contact, the torque
-switch and its delay. At each it decides the next mode in compiled code (``chain_rules``) for
+switch and its delay. At each it decides the next mode in compiled code (``rules``) for
 all stages at once by the complementarity logic the derivation uses (tswm_common/chain_decision.py):
 a flank change, breakaway or rest; no mode or several (a Painleve-type case) stop the run. D or the
 jam factor reaching 0 stops it too (no contact force keeps the stages together).
@@ -36,8 +36,8 @@ from functools import cached_property
 import numpy as np
 
 from tswm_common.chain_decision import Candidate, Decision, Statics, decide_numbers
-from tswm_runtime.hybrid import chain_rules as compiled
-from tswm_runtime.hybrid import chain_kernel as kernel
+from tswm_runtime.chains import rules as compiled
+from tswm_runtime.chains import kernel
 from tswm_runtime.hybrid import entry
 from tswm_runtime.integration import segment
 from tswm_runtime.jit.signatures import GUARDS_SIG, address

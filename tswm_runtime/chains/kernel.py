@@ -1,6 +1,6 @@
 """A chain's whole run in one compiled call: its segments (the mode machine's segment kernel, through its
-address), its events, the decision at each (``chain_rules.settle``: the latches, then the next mode) and
-its resting phases, written into a ChainRecord from which ``hybrid/chain.py`` builds the result.
+address), its events, the decision at each (``rules.settle``: the latches, then the next mode) and
+its resting phases, written into a ChainRecord from which ``chains/run.py`` builds the result.
 
 Per phase (a stretch in one mode, or at rest) the record keeps its mode, times, latches and the
 range of its samples; a sliding phase's samples are (t, q0, v0, stage forces) at its start, at every
@@ -14,7 +14,7 @@ import numpy as np
 from numba import types
 
 from tswm_runtime.hybrid.addressed import ADDRESSES, model_functions, segment_function
-from tswm_runtime.hybrid.chain_rules import (NO_MODE, NONE, RESTING, SEVERAL, START, ChainFunctions, ChainTables,
+from tswm_runtime.chains.rules import (NO_MODE, NONE, RESTING, SEVERAL, START, ChainFunctions, ChainTables,
                                              chain_work, decide, settle)
 from tswm_runtime.integration import segment
 from tswm_runtime.jit import cache_guard
@@ -35,7 +35,7 @@ INCONSISTENT_START = -25  # D or the jam factor <= 0 where a mode begins
 RECORD_FULL = -26     # more phases, events or samples than the record holds: run again with more room
 MAX_SAME_TIME = 8     # decisions at one instant before the run stops
 
-#: Where the run writes (sizes from ``hybrid/chain.py``): phases (mode, first sample, end of samples) and
+#: Where the run writes (sizes from ``chains/run.py``): phases (mode, first sample, end of samples) and
 #: phase_f (t_start, t_end, p); samples (t, q0, v0, 3 stage forces per stage); events (guard, from, to,
 #: outcome) and event_f (t, q0, v0, p); trip (t, q0, v0, drive, stage forces, mode; t NaN: no cut);
 #: counts (phases, samples, events).
@@ -194,7 +194,7 @@ def run_chain_at(functions, chain_addresses, c, settings, y0, p, record, rec, ma
 
 @njit(cache=True, error_model="numpy", no_cpython_wrapper=False)
 def decide_at(functions, chain_addresses, c, t, y, p, current):
-    """The compiled decision (``chain_rules.decide``) called from Python: (outcome, mode) at (t, y) under p."""
+    """The compiled decision (``rules.decide``) called from Python: (outcome, mode) at (t, y) under p."""
     fns = model_functions(functions)
     chain_fns = ChainFunctions(guards_at(chain_addresses[0]), guards_at(chain_addresses[1]))
     w = chain_work(c.guard_direction.shape[1], c.psi.shape[0], c.direction.size, p.size)
