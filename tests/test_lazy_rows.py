@@ -1,6 +1,8 @@
 """Rows evaluated after the run from its step log: the same rows as written during the run, ``sol``
 at any t against the independent quadrature reference, every state, event instants, held tails,
 the Painleve approach, and rows evaluated once."""
+import functools
+
 import numpy as np
 import pytest
 
@@ -60,8 +62,9 @@ def test_rows_from_the_steps_are_the_rows_written_during_the_run(scene, params, 
         assert steplog.HELD in steps.index[:steps.count[0], 0]
 
 
+@functools.lru_cache(maxsize=1)
 def painleve_run():
-    """The Painleve run, its reference, and the reference's clock shifted onto tswm's D = 0 (tswm's
+    """(Once per file.) The Painleve run, its reference, and the reference's clock shifted onto tswm's D = 0 (tswm's
     t* is 2.5e-13 s later: near t* v1 - v* ~ sqrt(t* - t), so unshifted the two differ by far more
     than either's error)."""
     ref = q.solve(q.paper_wedge(5000.0), [(0.0, 0.0), (0.04, 60000.0)], 0.0, 1.0)
@@ -91,8 +94,11 @@ def test_rows_in_the_painleve_approach_follow_its_dense_output_in_sundman_time()
     sundman = kinds_at(steps, t) == steplog.SUNDMAN
     assert sundman.sum() >= 400
     np.testing.assert_array_equal(y[~sundman], out.y[kept][~sundman])
-    inside = sundman & (t < r.t_stop)
-    np.testing.assert_allclose(y[inside, 0], v_ref(t[inside]), rtol=0.0, atol=_row_tolerance(r))
+    inside = np.flatnonzero(sundman & (t < r.t_stop))
+    # Against the reference (each value inverts the 34-digit quadrature): every 10th row inside the
+    # approach and all of its last 50, those of the step that lands on D = 0.
+    checked = np.union1d(inside[::10], inside[-50:])
+    np.testing.assert_allclose(y[checked, 0], v_ref(t[checked]), rtol=0.0, atol=_row_tolerance(r))
 
 
 @pytest.mark.parametrize("times", [20, pytest.param(200, marks=pytest.mark.slow)])

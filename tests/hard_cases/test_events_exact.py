@@ -4,6 +4,7 @@ Expected values come from the independent quadrature reference (``quadrature``: 
 force balance written by hand, solved by quadrature in v1 at 34 digits) or from scipy's
 DOP853 at rtol 1e-13 on hand formulas (``tswm_runtime.reference.paper_gear``), never from tswm.
 """
+import functools
 import math
 
 import numpy as np
@@ -26,8 +27,17 @@ def tolerances(rtols):
     return sorted({(m, max(r, METHOD_RTOL_MIN[m][0])) for m in METHODS for r in rtols})
 
 
-def reference(m2, schedule, t_end, v0=0.0):
-    return q.solve(q.paper_wedge(m2), schedule, v0, t_end)
+@functools.lru_cache(maxsize=None)
+def reference(m2, schedule, t_end):
+    """The quadrature reference from rest, solved once per file for each (m2, schedule, t_end)
+    (1 to 2 s each; the tolerance grids below share it)."""
+    return q.solve(q.paper_wedge(m2), list(schedule), 0.0, t_end)
+
+
+@functools.lru_cache(maxsize=None)
+def extrema(m2, schedule, t_end):
+    """``reference(...).S_extrema()``, computed once."""
+    return reference(m2, schedule, t_end).S_extrema()
 
 
 # --- the Painleve point: D -> 0+ on flank b, found in finite time ---------------------------
@@ -37,7 +47,7 @@ PAINLEVE = {"m2": 5000.0, "F2_after": 60000.0, "t_step": 0.04}
 
 @pytest.fixture(scope="module")
 def painleve_reference():
-    tr = reference(5000.0, [(0.0, 0.0), (0.04, 60000.0)], 1.0)
+    tr = reference(5000.0, ((0.0, 0.0), (0.04, 60000.0)), 1.0)
     assert tr.status == "inconsistent" and tr.events[-1].kind == "D"
     return tr
 
@@ -79,7 +89,7 @@ def test_reaction_maxima_are_attained_one_sided_limits():
     """m2 = 100 kg, F2 = +30 kN stepped on at 2 ms: the contact moves to flank b at the step
     and the gear brakes to rest. The largest |S1| is positive, at the stop; evaluating flank
     a's reaction with the new load at the step (-5480 N) mixes the two sides."""
-    ref = reference(100.0, [(0.0, 0.0), (0.002, 30000.0)], 1.0)
+    ref = reference(100.0, ((0.0, 0.0), (0.002, 30000.0)), 1.0)
     S = ref.S_extrema()
     r = simulate("paper-runup", {"m2": 100.0, "F2_after": 30000.0, "t_step": 0.002}, rtol=1e-8, atol=1e-11)
     assert [(e.guard, e.to_mode) for e in r.events] == [("load_step", "fwd_b"), ("v1", "stick")]
@@ -98,7 +108,7 @@ def test_interior_reaction_maxima_are_located_between_steps(method, rtol):
     once the search finds the peak's v1; its time carries the run's own time error (< rtol s
     here, and sqrt(eps) relative is the floor for locating a flat maximum). At rtol 1e-4 the
     step ends lie 1e-3 relative below the peak: a search that stops at them fails."""
-    S = reference(200.0, [(0.0, 0.0)], 0.3).S_extrema()
+    S = extrema(200.0, ((0.0, 0.0),), 0.3)
     r = simulate("paper-runup", {"F2_after": 0.0}, method=method, rtol=rtol, atol=rtol * 1e-3, t_end=0.3)
     for name, value, t in (("S1", r.S1_max, r.t_S1_max), ("S2", r.S2_max, r.t_S2_max)):
         assert 0.07 < float(S[name][1]) < 0.09, name  # inside the run-up, not at an event
@@ -110,19 +120,19 @@ def test_interior_reaction_maxima_are_located_between_steps(method, rtol):
 def test_state_at_and_after_a_load_step_is_within_tolerance(method, rtol):
     """Run up free, -15 kN from 0.3 s: the load is latched per segment, so no step sees the
     jump; the state at the step and at t_end agree with the reference to the tolerance."""
-    ref = reference(200.0, [(0.0, 0.0), (0.3, -15000.0)], 1.0)
+    ref = reference(200.0, ((0.0, 0.0), (0.3, -15000.0)), 1.0)
     r = simulate("paper-runup", {"F2_after": -15000.0}, method=method, rtol=rtol, atol=rtol * 1e-3)
     assert [e.guard for e in r.events] == ["load_step"] and r.events[0].t == pytest.approx(0.3, abs=1e-15)
     assert r.events[0].v1 == pytest.approx(float(ref.v_at(0.3)), rel=2 * rtol)
     assert r.v1[-1] == pytest.approx(float(ref.v_at(1.0)), rel=2 * rtol)
-    S = ref.S_extrema()
+    S = extrema(200.0, ((0.0, 0.0), (0.3, -15000.0)), 1.0)
     assert r.S2_max == pytest.approx(float(S["S2"][0]), rel=2 * rtol)
 
 
 @pytest.mark.parametrize("rtol", [1e-3, 1e-6, 1e-8, 1e-10])
 def test_early_load_step_state_with_dopri5(rtol):
     """A load step 50 ms into the run-up, while v1 still climbs fast: dopri5 within 2 rtol."""
-    ref = reference(200.0, [(0.0, 0.0), (0.05, -5000.0)], 1.0)
+    ref = reference(200.0, ((0.0, 0.0), (0.05, -5000.0)), 1.0)
     r = simulate("paper-runup", {"F2_after": -5000.0, "t_step": 0.05}, rtol=rtol, atol=rtol * 1e-3)
     assert r.events[0].v1 == pytest.approx(float(ref.v_at(0.05)), rel=2 * rtol)
     assert r.v1[-1] == pytest.approx(float(ref.v_at(1.0)), rel=2 * rtol)
@@ -135,7 +145,7 @@ def test_rosenbrock_run_up_from_rest_known_limit(rtol):
     first steps' error; its global error in the run-up stays below 250 rtol (measured: 4x
     at 1e-6, 104x at 1e-10, a tolerance rosenbrock23 no longer accepts). This pins it, so a
     regression shows."""
-    ref = reference(200.0, [(0.0, 0.0), (0.05, -5000.0)], 1.0)
+    ref = reference(200.0, ((0.0, 0.0), (0.05, -5000.0)), 1.0)
     r = simulate("paper-runup", {"F2_after": -5000.0, "t_step": 0.05}, method="rosenbrock23", rtol=rtol,
                  atol=rtol * 1e-3)
     assert r.events[0].v1 == pytest.approx(float(ref.v_at(0.05)), rel=250 * rtol)
@@ -147,7 +157,7 @@ def test_rosenbrock_run_up_from_rest_known_limit(rtol):
 def test_load_schedule_in_time_stall_and_restart(method):
     """0 -> -30 kN at 0.3 s -> -2 kN at 0.6 s (scene load-schedule): the reference gives the
     events (load, stop and stick, load, breakaway) and the speed at t_end."""
-    ref = reference(200.0, [(0.0, 0.0), (0.3, -30000.0), (0.6, -2000.0)], 1.0)
+    ref = reference(200.0, ((0.0, 0.0), (0.3, -30000.0), (0.6, -2000.0)), 1.0)
     r = simulate("load-schedule", method=method, rtol=1e-9, atol=1e-12)
     assert r.status == "finished", r.message
     # A load event that leaves stick is what the reference calls a breakaway.
@@ -270,7 +280,7 @@ def test_every_status_message_builds_for_every_mode():
 def test_result_sol_follows_the_reference_across_a_load_step():
     """result.sol(t): cubic Hermite between output points, split at events, against the
     quadrature reference at off-grid times, including just before and after the step."""
-    ref = reference(200.0, [(0.0, 0.0), (0.3, -15000.0)], 1.0)
+    ref = reference(200.0, ((0.0, 0.0), (0.3, -15000.0)), 1.0)
     r = simulate("paper-runup", {"F2_after": -15000.0}, rtol=1e-10, atol=1e-13, points=2001)
     t = np.array([0.0123456, 0.1, 0.29977, 0.3 - 1e-6, 0.3 + 1e-6, 0.30041, 0.777, 0.99999])
     v = r.sol(t)[1]
@@ -306,7 +316,7 @@ def test_equilibrium_tail_is_held_exactly_and_its_cost_is_flat(method):
     """Run up, -15 kN from 0.3 s, then 100 s at the new equilibrium: the tail is held at
     the equilibrium (one Newton step from the integrated state), so v1 and x1 at 100 s
     agree with the reference to the tolerance and the step count does not grow with T."""
-    ref = reference(200.0, [(0.0, 0.0), (0.3, -15000.0)], 100.0)
+    ref = reference(200.0, ((0.0, 0.0), (0.3, -15000.0)), 100.0)
     runs = {T: simulate("paper-runup", {"F2_after": -15000.0}, method=method, t_end=T) for T in (1.0, 100.0)}
     r = runs[100.0]
     assert r.status == "finished" and r.njev > 0
