@@ -198,6 +198,18 @@ def run_chain(module, *, t_end: float, v0: float, rtol: float, atol: float, t_ou
     return _result(module, code, t_stop, record, chain)
 
 
+def run_status(code: int) -> str:
+    """The run's status for the kernel's code: "finished", "indeterminate" (several modes),
+    "inconsistent" (none, or no contact force keeps the stages together), or why the run stopped."""
+    if code == kernel.FINISHED:
+        return "finished"
+    if code == kernel.INDETERMINATE:
+        return "indeterminate"
+    if code in (kernel.UNDECIDED, kernel.SINGULAR, kernel.INCONSISTENT_START):
+        return "inconsistent"
+    return STATUS.get(code, f"status {code}")
+
+
 def _result(module, code: int, t_stop: float, record: Record, chain: kernel.ChainRecord) -> ChainRun:
     n_phases, _, n_events = chain.counts
     n_p = len(module.P_NAMES)
@@ -208,26 +220,23 @@ def _result(module, code: int, t_stop: float, record: Record, chain: kernel.Chai
         events.append(ChainEvent(float(f[0]), "start" if guard == compiled.START else module.GUARDS[guard],
                                  int(before), None if after == compiled.NO_MODE else int(after),
                                  compiled.OUTCOMES[outcome], (module, f[1:3].copy(), f[3:3 + n_p].copy())))
-    status, message = "finished", ""
+    status, message = run_status(code), ""
     last = events[-1]
     if code in (kernel.UNDECIDED, kernel.INDETERMINATE):
-        status = "indeterminate" if code == kernel.INDETERMINATE else "inconsistent"
         message = last.decision.reason
     elif code == kernel.SINGULAR:
-        status = "inconsistent"
         message = (f"{last.guard} reached 0 in mode {module.MODES[last.from_mode]} at t = {t_stop:.9g} s: no contact "
                    "force keeps the stages together (a Painleve-type inconsistency), not integrated through")
         last.given = Decision("none", (), None, message)
     elif code == kernel.INCONSISTENT_START:
-        status = "inconsistent"
         message = (f"D or the jam factor is <= 0 where mode {module.MODES[phases[-1].mode]} begins at "
                    f"t = {t_stop:.9g} s: no contact force keeps the stages together")
     elif code == kernel.TOO_MANY_EVENTS:
-        status, message = STATUS[code], f"{len(events)} events"
+        message = f"{len(events)} events"
     elif code == kernel.CHATTERING:
-        status, message = STATUS[code], f"{kernel.MAX_SAME_TIME} decisions at t = {t_stop:.9g} s"
+        message = f"{kernel.MAX_SAME_TIME} decisions at t = {t_stop:.9g} s"
     elif code != kernel.FINISHED:
-        status, message = STATUS.get(code, f"status {code}"), f"the integrator stopped at t = {t_stop:.9g} s"
+        message = f"the integrator stopped at t = {t_stop:.9g} s"
     counters = record.counters
     return ChainRun(status, message, float(t_stop), phases, events, record.out.t, record.out.y,
                     int(counters[segment.N_STEPS] + counters[segment.N_REJECTED]), _trip(module, chain.trip))

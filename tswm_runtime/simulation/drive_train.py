@@ -16,7 +16,10 @@ from __future__ import annotations
 import math
 from types import ModuleType
 
+import numpy as np
+
 from tswm_common.chain_decision import internal_forces
+from tswm_runtime.chains.batch import VERDICTS, hold_verdict
 from tswm_runtime.chains.run import RESTING, ChainRun
 
 UNITS = {"rotation": "N m", "translation": "N"}
@@ -44,11 +47,27 @@ def answers(module: ModuleType, run: ChainRun, voltage: float | None = None) -> 
     else:
         out["extra_travel"] = 0.0
     if thrust is not None:
-        out["needed"] = thrust * math.prod(psi_t * r_in / r_out for (psi_t, _), r_in, r_out
-                                           in zip(module.PSI, module.LEVER_IN, module.LEVER_OUT))
+        out["needed"] = float(needed_torque(module, thrust))
         if out["pull_out"] is not None and out["needed"] > 0:
-            out["stall_margin"] = out["pull_out"] / out["needed"]
+            out["stall_margin"] = float(stall_margin(module, thrust, out["voltage"]))
     return out
+
+
+def needed_torque(module: ModuleType, thrust):
+    """The drive torque that holds ``thrust`` (a number or an array) with every stage sliding forward
+    tractive at constant speed."""
+    return thrust * math.prod(psi_t * r_in / r_out for (psi_t, _), r_in, r_out
+                              in zip(module.PSI, module.LEVER_IN, module.LEVER_OUT))
+
+
+def stall_margin(module: ModuleType, thrust, voltage):
+    """Pull-out torque at ``voltage`` over the torque ``thrust`` needs (numbers or arrays); NaN where
+    that torque is <= 0 or the thrust unknown (NaN), or without a motor."""
+    needed = np.asarray(needed_torque(module, thrust), dtype=float)
+    if not hasattr(module, "MOTOR_TORQUE"):
+        return np.full(needed.shape, np.nan)
+    pull_out = float(max(module.MOTOR_TORQUE)) * np.asarray(voltage, dtype=float)**2
+    return np.divide(pull_out, needed, out=np.full(np.broadcast(pull_out, needed).shape, np.nan), where=needed > 0)
 
 
 def _pull_out(module: ModuleType, voltage: float | None) -> float | None:
@@ -68,20 +87,9 @@ def _holds(module: ModuleType, run: ChainRun) -> dict:
     ever_seated = bool(module.HAS_SEAT and any(p.latches[module.P_SEATED] > 0.5 for p in run.phases))
     rest = next((e.decision for e in reversed(run.events) if e.to_mode == RESTING), None) if resting else None
     undetermined = [list(map(list, xs)) for xs in rest.internal] if rest is not None and module.STAGES > 1 else []
-    if run.trip is None:
-        verdict = "no trip: the motor was not cut"
-    elif not module.HAS_SEAT:
-        verdict = "no seat in the scene"
-    elif run.status != "finished":
-        verdict = f"undecided: the run stopped ({run.status})"
-    elif seated:
-        verdict = ("holds" if locking else "holds, though no stage self-locks") if resting else \
-            "undecided: still moving on the seat at the end of the run"
-    elif ever_seated:
-        verdict = "seat lost: no stage self-locks" if not locking else "seat lost"
-    else:
-        verdict = "rests before the seat (never reached it)" if resting else \
-            "undecided: still moving before the seat at the end of the run"
+    code = hold_verdict(run.trip is not None, bool(module.HAS_SEAT), run.status == "finished", seated, resting,
+                        ever_seated, bool(locking))
+    verdict = VERDICTS[code].format(status=run.status)
     return {"verdict": verdict, "self_locking": locking, "seated": seated, "resting": resting,
             "undetermined": undetermined}
 
