@@ -80,7 +80,7 @@ def _run_chain(args: argparse.Namespace) -> int:
     try:
         grid = parse_grid(args.grid, module.STAGES)
         outcome = sizing(module, grid, {**overrides, "method": METHODS[method]}, scene=args.scene, output=args.output,
-                         chunk_size=args.chunk_size or CHAIN_CHUNK, progress=not args.no_progress, prune=args.prune,
+                         chunk_size=CHAIN_CHUNK if args.chunk_size is None else args.chunk_size, progress=not args.no_progress, prune=args.prune,
                          notice=_notice)
     except (ChainSweepError, SweepInputError) as error:
         raise UsageError(str(error)) from None
@@ -107,7 +107,7 @@ def _run(args: argparse.Namespace) -> int:
 
     if is_chain(args.scene):
         return _run_chain(args)
-    args.chunk_size = args.chunk_size or DEFAULT_CHUNK
+    args.chunk_size = DEFAULT_CHUNK if args.chunk_size is None else args.chunk_size
     spec, cold = prepare_kernels(args.scene, ("integrate", "batch"))
     from tswm_runtime.model.scenes import load_model
     from tswm_runtime.simulation.simulate import SimulationInputError
