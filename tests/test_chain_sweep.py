@@ -11,7 +11,7 @@ import pytest
 
 from tests.chains import TIGHT, wedges
 from tswm_runtime.chains.batch import run_cases
-from tswm_runtime.chains.run import latches
+from tswm_runtime.chains.run import first_room, latches
 from tswm_runtime.model.contract import load_module
 from tswm_runtime.simulation.chain import settings, simulate_chain
 from tswm_runtime.simulation.drive_train import stall_margin
@@ -83,6 +83,17 @@ def test_the_batch_reports_a_painleve_case_as_the_single_run(chain_module):
     batch, singles = _batch_and_single(module, [1.0, 1.0], TIGHT)
     assert [r.status for r in singles] == ["indeterminate"] * 2
     _assert_same(module, [1.0, 1.0], batch, singles)
+
+
+def test_a_run_of_more_phases_than_the_first_record_holds_is_run_again_with_more_room(chain_module):
+    """A frictionless wedge on a spring oscillates: every reversal is an event, 12 s make more phases than
+    the record's first room (kernel.RECORD_FULL); the batch runs those cases again with twice the room and
+    gives the single run's answers."""
+    module = chain_module(wedges("oscillator", gammas=(30.0,), mus=(0.0,), masses=(1.0, 1.0), forces=(0.0, 0.0),
+                                 spring=400.0, v0=1.0, t_end=12.0))
+    batch, singles = _batch_and_single(module, [1.0, 1.0, 1.0], {})
+    assert [r.status for r in singles] == ["finished"] * 3 and len(singles[0].events) > first_room(1000) + 1
+    _assert_same(module, [1.0] * 3, batch, singles)
 
 
 def test_a_refused_voltage_is_recorded_and_the_sweep_goes_on():

@@ -24,7 +24,7 @@ from numba import prange, types
 
 from tswm_runtime.chains import kernel
 from tswm_runtime.chains.rules import RESTING
-from tswm_runtime.chains.run import chain_functions, chain_tables, run_status
+from tswm_runtime.chains.run import chain_functions, chain_tables, first_room, run_status, samples_room
 from tswm_runtime.hybrid import entry
 from tswm_runtime.hybrid.addressed import ADDRESSES
 from tswm_runtime.integration import segment
@@ -183,10 +183,10 @@ def run_cases(module, P: np.ndarray, *, t_end: float, v0: float, rtol: float, at
             chain_tables(module), settings, np.array([0.0, float(v0)]))
     locking = any(psi_i <= 0 for _, psi_i in module.PSI)
     f, i = np.full((P.shape[0], N_F), np.nan), np.zeros((P.shape[0], N_I), np.int64)
-    todo, phases = np.arange(P.shape[0]), min(max_events, 58) + 6
+    todo, phases = np.arange(P.shape[0]), first_room(max_events)
     while todo.size:
         room = Answering(float(module.SPEED_FACTORS[-1]), bool(module.HAS_SEAT), locking, phases,
-                         t_out.size + 3 * phases)
+                         samples_room(phases, t_out.size))
         answers = Answers(np.empty((todo.size, N_F)), np.empty((todo.size, N_I), np.int64))
         run_chain_batch(*args, np.ascontiguousarray(P[todo]), t_out, room, int(max_events), answers)
         f[todo], i[todo] = answers.f, answers.i

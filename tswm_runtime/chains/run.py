@@ -159,6 +159,16 @@ def chain_functions(module) -> tuple[int, int]:
     return _TABLES[module.__name__][2]
 
 
+def first_room(max_events: int) -> int:
+    """The phases a run's record has room for at first (twice as many again while a run needs more)."""
+    return min(max_events, 58) + 6
+
+
+def samples_room(phases: int, points: int) -> int:
+    """The samples a record of room for ``phases`` phases and ``points`` output times holds."""
+    return points + 3 * phases
+
+
 def _record(module, t_out: np.ndarray, phases: int, samples: int) -> tuple[Record, kernel.ChainRecord]:
     n_p, width = len(module.P_NAMES), 3 + 3 * module.STAGES
     out = Outputs(t_out, np.full((t_out.size, 2), np.nan), np.full(t_out.size, -1, np.int64),
@@ -187,10 +197,10 @@ def run_chain(module, *, t_end: float, v0: float, rtol: float, atol: float, t_ou
     settings = Settings(int(method), float(t_end), Tolerances(float(rtol), np.full(2, float(atol)), 0.0, np.inf),
                         int(max_steps))
     args = (entry.functions(method, module), chain_functions(module), chain_tables(module), settings, y0)
-    phases = min(max_events, 58) + 6
+    phases = first_room(max_events)
     while True:   # a record too small for the run's phases and samples: again with twice the room
         p = latches(module, y0, voltage)
-        record, chain = _record(module, t_out, phases, t_out.size + 3 * phases)
+        record, chain = _record(module, t_out, phases, samples_room(phases, t_out.size))
         code, t_stop = kernel.run_chain_at(*args, p, record, chain, max_events)
         if code != kernel.RECORD_FULL:
             break
