@@ -68,7 +68,8 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _run_chain(args: argparse.Namespace) -> int:
-    """A chain scene: its sizing table over --grid voltage=... mu_k=... (tswm_runtime/sweeps/chain.py)."""
+    """A chain scene: its sizing table over --grid NAME=... of its values and voltage, one module for all
+    cases (tswm_runtime/sweeps/chain.py)."""
     import os
 
     from tswm_common.files import write_atomic
@@ -80,10 +81,10 @@ def _run_chain(args: argparse.Namespace) -> int:
     module, overrides, method = chain_inputs(args, SWEEP_SETTINGS)
     overrides = {k: v for k, v in overrides.items() if v is not None}
     try:
-        grid = parse_grid(args.grid, module.STAGES)
+        grid = parse_grid(args.grid, module)
     except ChainSweepError as error:
         raise UsageError(str(error)) from None
-    table = sizing(args.scene, grid, {**overrides, "method": METHODS[method]},
+    table = sizing(module, grid, {**overrides, "method": METHODS[method]},
                    notice=(lambda text: None) if args.no_progress else _notice)
     print(f"chain {module.SCENE}: sizing table, {plural(len(table), 'case')}")
     print(table.to_string(index=False, float_format=lambda x: f"{x:.6g}"))
