@@ -48,10 +48,10 @@ VERDICTS = ("no trip: the motor was not cut", "no seat in the scene", "undecided
             "seat lost: no stage self-locks", "seat lost", "rests before the seat (never reached it)",
             "undecided: still moving before the seat at the end of the run")
 
-#: The module's numbers the answers need: the last body's speed factor (q_N = speed q0), whether
-#: the scene has a seat, whether any stage self-locks; the record's room (phases, samples).
-Answering = namedtuple("Answering", "speed has_seat locking phases samples")
-ANSWERING = types.NamedTuple((types.float64, types.boolean, types.boolean, types.int64, types.int64), Answering)
+#: What the answers need besides the chain's tables: the slot of p that holds the last body's speed
+#: factor (q_N = factor q0), whether the scene has a seat; the record's room (phases, samples).
+Answering = namedtuple("Answering", "p_speed has_seat phases samples")
+ANSWERING = types.NamedTuple((types.int64, types.boolean, types.int64, types.int64), Answering)
 #: Where run_chain_batch writes, one row per case: f (N_F floats), i (N_I integers).
 Answers = namedtuple("Answers", "f i")
 ANSWERS = types.NamedTuple((MATRIX, types.int64[:, ::1]), Answers)
@@ -107,9 +107,14 @@ def _reset(record, p, row):
 
 
 @njit(error_model="numpy")
-def _answer(status, t_stop, record, rec, c, room, f, i):
-    """The case's answers from its records into rows f and i (module docstring)."""
-    n = c.psi.shape[0]
+def _answer(status, t_stop, record, rec, c, room, p, f, i):
+    """The case's answers from its records (and its p at the start: the speed factor, Psi_i) into rows f
+    and i (module docstring)."""
+    n = c.stages
+    speed = p[room.p_speed]
+    locking = False
+    for k in range(n):
+        locking = locking or p[c.p_psi + 2 * k + 1] <= 0.0
     n_phases = rec.counts[0]
     thrust_at = 3 * n - 2                # the last stage's force on the last body among a stage row's forces
     f[:] = np.nan
@@ -117,7 +122,7 @@ def _answer(status, t_stop, record, rec, c, room, f, i):
     tripped = not np.isnan(rec.trip[0])
     if tripped:
         f[F_T_TRIP], f[F_DRIVE] = rec.trip[0], rec.trip[3]
-        f[F_TRAVEL] = room.speed * rec.trip[1]
+        f[F_TRAVEL] = speed * rec.trip[1]
         if rec.trip[rec.trip.size - 1] != RESTING:
             f[F_THRUST] = rec.trip[4 + thrust_at]
         f[F_EXTRA] = 0.0
@@ -129,7 +134,7 @@ def _answer(status, t_stop, record, rec, c, room, f, i):
                 row = rec.samples[s]
                 if not found or abs(row[3 + thrust_at]) > abs(f[F_PEAK]):
                     f[F_PEAK], f[F_T_PEAK] = row[3 + thrust_at], row[0]
-                far = max(far, room.speed * row[1])
+                far = max(far, speed * row[1])
                 found = True
         if found:
             f[F_EXTRA] = far - f[F_TRAVEL]
@@ -142,7 +147,7 @@ def _answer(status, t_stop, record, rec, c, room, f, i):
     resting = n_phases > 0 and rec.phases[last, 0] == RESTING and finished
     i[I_STATUS] = status
     i[I_VERDICT] = _hold_verdict(tripped, room.has_seat, finished, seated, resting, room.has_seat and ever_seated,
-                                 room.locking)
+                                 locking)
     i[I_EVENTS] = rec.counts[2]
     i[I_STEPS] = record.counters[segment.N_STEPS] + record.counters[segment.N_REJECTED]
 
@@ -151,7 +156,7 @@ def _answer(status, t_stop, record, rec, c, room, f, i):
 def run_chain_batch(chain_at, functions, chain_addresses, c, settings, y0, P, t_out, room, max_events, answers):
     """Run the chain (``kernel.run_chain_at`` at address ``chain_at``) from (0, y0) for every row of P
     to settings.t_end, each case's answers into ``answers``; chunks of CHUNK_CASES cases share a record."""
-    n_cases, n_p, stages = P.shape[0], P.shape[1], c.psi.shape[0]
+    n_cases, n_p, stages = P.shape[0], P.shape[1], c.stages
     method, t_end, max_steps = settings.method, settings.t_end, settings.max_steps
     tol = Tolerances(settings.tol.rtol, settings.tol.atol, settings.tol.hmin, settings.tol.hmax)
     for chunk in prange((n_cases + CHUNK_CASES - 1) // CHUNK_CASES):
@@ -162,7 +167,7 @@ def run_chain_batch(chain_at, functions, chain_addresses, c, settings, y0, P, t_
             run = _chain_at(chain_at)
             status, t_stop = run(functions, chain_addresses, c, Settings(method, t_end, tol, max_steps), y0, p,
                                  record, rec, max_events)
-            _answer(status, t_stop, record, rec, c, room, answers.f[case], answers.i[case])
+            _answer(status, t_stop, record, rec, c, room, P[case], answers.f[case], answers.i[case])
 
 
 #: The answers of a batch as arrays, one entry per case (module docstring): status and verdict as
@@ -173,7 +178,7 @@ CaseAnswers = namedtuple("CaseAnswers", "status status_words verdict verdict_wor
 
 def run_cases(module, P: np.ndarray, *, t_end: float, v0: float, rtol: float, atol: float, t_out: np.ndarray,
               method: int = 0, max_steps: int = 100_000, max_events: int = 1000) -> CaseAnswers:
-    """Every row of P (p of the module: latches, voltage) run from q0 = 0, v0 to t_end; the answers per case.
+    """Every row of P (the module's complete p, as ``run.latches`` gives it) run from q0 = 0, v0 to t_end; the answers per case.
     The record starts with the room ``run.run_chain`` gives it; cases that need more run again with twice it."""
     P = np.ascontiguousarray(P, dtype=np.float64)
     t_out = np.ascontiguousarray(t_out, dtype=np.float64)
@@ -181,12 +186,10 @@ def run_cases(module, P: np.ndarray, *, t_end: float, v0: float, rtol: float, at
                         int(max_steps))
     args = (address(kernel.run_chain_at, kernel.CHAIN_SIG), entry.functions(method, module), chain_functions(module),
             chain_tables(module), settings, np.array([0.0, float(v0)]))
-    locking = any(psi_i <= 0 for _, psi_i in module.PSI)
     f, i = np.full((P.shape[0], N_F), np.nan), np.zeros((P.shape[0], N_I), np.int64)
     todo, phases = np.arange(P.shape[0]), first_room(max_events)
     while todo.size:
-        room = Answering(float(module.SPEED_FACTORS[-1]), bool(module.HAS_SEAT), locking, phases,
-                         samples_room(phases, t_out.size))
+        room = Answering(module.P_SPEED + module.STAGES, bool(module.HAS_SEAT), phases, samples_room(phases, t_out.size))
         answers = Answers(np.empty((todo.size, N_F)), np.empty((todo.size, N_I), np.int64))
         run_chain_batch(*args, np.ascontiguousarray(P[todo]), t_out, room, int(max_events), answers)
         f[todo], i[todo] = answers.f, answers.i

@@ -68,7 +68,8 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _run_chain(args: argparse.Namespace) -> int:
-    """A chain scene: its sizing table over --grid voltage=... mu_k=... (tswm_runtime/sweeps/chain.py)."""
+    """A chain scene: its sizing table over --grid NAME=... of its values and voltage, one module for all
+    cases (tswm_runtime/sweeps/chain.py)."""
     from tswm_runtime.simulation.simulate import METHODS, SimulationInputError
     from tswm_runtime.sweeps.chain import ChainSweepError, parse_grid, sizing
     from tswm_runtime.sweeps.sweep import SweepInputError, SweepInterrupted
@@ -78,10 +79,10 @@ def _run_chain(args: argparse.Namespace) -> int:
     module, overrides, method = chain_inputs(args, SWEEP_SETTINGS)
     overrides = {k: v for k, v in overrides.items() if v is not None}
     try:
-        grid = parse_grid(args.grid, module.STAGES)
-        outcome = sizing(module, grid, {**overrides, "method": METHODS[method]}, scene=args.scene, output=args.output,
-                         chunk_size=CHAIN_CHUNK if args.chunk_size is None else args.chunk_size, progress=not args.no_progress, prune=args.prune,
-                         notice=_notice)
+        grid = parse_grid(args.grid, module)
+        outcome = sizing(module, grid, {**overrides, "method": METHODS[method]}, output=args.output,
+                         chunk_size=CHAIN_CHUNK if args.chunk_size is None else args.chunk_size,
+                         progress=not args.no_progress, prune=args.prune, notice=_notice)
     except (ChainSweepError, SweepInputError) as error:
         raise UsageError(str(error)) from None
     except SimulationInputError as error:
