@@ -178,7 +178,8 @@ CaseAnswers = namedtuple("CaseAnswers", "status status_words verdict verdict_wor
 
 def run_cases(module, P: np.ndarray, *, t_end: float, v0: float, rtol: float, atol: float, t_out: np.ndarray,
               method: int = 0, max_steps: int = 100_000, max_events: int = 1000) -> CaseAnswers:
-    """Every row of P (the module's complete p, as ``run.latches`` gives it) run from q0 = 0, v0 to t_end; the answers per case.
+    """Every row of P (the module's complete p, as ``run.latches`` gives it) run from q0 = 0, v0 to t_end;
+    the answers per case.
     The record starts with the room ``run.run_chain`` gives it; cases that need more run again with twice it."""
     P = np.ascontiguousarray(P, dtype=np.float64)
     t_out = np.ascontiguousarray(t_out, dtype=np.float64)
@@ -189,7 +190,8 @@ def run_cases(module, P: np.ndarray, *, t_end: float, v0: float, rtol: float, at
     f, i = np.full((P.shape[0], N_F), np.nan), np.zeros((P.shape[0], N_I), np.int64)
     todo, phases = np.arange(P.shape[0]), first_room(max_events)
     while todo.size:
-        room = Answering(module.P_SPEED + module.STAGES, bool(module.HAS_SEAT), phases, samples_room(phases, t_out.size))
+        room = Answering(module.P_SPEED + module.STAGES, bool(module.HAS_SEAT), phases,
+                         samples_room(phases, t_out.size))
         answers = Answers(np.empty((todo.size, N_F)), np.empty((todo.size, N_I), np.int64))
         run_chain_batch(*args, np.ascontiguousarray(P[todo]), t_out, room, int(max_events), answers)
         f[todo], i[todo] = answers.f, answers.i

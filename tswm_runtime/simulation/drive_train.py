@@ -13,7 +13,6 @@ bodies' own forces are not counted). Above 1 the motor can reach the trip quasi-
 """
 from __future__ import annotations
 
-import math
 from types import ModuleType
 
 import numpy as np
@@ -60,7 +59,8 @@ def needed_torque(module: ModuleType, p: np.ndarray, thrust):
     p = np.asarray(p)
     factor = 1.0
     for k in range(module.STAGES):
-        factor = factor * (p[..., module.P_PSI + 2 * k] * p[..., module.P_LEVER_IN + k] / p[..., module.P_LEVER_OUT + k])
+        psi_t, r_in, r_out = p[..., module.P_PSI + 2 * k], p[..., module.P_LEVER_IN + k], p[..., module.P_LEVER_OUT + k]
+        factor = factor * (psi_t * r_in / r_out)
     return thrust * factor
 
 
