@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 from types import SimpleNamespace
 
+import numpy as np
 import pytest
 
 from tswm_common.chain_decision import Statics, decide_numbers
@@ -39,10 +40,15 @@ def test_a_resting_chain_with_a_drive_force_prints_its_admissible_band():
     assert (f"{lo:.6g}", f"{hi:.6g}") == ("6.95552", "11.0792")
 
 
+# p of the run: latches (switch, t_pick, seated, voltage), then the derived slots the answers read: Psi_t, Psi_i per
+# stage, the levers in and out, the speed factors, the valve's friction.
+P = np.array([0.0, 0.0, 0.0, 1.0, *WORM, *NUT, 1.0, 1.0, 1.0, 1.0, 1.0, 0.5, 0.05, 0.0])
+
+
 def module(**changes) -> SimpleNamespace:
     """A two-stage drive train module's constants: worm and nut as above, a seat, a thrust switch, a motor."""
-    return SimpleNamespace(**{"STAGES": 2, "PSI": (WORM, NUT), "LEVER_IN": (1.0, 1.0), "LEVER_OUT": (1.0, 1.0),
-                              "SPEED_FACTORS": (1.0, 0.5, 0.05), "HAS_SEAT": True, "SWITCH_ON": 2, "P_SWITCH": 0,
+    return SimpleNamespace(**{"STAGES": 2, "P_PSI": 4, "P_LEVER_IN": 8, "P_LEVER_OUT": 10, "P_SPEED": 12,
+                              "P_SLACK": 15, "HAS_SEAT": True, "SWITCH_ON": 2, "P_SWITCH": 0,
                               "P_SEATED": 2, "TRIPPED": 2, "STAGE_KINDS": ("wedge", "wedge"),
                               "BODY_MOTIONS": ("translation",) * 3, "MOTOR_TORQUE": (30.0, 10.0), "MOTOR_VOLTAGE": 1.0,
                               **changes})
@@ -56,7 +62,7 @@ def run(phases, status="finished", thrust=100.0):
     """A run that tripped at t = 1 s with ``thrust`` on the last body; the last phase's mode -1 is resting."""
     forces = [0.0] * 6
     forces[4] = thrust
-    return SimpleNamespace(phases=phases, status=status, events=[],
+    return SimpleNamespace(phases=phases, status=status, events=[], p=P,
                            trip={"t": 1.0, "y": (0.1, 0.0), "forces": forces, "drive": 3.0})
 
 

@@ -146,7 +146,7 @@ def test_cli_simulates_a_chain_file(tmp_path, capsys, monkeypatch):
     assert main(["simulate", str(path), "--rtol", "5"]) == 2
     assert "--rtol: rtol = 5.0: must be in [1e-13, 0.01]" in capsys.readouterr().err
     assert main(["simulate", str(path), "--set", "F2=1"]) == 2
-    assert "--set: a chain scene has no free parameters" in capsys.readouterr().err
+    assert "parameter 'F2': chain scene 'hold' has no such value (values: gamma_1, mu_1, " in capsys.readouterr().err
     path.write_text(wedges("hold", **HOLD).replace("v0 = 1.0", 'v0 = "fast"'))
     assert main(["simulate", str(path)]) == 2
     assert 'run.v0 = "fast"' in capsys.readouterr().err

@@ -252,7 +252,7 @@ def test_energy_over_a_trip_and_coast_run(chain_module):
     run = run_chain(module, t_end=0.5, v0=0.0, t_out=np.linspace(0.0, 0.5, 200001), **TIGHT)
     assert run.status == "finished" and run.trip is not None
     speeds, forces, voltage = MOTOR
-    c = np.array(module.SPEED_FACTORS)
+    c = run.p[module.P_SPEED:module.P_SPEED + module.STAGES + 1]
     mass, gammas, mus = np.array(VALVE["masses"]), np.radians(VALVE["gammas"]), np.array(VALVE["mus"])
     motor = load = losses = valve = 0.0
     for phase in (p for p in run.phases if p.mode != RESTING):
@@ -287,7 +287,9 @@ def test_the_packing_friction_grows_with_the_pressure_as_the_hand_model(chain_mo
     text = wedges("packing-dp", **PACKING, v0=1.0, t_end=0.5)
     last = text.rindex("[[body]]\n") + len("[[body]]\n")
     module = chain_module(text[:last] + PACKING_KEYS + text[last:])
-    assert module.LOAD_FRICTION == pytest.approx(friction, rel=1e-14)
+    from tswm_runtime.chains.run import latches
+
+    assert latches(module, np.zeros(2))[module.P_SLACK] == pytest.approx(friction, rel=1e-14)
     result = simulate_chain(module, **TIGHT)
     log, _, y, _, _ = HandValve(**PACKING, friction=friction).run(1.0, 0.5)
     assert [(p.regime, p.flank) for p in result.stages[0].phases] == [("tractive", "a"), ("resting", "")]
@@ -356,10 +358,11 @@ def test_tswm_simulate_mov_prints_the_answers(tmp_path, capsys):
 
 
 def test_tswm_sweep_mov_gives_a_sizing_table_and_keeps_failed_cases(tmp_path, capsys, monkeypatch):
-    """`tswm sweep mov` over voltage and mu_2: one row per case; the scene's own case equals `tswm simulate
-    mov`'s answers; the stall margin times the trip thrust scales as (U/U_n)^2 (its definition: pull-out
-    torque over the torque the trip thrust needs); a case whose mu_2 is refused keeps its status and the
-    sweep goes on; a bad --grid exits 2 naming it."""
+    """`tswm sweep mov` over voltage and mu_2: one row per case, all on the shipped module (nothing is generated
+    into the user cache); the scene's own case equals `tswm simulate mov`'s answers; the stall margin times
+    the trip thrust scales as (U/U_n)^2 (its definition: pull-out torque over the torque the trip thrust
+    needs); a case whose mu_2 is refused keeps its status and the sweep goes on; a bad --grid exits 2 naming
+    it."""
     import pandas as pd
 
     from tswm_runtime.cli import main
@@ -370,14 +373,16 @@ def test_tswm_sweep_mov_gives_a_sizing_table_and_keeps_failed_cases(tmp_path, ca
                  "--no-progress"]) == 0
     assert "chain mov: sizing table, 4 cases" in capsys.readouterr().out
     table = pd.read_csv(tmp_path / "mov-sizing.csv")
-    assert list(table["status"]) == ["finished"] * 2 + ["error: mu_2 = 11.0: must be in [0, 10)"] * 2
-    low, nominal = table.iloc[0], table.iloc[1]
+    refused = "error: parameter mu_2 = 11 (stage[2].mu): must be >= 0 and < 10"
+    assert list(table["status"]) == ["finished", refused] * 2           # the first --grid item varies slowest
+    assert not (tmp_path / "cache").exists()
+    low, nominal = table.iloc[0], table.iloc[2]
     answers = simulate_chain(load_module("mov")).answers
     assert nominal["thrust at trip [N]"] == pytest.approx(answers["trip"]["thrust"], rel=1e-12)
     assert nominal["peak after trip [N]"] == pytest.approx(answers["peak_after_trip"]["thrust"], rel=1e-12)
     assert nominal["stall margin"] == pytest.approx(answers["stall_margin"], rel=1e-12)
     assert (low["stall margin"] * low["thrust at trip [N]"]) / (nominal["stall margin"] * nominal["thrust at trip [N]"]) \
         == pytest.approx(0.64, rel=1e-12)
-    assert list(table["holds"][:2]) == ["holds", "holds"]
+    assert list(table["holds"][::2]) == ["holds", "holds"]
     assert main(["sweep", "mov", "--grid", "mu_3=0.1"]) == 2
-    assert "--grid 'mu_3': a chain sweeps voltage and mu_1 .. mu_2" in capsys.readouterr().err
+    assert "--grid 'mu_3': chain scene 'mov' has no such value (values: lead_angle_1," in capsys.readouterr().err

@@ -14,14 +14,19 @@ def paper():
     return load_module("paper")
 
 
+@pytest.fixture(scope="module")
+def mov():
+    return load_module("mov")
+
+
 def test_a_scene_grid_takes_lists_with_units(paper):
     grid = sweep.parse_grid(["F2=-15 kN,-5000,0 kN", "m2=0.2 t:300:3"], paper)
     assert grid["F2"].tolist() == [-15000.0, -5000.0, 0.0] and grid["m2"].tolist() == [200.0, 250.0, 300.0]
 
 
-def test_a_chain_grid_takes_ranges_lists_and_single_values():
-    grid = chain.parse_grid(["voltage=0.8:1.0:3", "mu_1=0.05", "mu_2=0.1, 0.15"], 2)
-    assert grid == {"voltage": [0.8, 0.9, 1.0], "mu_1": [0.05], "mu_2": [0.1, 0.15]}
+def test_a_chain_grid_takes_ranges_lists_and_single_values_of_any_value_with_units(mov):
+    grid = chain.parse_grid(["voltage=0.8:1.0:3", "mu_1=0.05", "mu_2=0.1, 0.15", "force_2=-5 kN,-254"], mov)
+    assert grid == {"voltage": [0.8, 0.9, 1.0], "mu_1": [0.05], "mu_2": [0.1, 0.15], "force_2": [-5000.0, -254.0]}
 
 
 @pytest.mark.parametrize("scene_item, chain_item, message", [
@@ -32,30 +37,32 @@ def test_a_chain_grid_takes_ranges_lists_and_single_values():
     ("F2=1,,2", "voltage=1,,2", "an empty value"),
     ("F2=1,inf", "voltage=1,inf", "'inf' is not finite"),
 ])
-def test_both_commands_refuse_a_bad_item_alike(paper, scene_item, chain_item, message):
+def test_both_commands_refuse_a_bad_item_alike(paper, mov, scene_item, chain_item, message):
     with pytest.raises(sweep.SweepInputError) as scene_error:
         sweep.parse_grid([scene_item], paper)
     with pytest.raises(chain.ChainSweepError) as chain_error:
-        chain.parse_grid([chain_item], 2)
+        chain.parse_grid([chain_item], mov)
     for error, item in ((scene_error, scene_item), (chain_error, chain_item)):
         assert str(error.value).startswith(f"--grid {item!r}: ") and message in str(error.value), str(error.value)
 
 
-def test_one_limit_on_the_whole_grid(paper):
+def test_one_limit_on_the_whole_grid(paper, mov):
     """Each axis within its count, but 4000 x 4000 = 1.6e7 cases: refused by both, before anything is built."""
     for error, parse in ((sweep.SweepInputError, lambda: sweep.parse_grid(["F2=1:2:4000", "m2=1:2:4000"], paper)),
-                         (chain.ChainSweepError, lambda: chain.parse_grid(["mu_1=0.1:0.2:4000", "mu_2=0.1:0.2:4000"], 2))):
+                         (chain.ChainSweepError, lambda: chain.parse_grid(["mu_1=0.1:0.2:4000", "mu_2=0.1:0.2:4000"], mov))):
         with pytest.raises(error, match=r"--grid: 16000000 cases \(4000 x 4000\), more than the 1e\+07 one sweep runs"):
             parse()
 
 
-def test_names_and_units_are_checked_per_command(paper):
+def test_names_and_units_are_checked_per_command(paper, mov):
     with pytest.raises(sweep.SweepInputError, match=r"--grid 'F2=1 kg': parameter F2 = '1 kg': 'kg' is a mass unit"):
         sweep.parse_grid(["F2=1 kg"], paper)
-    with pytest.raises(chain.ChainSweepError, match=r"--grid 'mu_1=0.1 kN': mu_1 = '0.1 kN': expected a plain number"):
-        chain.parse_grid(["mu_1=0.1 kN"], 2)
-    with pytest.raises(chain.ChainSweepError, match=r"--grid 'mu_3': a chain sweeps voltage and mu_1 .. mu_2"):
-        chain.parse_grid(["mu_3=0.1"], 2)
+    with pytest.raises(chain.ChainSweepError, match=r"--grid 'force_2=1 kg': parameter force_2 = '1 kg': 'kg' is a "
+                       "mass unit"):
+        chain.parse_grid(["force_2=1 kg"], mov)
+    with pytest.raises(chain.ChainSweepError, match=r"--grid 'mu_3': chain scene 'mov' has no such value \(values: "
+                       r"lead_angle_1, .*, mu_2, .*, switch_delay, voltage\)"):
+        chain.parse_grid(["mu_3=0.1"], mov)
 
 
 @pytest.mark.parametrize("scene", ["paper", "mov"])

@@ -56,8 +56,8 @@ def simulate(scene, params: dict | None = None, *, t_end=None, rtol=None, atol=N
     """One run of ``scene`` (``tswm simulate``): ``params`` {name: value} sets free parameters
     (``--set``); ``output``: a directory for SCENE.csv, .npz, -summary.json and (with ``plot``)
     .png. Returns the ``Result`` (arrays, phases, events, maxima, status; ``to_dict``). A chain scene
-    file ([[stage]] tables) returns a ``ChainResult`` (per stage regimes, switch times, force maxima;
-    no free parameters, no output files yet)."""
+    ([[stage]] tables) returns a ``ChainResult`` (per stage regimes, switch times, force maxima); its
+    ``params`` are any of its values (the module's PARAM_NAMES) and ``voltage``; no output files yet."""
     from tswm_runtime.model.scenes import is_chain
     from tswm_runtime.simulation.simulate import simulate as run
 
@@ -77,13 +77,12 @@ def _chain(scene, params, settings: dict, output):
     from tswm_runtime.simulation.chain import simulate_chain
     from tswm_runtime.simulation.simulate import METHODS, SimulationInputError
 
-    if params or output is not None:
-        raise SimulationInputError(f"{'params' if params else 'output'}: a chain scene takes neither free parameters "
-                                   "nor an output directory yet")
+    if output is not None:
+        raise SimulationInputError("output: a chain scene takes no output directory yet")
     method = settings.pop("method", "dopri5")
     if method not in METHODS:
         raise SimulationInputError(f"method = {method!r}: must be one of {', '.join(METHODS)}")
-    return simulate_chain(load_chain_model(scene), method=METHODS[method], **settings)
+    return simulate_chain(load_chain_model(scene), params, method=METHODS[method], **settings)
 
 
 def sweep(scene, grid=None, *, samples: int | None = None, ranges=None, seed: int = 0, output=None,

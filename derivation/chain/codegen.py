@@ -2,7 +2,9 @@
 
 Every formula comes from derivation/chain/: each stage's equivalent wedge (stages.py) and each
 sliding mode's reduced equation of motion, normal forces, denominator and stage forces
-(dynamics.py); the scene's values enter only as named module constants printed by ``inert``. The
+(dynamics.py); the scene's values are slots of the parameter vector p (their defaults the scene's, printed
+by ``inert``) and what they determine (slopes, friction angles, levers, FTFs, speed factors) is derived
+from them once per run by the module's ``prepare(p)``, so the code depends on the chain's structure only. The
 module's rhs, jac and guards take the runtime's explicit signatures, so the compiled step loop
 (tswm_runtime/integration/segment.py) runs it; tswm_runtime/chains/kernel.py decides its modes. A mode
 and its mirror image (the same regimes on the other flanks, moving the other way) share their functions
@@ -43,12 +45,18 @@ def generator_digest() -> str:
 
 
 class _Code:
-    """Python source of expressions in the chain's symbols: one CSE per function, the body forces
-    from ``body_forces`` where an expression uses them."""
+    """Python source of expressions in the chain's symbols: one CSE per function, each value or derived number
+    it uses read from its slot of p (``slots``), the body forces from ``body_forces`` where an expression
+    uses them."""
 
-    def __init__(self, stages: int):
+    def __init__(self, stages: int, slots: dict[sp.Symbol, str]):
         self.sym = dyn.symbols(stages)
+        self.slots = slots
         self.printer = _Printer()
+
+    def reads(self, used: set) -> list[str]:
+        """``name = p[SLOT]`` for each value or derived symbol in ``used``, in slot order."""
+        return [f"{s} = p[{slot}]" for s, slot in self.slots.items() if s in used]
 
     def body(self, exprs: list[sp.Expr], direction: str = "0.0") -> tuple[list[str], list[str]]:
         """Lines and results; the body forces of a sliding mode in ``direction`` (a number or the argument's
@@ -58,6 +66,7 @@ class _Code:
         lines = []
         if used & set(self.sym.force):
             lines.append(f"{', '.join(map(str, self.sym.force))} = body_forces(t, y, p, {direction})")
+        lines += self.reads(used)
         if q0 in used:
             lines.append("q_0 = y[0]")
         if MOTOR in used:
@@ -76,28 +85,57 @@ class _Code:
         return {"name": name, "args": args, "doc": doc, "lines": lines, "result": ", ".join(results)}
 
 
-def _constants(chain: ChainScene, code: _Code) -> tuple[list[tuple[str, str, str]], list[tuple[str, str]]]:
-    """(name, value, scene key) of the scene's values and (name, formula) of the chain's symbols from them."""
-    given, derived = [], []
-    sym = code.sym
+def _range(rule, names: dict[str, str]) -> tuple:
+    """A rule's (lo, hi, lo_in, hi_in) for the module: None for no bound; hi the slot name of a sibling value
+    (the hysteresis is at most the setting)."""
+    hi = names[rule.hi] if isinstance(rule.hi, str) else rule.hi
+    return (rule.lo, hi, rule.lo_in, rule.hi_in)
+
+
+def _layout(chain: ChainScene) -> tuple[list[dict], list[dict], dict[sp.Symbol, str]]:
+    """p after its latches: the scene's values (name, slot, SI value, scene key, unit, range) and what
+    ``prepare`` derives from them (name, slot, formula in the values and earlier derived names), and the
+    slot of each symbol the generated functions read."""
+    n = len(chain.stages)
+    sym = dyn.symbols(n)
+    printer = _Printer()
+    values, derived, slots = [], [], {}
+    pairs = chain.value_rules()
+    names = {p.key.rsplit(".", 1)[-1]: p.name for p, _ in pairs if p.key.startswith("switch.")}
+    for p, rule in pairs:
+        slot = f"V_{p.name}"
+        values.append({"name": p.name, "slot": slot, "si": p.value, "value": inert(p.value, p.name), "key": p.key,
+                       "unit": p.unit, "range": _range(rule, names)})
+        slots[sp.Symbol(p.name, real=True)] = slot
+
+    def derive(target: sp.Symbol, expr) -> None:
+        slot = f"D_{target}"
+        expr = sp.sympify(expr)
+        derived.append({"name": str(target), "slot": slot, "formula": printer.doprint(expr)})
+        for v in values:
+            v["read"] = v.get("read", False) or sp.Symbol(v["name"], real=True) in expr.free_symbols
+        slots[target] = slot
+    per_stage = []
     for k, stage in enumerate(chain.stages):
         kind, wedge = st.kinds()[stage.kind], st.equivalent_wedge(stage.kind)
-        names = {symbol: sp.Symbol(stage.params[key].name, real=True) for key, symbol in kind.keys.items()}
-        given += [(p.name, inert(p.value, p.name), p.key) for p in stage.params.values()]
-        for target, expr in ((sym.gamma[k], sp.atan(wedge.tan_gamma)), (sym.rho[k], sp.atan(wedge.tan_rho)),
-                             (sym.lever_in[k], wedge.lever_in), (sym.lever_out[k], wedge.lever_out)):
-            derived.append((str(target), code.printer.doprint(sp.sympify(expr).subs(names))))
+        names_k = {symbol: sp.Symbol(stage.params[key].name, real=True) for key, symbol in kind.keys.items()}
+        per_stage.append({sym.gamma[k]: sp.atan(wedge.tan_gamma), sym.rho[k]: sp.atan(wedge.tan_rho),
+                          sym.lever_in[k]: wedge.lever_in, sym.lever_out[k]: wedge.lever_out})
+        per_stage[-1] = {t: sp.sympify(e).subs(names_k) for t, e in per_stage[-1].items()}
+    for group in (sym.gamma, sym.rho, sym.lever_in, sym.lever_out):
+        for k, target in enumerate(group):
+            derive(target, per_stage[k][target])
+    for k in range(n):
+        for name, flank in (("psi_t", "a"), ("psi_i", "b")):
+            derive(sp.Symbol(f"{name}_{k + 1}", real=True), _psi(sym, k, flank))
+    for j, factor in enumerate(dyn.speed_factors(sym)):
+        derive(sp.Symbol(f"c_{j}", real=True), factor)
     valve = chain.bodies[-1].valve
+    derive(sp.Symbol("load_friction", real=True), vl.coulomb(valve) if valve else sp.Float(0.0))
+    derive(sp.Symbol("delay", real=True), vl.symbol(chain.switch.delay) if chain.switch else sp.Float(0.0))
     for j, body in enumerate(chain.bodies):
-        for param in (body.inertia, body.force, body.stiffness, *(vars(body.valve).values() if body.valve else ())):
-            if param is not None:
-                given.append((param.name, inert(param.value, param.name), param.key))
-        derived.append((str(sym.inertia[j]), body.inertia.name))
-    if chain.switch is not None:
-        given += [(p.name, inert(p.value, p.name), p.key) for p in (chain.switch.setting, chain.switch.hysteresis,
-                                                                    chain.switch.delay)]
-    derived.append(("LOAD_FRICTION", code.printer.doprint(vl.coulomb(valve)) if valve else "0.0"))
-    return given, derived
+        slots[sym.inertia[j]] = slots[sp.Symbol(body.inertia.name, real=True)]
+    return values, derived, slots
 
 
 def _forces(chain: ChainScene, code: _Code, direction: sp.Expr) -> list[sp.Expr]:
@@ -106,8 +144,7 @@ def _forces(chain: ChainScene, code: _Code, direction: sp.Expr) -> list[sp.Expr]
     last body moving in ``direction``."""
     factors = dyn.speed_factors(code.sym)
     return [sp.Symbol(b.force.name, real=True) + (vl.drive(MOTOR) if b.motor is not None else 0)
-            - (sp.Symbol(b.stiffness.name, real=True) * factors[j] * q0 if b.stiffness is not None and b.stiffness.value
-               else 0) + (vl.valve_force(b.valve, factors[j] * q0, direction) if b.valve is not None else 0)
+            - (sp.Symbol(b.stiffness.name, real=True) * factors[j] * q0 if b.stiffness is not None else 0) + (vl.valve_force(b.valve, factors[j] * q0, direction) if b.valve is not None else 0)
             for j, b in enumerate(chain.bodies)]
 
 
@@ -190,31 +227,35 @@ def _group_functions(code: _Code, index: int, modes: list[dyn.SlidingMode], expr
                              direction="direction"), "group": index} for name, e in exprs.items()]
 
 
-def _jacobian(code: _Code, chain: ChainScene, mode: dyn.SlidingMode) -> tuple[str, str]:
+def _jacobian(code: _Code, chain: ChainScene, mode: dyn.SlidingMode) -> tuple[sp.Expr, sp.Expr]:
     """(d a_0 / d q_0, d a_0 / d v_0) in a mode: the springs' and the motor's share (the forces are the only
     state dependence; the motor's torque changes with v_0 by its table's slope, ``motor_slope``)."""
     accel = mode.accel.subs(dict(zip(code.sym.force, _forces(chain, code, mode.direction))))
-    return code.printer.doprint(sp.diff(accel, q0)), code.printer.doprint(sp.diff(accel, MOTOR))
+    return sp.diff(accel, q0), sp.diff(accel, MOTOR)
 
 
-def _jacobians(code: _Code, chain: ChainScene, modes: list[dyn.SlidingMode]) -> list[tuple[list[int], str, str]]:
-    """(the modes, d a_0 / d q_0, d a_0 / d v_0) for each distinct pair of the modes' Jacobian entries (a mode
-    and its mirror image have the same), in the order of their first mode."""
+def _jacobians(code: _Code, chain: ChainScene, modes: list[dyn.SlidingMode]) -> tuple[list[str], list[tuple]]:
+    """The reads of p the Jacobian needs and (the modes, d a_0 / d q_0, d a_0 / d v_0) for each distinct pair
+    of the modes' Jacobian entries (a mode and its mirror image have the same), in the order of their first
+    mode."""
     found: dict[tuple[str, str], list[int]] = {}
+    used: set = set()
     for index, mode in enumerate(modes):
-        found.setdefault(_jacobian(code, chain, mode), []).append(index)
-    return [(indices, by_q, by_motor) for (by_q, by_motor), indices in found.items()]
+        pair = _jacobian(code, chain, mode)
+        used |= pair[0].free_symbols | pair[1].free_symbols
+        found.setdefault(tuple(code.printer.doprint(e) for e in pair), []).append(index)
+    return code.reads(used), [(indices, by_q, by_motor) for (by_q, by_motor), indices in found.items()]
 
 
 def generate_chain_module(chain: ChainScene) -> str:
-    """Source of the chain scene's module."""
-    values = chain.values()
+    """Source of the chain scene's module: its code depends on the chain's structure only (stage kinds, their
+    modelled flanks, which bodies have springs, motor, valve, seat, switch); the scene's values are the
+    defaults of p's slots."""
     n = len(chain.stages)
-    code = _Code(n)
-    reachable = dyn.reachable(values.flanks)
+    values, derived, slots = _layout(chain)
+    code = _Code(n, slots)
+    reachable = dyn.reachable(tuple(s.flanks for s in chain.stages))
     modes = [dyn.sliding(direction, regimes) for direction, regimes in reachable]
-    given, derived = _constants(chain, code)
-    psi = [tuple(code.printer.doprint(p) for p in _psi(code.sym, k)) for k in range(n)]
     functions = [code.function("body_forces", "(F_0, ..., F_N): each body's force or torque (the motor's while "
                                "powered), a spring's part -stiffness q_j with q_j = (v_j/v_0) q_0, the valve's force "
                                "on the last body moving in `direction` (0: at rest, without its friction)",
@@ -225,6 +266,8 @@ def generate_chain_module(chain: ChainScene) -> str:
     directions = [tuple([-1] * (n + 2) + [-mode.direction] + [-1] * len(SWITCHED_GUARDS)) for mode in modes]
     switch, valve = chain.switch, chain.bodies[-1].valve
     seat = valve.seat if valve is not None else None
+    first = len(vl.P_NAMES)
+    slot = {d["slot"]: first + len(values) + i for i, d in enumerate(derived)}
     constants = {
         "SCENE": chain.name, "DESCRIPTION": chain.description, "SCENE_DIGEST": chain.digest, "STAGES": n,
         "STATES": STATES, "MODES": tuple(m.name for m in modes), "MODE_DIRECTION": tuple(m.direction for m in modes),
@@ -232,32 +275,43 @@ def generate_chain_module(chain: ChainScene) -> str:
         "STAGE_KINDS": tuple(s.kind for s in chain.stages),
         "BODY_MOTIONS": tuple(b.motion for b in chain.bodies), "GUARDS": guards,
         "GUARD_DIRECTIONS": tuple(directions), "OBSERVABLES": (), "RUN": dict(vars(chain.run)),
-        "P_NAMES": vl.P_NAMES, "P_SWITCH": vl.P_SWITCH, "P_PICK": vl.P_PICK, "P_SEATED": vl.P_SEATED,
-        "P_VOLTAGE": vl.P_VOLTAGE,
+        "PARAM_NAMES": tuple(v["name"] for v in values), "PARAM_UNITS": tuple(v["unit"] for v in values),
+        "PARAM_KEYS": tuple(v["key"] for v in values), "PARAM_RANGES": tuple(v["range"] for v in values),
+        "DERIVED": tuple(d["name"] for d in derived),
+        "P_NAMES": (*vl.P_NAMES, *(v["name"] for v in values), *(f"derived {d['name']}" for d in derived)),
+        "P_SWITCH": vl.P_SWITCH, "P_PICK": vl.P_PICK, "P_SEATED": vl.P_SEATED, "P_VOLTAGE": vl.P_VOLTAGE,
+        "P_VALUES": first, "P_DERIVED": first + len(values),
+        "P_GAMMA": slot["D_gamma_1"], "P_RHO": slot["D_rho_1"], "P_LEVER_IN": slot["D_r_in_1"],
+        "P_LEVER_OUT": slot["D_r_out_1"], "P_PSI": slot["D_psi_t_1"], "P_SPEED": slot["D_c_0"],
+        "P_SLACK": slot["D_load_friction"], "P_DELAY": slot["D_delay"],
+        "P_SEAT": first + next(i for i, v in enumerate(values) if v["name"] == seat.name) if seat else -1,
         "ARMED": vl.ARMED, "PICKED": vl.PICKED, "TRIPPED": vl.TRIPPED,
         "SWITCH_ON": -1 if switch is None else switch.stage, "HAS_SEAT": seat is not None,
     }
+    for i, v in enumerate(values):
+        v["index"] = first + i
+    for d in derived:
+        d["index"] = slot[d["slot"]]
     env = jinja2.Environment(loader=jinja2.FileSystemLoader(str(resources.files("derivation") / "templates")),
                              trim_blocks=True, lstrip_blocks=True, keep_trailing_newline=True)
     env.filters["docstring"] = _docstring
     env.filters["comment"] = _comment
+    jac_reads, jacobians = _jacobians(code, chain, modes)
+    motor = chain.bodies[0].motor
     body = env.get_template("chain_module.py.j2").render(
-        chain=chain, n=n, modes=modes, calls=calls, constants={k: inert(v, k) for k, v in constants.items()}, given=given,
-        derived=derived, psi=psi, functions=functions, jacobians=_jacobians(code, chain, modes),
-        factors=[code.printer.doprint(f) for f in dyn.speed_factors(code.sym)],
-        inertia=[str(s) for s in code.sym.inertia], motor=chain.bodies[0].motor,
-        motor_arrays={name: inert(values, name) for name, values in (
-            ("MOTOR_SPEED", chain.bodies[0].motor.speed), ("MOTOR_TORQUE", chain.bodies[0].motor.torque))}
-        if chain.bodies[0].motor else {},
-        motor_voltage=inert(chain.bodies[0].motor.voltage, "voltage") if chain.bodies[0].motor else "", lever_in=[str(s) for s in code.sym.lever_in],
-        lever_out=[str(s) for s in code.sym.lever_out], guards=guards,
+        chain=chain, n=n, modes=modes, calls=calls, constants={k: inert(v, k) for k, v in constants.items()},
+        values=values, defaults=inert(tuple(v["si"] for v in values), "PARAM_DEFAULTS"),
+        derived=derived, prepare_reads=[f"{v['name']} = p[{v['slot']}]" for v in values if v["read"]],
+        functions=functions, jac_reads=jac_reads, jacobians=jacobians, motor=motor,
+        motor_arrays={name: inert(table, name) for name, table in (
+            ("MOTOR_SPEED", motor.speed), ("MOTOR_TORQUE", motor.torque))} if motor else {},
+        motor_voltage=inert(motor.voltage, "voltage") if motor else "", guards=guards,
         contact_targets=", ".join(f"g[{k}]" for k in range(n + 2)),
         force_targets=", ".join(f"out[{k}]" for k in range(3 * n)),
         body_targets=", ".join(f"out[{j}]" for j in range(n + 1)),
-        switch={"SWITCH_SETTING": switch.setting.name, "SWITCH_HYSTERESIS": switch.hysteresis.name,
-                "SWITCH_DELAY": switch.delay.name} if switch else {"SWITCH_SETTING": "math.inf",
-                                                                  "SWITCH_HYSTERESIS": "0.0", "SWITCH_DELAY": "0.0"},
-        seat=seat.name if seat is not None else "math.nan")
+        setting=f"p[V_{switch.setting.name}]" if switch else "math.inf",
+        hysteresis=f"p[V_{switch.hysteresis.name}]" if switch else "0.0",
+        seat=f"p[V_{seat.name}]" if seat is not None else "math.nan")
     body = re.sub(r"\n+@njit", "\n\n\n@njit", body)
     header = (f"# Generated by tswm {GENERATOR_VERSION} from chain scene '{chain.name}'. DO NOT EDIT: regenerate "
               "it from its scene file.\n"
@@ -273,6 +327,6 @@ def generate_chain_module(chain: ChainScene) -> str:
     return source
 
 
-def _psi(sym: dyn.Symbols, k: int) -> tuple[sp.Expr, sp.Expr]:
-    """Stage k's FTFs of forward sliding, tractive (flank a) and inverse-tractive (flank b), from mechanics."""
-    return tuple(mech.sliding(f, 1).psi.subs({mech.gamma: sym.gamma[k], mech.rho: sym.rho[k]}) for f in "ab")
+def _psi(sym: dyn.Symbols, k: int, flank: str) -> sp.Expr:
+    """Stage k's FTF of forward sliding on a flank: tractive (a) or inverse-tractive (b), from mechanics."""
+    return mech.sliding(flank, 1).psi.subs({mech.gamma: sym.gamma[k], mech.rho: sym.rho[k]})

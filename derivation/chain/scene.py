@@ -9,7 +9,7 @@ from __future__ import annotations
 import hashlib
 import math
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import sympy as sp
@@ -87,6 +87,7 @@ class Switch:
     setting: Param
     hysteresis: Param
     delay: Param
+    quantity: str = "torque"      # of setting and hysteresis: "torque" or "force"
 
 
 @dataclass(frozen=True)
@@ -120,29 +121,28 @@ class ChainScene:
     run: ChainRun = ChainRun(1.0, 0.0, 1e-6, 1e-9, 100000)
     switch: Switch | None = None
 
-    def with_friction(self, mu: dict[int, float]) -> ChainScene:
-        """This chain with stage k's mu replaced by mu[k] (k from 1), checked as the scene file's would be,
-        under a digest of its own."""
-        stages = list(self.stages)
-        for k, value in mu.items():
-            old = stages[k - 1].params["mu"]
-            if not (MU.lo <= value < MU.hi) or not math.isfinite(value):
-                raise SceneError(f"mu_{k} = {value!r}: must be in [0, 10)")
-            stages[k - 1] = Stage(stages[k - 1].kind, {**stages[k - 1].params, "mu": Param(old.name, float(value),
-                                  old.unit, False, old.key)}, stages[k - 1].flanks)
-            gamma, rho, _, _ = _equivalent(stages[k - 1])
-            if gamma + rho >= 90 * DEG:
-                raise SceneError(f"mu_{k} = {value!r}: the stage jams (slope + friction angle >= 90 deg)")
-        digest = hashlib.sha256(f"{self.digest} mu {sorted(mu.items())!r}".encode()).hexdigest()
-        return ChainScene(self.name, self.description, tuple(stages), self.bodies, self.source, digest, self.run,
-                          self.switch)
-
     def values(self) -> ChainValues:
         """The equivalent wedges' numbers (slope, friction angle, levers) and the bodies', in SI."""
         wedges = [_equivalent(stage) for stage in self.stages]
         return ChainValues(*(tuple(w[k] for w in wedges) for k in range(4)),
                            tuple(b.inertia.value for b in self.bodies), tuple(b.force.value for b in self.bodies),
                            tuple(s.flanks for s in self.stages))
+
+    def value_rules(self) -> list[tuple[Param, Rule]]:
+        """Every value of the chain (stages, bodies, valve, switch; the motor's table and voltage aside) with
+        the rule the scene reader checked it by, in the order the generated module keeps them in p."""
+        out = [(p, RULES[key]) for stage in self.stages for key, p in stage.params.items()]
+        for body in self.bodies:
+            rules = body_rules(body.motion)
+            out += [(p, rules[key]) for key, p in zip(BODY[body.motion], (body.inertia, body.force))]
+            if body.stiffness is not None:
+                out.append((body.stiffness, SPRING))
+            if body.valve is not None:
+                out += [(p, {**VALVE, **SEAT}[key]) for key, p in vars(body.valve).items() if p is not None]
+        if self.switch is not None:
+            rules = switch_rules(self.switch.quantity)
+            out += [(getattr(self.switch, key), rule) for key, rule in rules.items()]
+        return out
 
 
 def _equivalent(stage: Stage) -> tuple[float, float, float, float]:
@@ -152,6 +152,26 @@ def _equivalent(stage: Stage) -> tuple[float, float, float, float]:
     number = lambda expr: float(sp.sympify(expr).subs(at))   # noqa: E731
     return (math.atan(number(wedge.tan_gamma)), math.atan(number(wedge.tan_rho)),
             number(wedge.lever_in), number(wedge.lever_out))
+
+
+def body_rules(motion: str) -> dict[str, Rule]:
+    """A body's inertia (or mass) and torque (or force) rules; a translating body's spring's."""
+    inertia_key, force_key = BODY[motion]
+    quantity = "mass" if motion == st.TRANSLATION else "inertia"
+    return {inertia_key: Rule(quantity, 0.0), force_key: Rule(force_key if force_key == "torque" else "force",
+                                                              default=0.0),
+            **({"stiffness": SPRING} if motion == st.TRANSLATION else {})}
+
+
+def switch_rules(quantity: str) -> dict[str, Rule]:
+    """The torque switch's setting, hysteresis (at most the setting) and delay."""
+    return {"setting": Rule(quantity, 0.0), "hysteresis": Rule(quantity, 0.0, "setting", lo_in=True, default=0.0),
+            **SWITCH_TIMES}
+
+
+def _suffixed(params: dict[str, Param], index: int) -> dict[str, Param]:
+    """Params named key_index (mu_1, force_2): the names of p's slots in the generated module."""
+    return {key: replace(p, name=f"{key}_{index}") for key, p in params.items()}
 
 
 SCENES = Path(__file__).resolve().parent / "scenes"
@@ -200,7 +220,7 @@ class _ChainReader(_Reader):
         kind = self.text(table, "kind", path, tuple(st.kinds()))
         keys = tuple(st.kinds()[kind].keys)
         self.keys(table, path, ("kind", "flanks", *keys))
-        params = self.params(table, path, {key: RULES[key] for key in keys}, f"stage{k}_")
+        params = _suffixed(self.params(table, path, {key: RULES[key] for key in keys}), k)
         for param in params.values():
             if param.free:
                 self.fail(param.key, "free parameters of a chain are not supported yet: give a plain value")
@@ -224,26 +244,23 @@ class _ChainReader(_Reader):
         spring = ("stiffness",) if motion == st.TRANSLATION else ()
         valve = (*VALVE, *SEAT) if last and motion == st.TRANSLATION else ()
         self.keys(table, path, (inertia_key, force_key, *spring, *(("motor",) if j == 0 else ()), *valve))
-        quantity = "mass" if motion == st.TRANSLATION else "inertia"
-        rules = {inertia_key: Rule(quantity, 0.0), force_key: Rule(force_key if force_key == "torque" else "force",
-                                                                   default=0.0), **{key: SPRING for key in spring}}
-        params = self.params(table, path, rules, f"body{j}_")
+        params = _suffixed(self.params(table, path, body_rules(motion)), j)
         for param in params.values():
             if param.free:
                 self.fail(param.key, "free parameters of a chain are not supported yet: give a plain value")
         motor = self.motor(table["motor"], f"{path}.motor") if "motor" in table else None
-        valve = self.valve(table, path, f"body{j}_") if last and motion == st.TRANSLATION else None
+        valve = self.valve(table, path, j) if last and motion == st.TRANSLATION else None
         return Body(motion, params[inertia_key], params[force_key], params.get("stiffness"), motor, valve)
 
-    def valve(self, table: dict, path: str, prefix: str) -> Valve | None:
-        """Packing, differential pressure and seat keys of the last body (None when none is given)."""
+    def valve(self, table: dict, path: str, j: int) -> Valve | None:
+        """Packing, differential pressure and seat keys of the last body j (None when none is given)."""
         if not any(key in table for key in (*VALVE, *SEAT)):
             return None
-        params = self.plain(table, path, VALVE, prefix)
-        seat = self.plain(table, path, SEAT, prefix) if "seat" in table or "seat_stiffness" in table else {}
+        params = _suffixed(self.plain(table, path, VALVE), j)
+        seat = _suffixed(self.plain(table, path, SEAT), j) if "seat" in table or "seat_stiffness" in table else {}
         return Valve(*params.values(), seat.get("seat"), seat.get("seat_stiffness"))
 
-    def plain(self, table: dict, path: str, rules: dict[str, Rule], prefix: str) -> dict[str, Param]:
+    def plain(self, table: dict, path: str, rules: dict[str, Rule], prefix: str = "") -> dict[str, Param]:
         """Params of plain values (a chain has no free parameters yet)."""
         params = self.params(table, path, rules, prefix)
         for param in params.values():
@@ -261,10 +278,8 @@ class _ChainReader(_Reader):
         on = self.text(table, "on", "switch", choices)
         stage = 0 if on == "motor" else int(on.split()[1])
         quantity = "torque" if motions[stage] == st.ROTATION else "force"
-        params = self.plain(table, "switch", {"setting": Rule(quantity, 0.0),
-                                              "hysteresis": Rule(quantity, 0.0, "setting", lo_in=True, default=0.0),
-                                              **SWITCH_TIMES}, "switch_")
-        return Switch(stage, params["setting"], params["hysteresis"], params["delay"])
+        params = self.plain(table, "switch", switch_rules(quantity), "switch_")
+        return Switch(stage, params["setting"], params["hysteresis"], params["delay"], quantity)
 
     def motor(self, table: object, path: str) -> Motor:
         """speed (SI, increasing from >= 0), torque (SI) of 2 to MOTOR_POINTS points; voltage = U / U_n."""

@@ -42,9 +42,8 @@ MAX_SAME_TIME = 8     # decisions at one instant before the run stops
 ChainRecord = namedtuple("ChainRecord", "phases phase_f samples events event_f trip counts")
 INT_MATRIX = types.int64[:, ::1]
 CHAIN_RECORD = types.NamedTuple((INT_MATRIX, MATRIX, MATRIX, INT_MATRIX, MATRIX, VECTOR, INTS), ChainRecord)
-CHAIN_TABLES = types.NamedTuple((INTS, INT_MATRIX, MATRIX, VECTOR, VECTOR, types.float64, types.int64,
-                                 types.float64, types.int64, types.int64, types.int64, types.float64,
-                                 types.float64, types.float64), ChainTables)
+CHAIN_TABLES = types.NamedTuple((INTS, INT_MATRIX, *(types.int64,) * 10, types.float64, types.float64,
+                                 types.float64), ChainTables)
 #: run_chain_at(functions, chain functions (stage_forces, body_forces_into), tables, settings, y, p, record,
 #: chain record, max_events) -> (status, t_stop)
 CHAIN_SIG = types.Tuple((types.int64, types.float64))(ADDRESSES, types.UniTuple(types.int64, 2), CHAIN_TABLES,
@@ -113,13 +112,14 @@ def _slide(fns, run_segment, settings, c, mode, t, y, p, record, i, scratch):
 
 @cache_guard.compile_cached(CHAIN_SIG, error_model="numpy", nogil=True)
 def run_chain_at(functions, chain_addresses, c, settings, y0, p, record, rec, max_events):
-    """The chain's run from (0, y0) under latches p (written) to settings.t_end: phases, events and their
+    """The chain's run from (0, y0) under p (its latches written; its derived slots filled by the module's
+    prepare) to settings.t_end: phases, events and their
     decisions, the trip, into rec; output rows into record.out.y (q0, v0; a row at an event time keeps the
     later phase's value, rows after a stop NaN). Returns (status, t_stop)."""
     fns, run_segment = model_functions(functions), segment_function(functions)
     chain_fns = ChainFunctions(guards_at(chain_addresses[0]), guards_at(chain_addresses[1]))
     out, counters = record.out, record.counters
-    stages, n_guards = c.psi.shape[0], c.guard_direction.shape[1]
+    stages, n_guards = c.stages, c.guard_direction.shape[1]
     w = chain_work(n_guards, stages, c.direction.size, p.size)
     scratch = segment.segment_work(2, n_guards, 0, 0)
     rec.counts[0], rec.counts[1], rec.counts[2] = 0, 0, 0
@@ -136,7 +136,7 @@ def run_chain_at(functions, chain_addresses, c, settings, y0, p, record, rec, ma
             status = INDETERMINATE if outcome == SEVERAL else UNDECIDED
             break
         if mode == RESTING:
-            t_cut = p[c.p_pick] + c.delay if p[c.p_switch] == c.picked else np.inf
+            t_cut = p[c.p_pick] + p[c.p_delay] if p[c.p_switch] == c.picked else np.inf
             _open(rec, RESTING, t, p)
             _close(rec, min(t_cut, t_end))
             for r in range(out.t.size):
@@ -197,5 +197,5 @@ def decide_at(functions, chain_addresses, c, t, y, p, current):
     """The compiled decision (``rules.decide``) called from Python: (outcome, mode) at (t, y) under p."""
     fns = model_functions(functions)
     chain_fns = ChainFunctions(guards_at(chain_addresses[0]), guards_at(chain_addresses[1]))
-    w = chain_work(c.guard_direction.shape[1], c.psi.shape[0], c.direction.size, p.size)
+    w = chain_work(c.guard_direction.shape[1], c.stages, c.direction.size, p.size)
     return decide(fns, chain_fns, c, t, y, p, current, w)

@@ -30,10 +30,12 @@ OUTCOMES = ("unique", "critical", "none", "several")
 SET_ROWS = 64         # rows of an interval set's work array (a merged set holds a few)
 
 #: A chain module's numbers for the decision: per mode its direction, per mode and guard the guard's
-#: direction; per stage Psi_t, Psi_i and its levers; the last body's friction magnitude at rest; the
-#: switch (the stage it measures, -1 none; its delay; the slots of p and its states).
-ChainTables = namedtuple("ChainTables", "direction guard_direction psi lever_in lever_out slack switch_on delay "
-                                        "p_switch p_pick p_seated armed picked tripped")
+#: direction; the number of stages; the slots of p (filled by the module's prepare) of the stages' Psi_t, Psi_i
+#: (two per stage), their levers (one per stage each) and the last body's friction magnitude at rest; the
+#: switch (the stage it measures, -1 none; the slots of its delay, its state and pick-up time, of the seat's
+#: latch; its states).
+ChainTables = namedtuple("ChainTables", "direction guard_direction stages p_psi p_lever_in p_lever_out p_slack "
+                                        "switch_on p_delay p_switch p_pick p_seated armed picked tripped")
 
 #: What a decision writes: guard values, a rate, the bodies' forces, interval sets (two and a cone),
 #: the candidates' modes and a_0, p before the latches moved, the stage forces at a cut.
@@ -123,25 +125,25 @@ def _affine(xs, n, offset, scale, out):
 
 
 @njit(error_model="numpy")
-def rest_holds(c, force, w):
-    """Whether the resting chain holds under the bodies' forces ``force``: the stage-by-stage propagation
-    of ``chain_decision.rest`` from body 0 meets what the last body's load and friction ask of the last
-    stage."""
-    stages = c.psi.shape[0]
+def rest_holds(c, p, force, w):
+    """Whether the resting chain holds under the bodies' forces ``force`` (its numbers from p): the
+    stage-by-stage propagation of ``chain_decision.rest`` from body 0 meets what the last body's load and
+    friction ask of the last stage."""
+    stages = c.stages
     a, b = w.set_a, w.set_b
-    a[0, 0] = a[0, 1] = -force[0] / c.lever_in[0]
+    a[0, 0] = a[0, 1] = -force[0] / p[c.p_lever_in]
     n = 1
     for i in range(stages):
-        n_cone = _forward_cone(c.psi[i, 0], c.psi[i, 1], w.cone)
+        n_cone = _forward_cone(p[c.p_psi + 2 * i], p[c.p_psi + 2 * i + 1], w.cone)
         n = _scaled(a, n, w.cone, n_cone, b)
-        n = _affine(b, n, 0.0, c.lever_out[i], a)
+        n = _affine(b, n, 0.0, p[c.p_lever_out + i], a)
         if i == stages - 1:
-            lo, hi = -force[stages] - c.slack, -force[stages] + c.slack
+            lo, hi = -force[stages] - p[c.p_slack], -force[stages] + p[c.p_slack]
             for j in range(n):
                 if max(a[j, 0], lo) <= min(a[j, 1], hi):
                     return True
             return False
-        n = _affine(a, n, -force[i + 1] / c.lever_in[i + 1], -1.0 / c.lever_in[i + 1], b)
+        n = _affine(a, n, -force[i + 1] / p[c.p_lever_in + i + 1], -1.0 / p[c.p_lever_in + i + 1], b)
         for j in range(n):
             a[j, 0], a[j, 1] = b[j, 0], b[j, 1]
     return False
@@ -153,7 +155,7 @@ def decide(fns, chain_fns, c, t, y, p, current, w):
     rest; ``current`` is the mode the event ended (a CRITICAL outcome takes another). Mode NO_MODE for
     NONE and SEVERAL."""
     v = y[1]
-    stages = c.psi.shape[0]
+    stages = c.stages
     n = 0
     for m in range(c.direction.size):
         d = c.direction[m]
@@ -170,7 +172,7 @@ def decide(fns, chain_fns, c, t, y, p, current, w):
     stuck = False
     if v == 0.0:
         chain_fns.body_forces(0, t, y, p, w.force)
-        stuck = rest_holds(c, w.force, w)
+        stuck = rest_holds(c, p, w.force, w)
     if n + stuck == 0:
         return NONE, NO_MODE
     if n + stuck == 1:

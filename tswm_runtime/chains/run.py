@@ -11,7 +11,8 @@ a flank change, breakaway or rest; no mode or several (a Painleve-type case) sto
 jam factor reaching 0 stops it too (no contact force keeps the stages together).
 
 The torque switch and the valve's seat are latches in the parameter vector p (the module's
-P_NAMES): at their events the seat's contact flips, the switch picks up (its delay starts), drops out
+P_NAMES; after them the scene's values and what the module's ``prepare`` derives from them, which the
+compiled decision reads through the slots in ``chain_tables``): at their events the seat's contact flips, the switch picks up (its delay starts), drops out
 (below setting - hysteresis) or trips (the motor is cut for good); then the mode is decided again with
 the new forces. A resting chain stays at rest: its forces depend on q0 (springs, the seat) and v0 (a
 motor's table), which rest with it, except when a picked-up switch's delay ends while it rests: the
@@ -30,7 +31,7 @@ at a phase end and the maxima taken from these samples are exact.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import cached_property
 
 import numpy as np
@@ -95,15 +96,34 @@ class ChainRun:
     y: np.ndarray
     n_steps: int
     trip: dict | None = None     # t, y, mode, stage forces (None at rest), drive just before the switch cut the motor
+    p: np.ndarray | None = field(default=None, repr=False)   # p at the start: latches, values, derived slots
 
 
-def latches(module, y: np.ndarray, voltage: float | None = None) -> np.ndarray:
-    """p at the start: the switch armed, the seat pressed if the last body starts at or beyond it, the
-    motor's voltage U / U_n (the scene's unless given)."""
+def latches(module, y: np.ndarray, voltage: float | None = None, values: np.ndarray | None = None) -> np.ndarray:
+    """The complete p at the start: the switch armed, the motor's voltage U / U_n (the scene's unless given),
+    the scene's values (PARAM_DEFAULTS unless ``values``, one per PARAM_NAMES, in SI), the slots derived
+    from them (the module's ``prepare``), and the seat pressed if the last body starts at or beyond it."""
     p = np.zeros(len(module.P_NAMES))
-    p[module.P_SEATED] = float(module.HAS_SEAT and module.SPEED_FACTORS[-1] * y[0] >= module.SEAT)
     p[module.P_VOLTAGE] = getattr(module, "MOTOR_VOLTAGE", 1.0) if voltage is None else voltage
+    p[module.P_VALUES:module.P_DERIVED] = module.PARAM_DEFAULTS if values is None else values
+    module.prepare(p)
+    p[module.P_SEATED] = float(module.HAS_SEAT and p[module.P_SPEED + module.STAGES] * y[0] >= p[module.P_SEAT])
     return p
+
+
+def numbers(module, p: np.ndarray) -> Statics:
+    """What p's derived slots say of the chain: per stage (Psi_t, Psi_i) and its levers, the valve's friction
+    magnitude (the forces left empty)."""
+    n = module.STAGES
+    psi = tuple((float(p[module.P_PSI + 2 * k]), float(p[module.P_PSI + 2 * k + 1])) for k in range(n))
+    return Statics(psi, tuple(float(x) for x in p[module.P_LEVER_IN:module.P_LEVER_IN + n]),
+                   tuple(float(x) for x in p[module.P_LEVER_OUT:module.P_LEVER_OUT + n]), (),
+                   float(p[module.P_SLACK]))
+
+
+def speed_factor(module, p: np.ndarray) -> float:
+    """v_N / v_0: the last body's travel per unit of q0."""
+    return float(p[module.P_SPEED + module.STAGES])
 
 
 def _candidates(module, t: float, y: np.ndarray, p: np.ndarray, directions) -> list[Candidate]:
@@ -123,28 +143,26 @@ def decide(module, t: float, y: np.ndarray, p: np.ndarray) -> Decision:
     and rest (the valve's friction holding anything up to its magnitude)."""
     v = y[1]
     directions = (1, -1) if v == 0 else ((1,) if v > 0 else (-1,))
-    statics = Statics(module.PSI, module.LEVER_IN, module.LEVER_OUT,
-                      tuple(float(f) for f in module.body_forces(t, y, p, 0.0)), float(module.LOAD_FRICTION))
+    statics = replace(numbers(module, p), force=tuple(float(f) for f in module.body_forces(t, y, p, 0.0)))
     return decide_numbers(_candidates(module, t, y, p, directions), v, statics)
 
 
 
 
 def chain_tables(module) -> compiled.ChainTables:
-    """The compiled decision's numbers of a chain module (remembered per module)."""
+    """The compiled decision's tables of a chain module: its modes and the slots of p it reads (remembered
+    per module; the numbers themselves are in each run's p)."""
     known = _TABLES.get(module.__name__)
     if known is None or known[0] is not module:
         n_modes = len(module.MODES)
-        ints = dict(switch_on=int(module.SWITCH_ON), p_switch=int(module.P_SWITCH), p_pick=int(module.P_PICK),
-                    p_seated=int(module.P_SEATED))
-        floats = dict(slack=float(module.LOAD_FRICTION), delay=float(module.SWITCH_DELAY), armed=float(module.ARMED),
-                      picked=float(module.PICKED), tripped=float(module.TRIPPED))
+        ints = dict(stages=module.STAGES, p_psi=module.P_PSI, p_lever_in=module.P_LEVER_IN,
+                    p_lever_out=module.P_LEVER_OUT, p_slack=module.P_SLACK, switch_on=module.SWITCH_ON,
+                    p_delay=module.P_DELAY, p_switch=module.P_SWITCH, p_pick=module.P_PICK, p_seated=module.P_SEATED)
         tables = compiled.ChainTables(
             direction=np.array(module.MODE_DIRECTION, np.int64),
             guard_direction=np.array(module.GUARD_DIRECTIONS, np.int64).reshape(n_modes, len(module.GUARDS)),
-            psi=np.array(module.PSI, np.float64).reshape(module.STAGES, 2),
-            lever_in=np.array(module.LEVER_IN, np.float64), lever_out=np.array(module.LEVER_OUT, np.float64),
-            **ints, **floats)
+            **{k: int(v) for k, v in ints.items()}, armed=float(module.ARMED), picked=float(module.PICKED),
+            tripped=float(module.TRIPPED))
         known = _TABLES[module.__name__] = (module, tables, (address(module.stage_forces, GUARDS_SIG),
                                                            address(module.body_forces_into, GUARDS_SIG)))
     return known[1]
@@ -157,6 +175,16 @@ def chain_functions(module) -> tuple[int, int]:
     """The addresses of the module's stage_forces and body_forces_into, as the kernel takes them."""
     chain_tables(module)
     return _TABLES[module.__name__][2]
+
+
+def first_room(max_events: int) -> int:
+    """The phases a run's record has room for at first (twice as many again while a run needs more)."""
+    return min(max_events, 58) + 6
+
+
+def samples_room(phases: int, points: int) -> int:
+    """The samples a record of room for ``phases`` phases and ``points`` output times holds."""
+    return points + 3 * phases
 
 
 def _record(module, t_out: np.ndarray, phases: int, samples: int) -> tuple[Record, kernel.ChainRecord]:
@@ -179,23 +207,39 @@ def _no_step_log(n_params: int) -> StepLog:
 
 def run_chain(module, *, t_end: float, v0: float, rtol: float, atol: float, t_out: np.ndarray,
               method: int = 0, max_steps: int = 100_000, max_events: int = 1000,
-              voltage: float | None = None) -> ChainRun:
+              voltage: float | None = None, values: np.ndarray | None = None) -> ChainRun:
     """Integrate the chain from q0 = 0, v0 to t_end through its mode changes and its switch's and seat's
-    events; ``voltage`` (U / U_n) replaces the scene's motor voltage."""
+    events; ``voltage`` (U / U_n) replaces the scene's motor voltage, ``values`` (one per PARAM_NAMES, SI,
+    checked by the caller) the scene's values."""
     t_out = np.ascontiguousarray(t_out, dtype=np.float64)
     y0 = np.array([0.0, float(v0)])
     settings = Settings(int(method), float(t_end), Tolerances(float(rtol), np.full(2, float(atol)), 0.0, np.inf),
                         int(max_steps))
     args = (entry.functions(method, module), chain_functions(module), chain_tables(module), settings, y0)
-    phases = min(max_events, 58) + 6
+    phases = first_room(max_events)
     while True:   # a record too small for the run's phases and samples: again with twice the room
-        p = latches(module, y0, voltage)
-        record, chain = _record(module, t_out, phases, t_out.size + 3 * phases)
+        p = latches(module, y0, voltage, values)
+        start = p.copy()
+        record, chain = _record(module, t_out, phases, samples_room(phases, t_out.size))
         code, t_stop = kernel.run_chain_at(*args, p, record, chain, max_events)
         if code != kernel.RECORD_FULL:
             break
         phases *= 2
-    return _result(module, code, t_stop, record, chain)
+    result = _result(module, code, t_stop, record, chain)
+    result.p = start
+    return result
+
+
+def run_status(code: int) -> str:
+    """The run's status for the kernel's code: "finished", "indeterminate" (several modes),
+    "inconsistent" (none, or no contact force keeps the stages together), or why the run stopped."""
+    if code == kernel.FINISHED:
+        return "finished"
+    if code == kernel.INDETERMINATE:
+        return "indeterminate"
+    if code in (kernel.UNDECIDED, kernel.SINGULAR, kernel.INCONSISTENT_START):
+        return "inconsistent"
+    return STATUS.get(code, f"status {code}")
 
 
 def _result(module, code: int, t_stop: float, record: Record, chain: kernel.ChainRecord) -> ChainRun:
@@ -208,26 +252,23 @@ def _result(module, code: int, t_stop: float, record: Record, chain: kernel.Chai
         events.append(ChainEvent(float(f[0]), "start" if guard == compiled.START else module.GUARDS[guard],
                                  int(before), None if after == compiled.NO_MODE else int(after),
                                  compiled.OUTCOMES[outcome], (module, f[1:3].copy(), f[3:3 + n_p].copy())))
-    status, message = "finished", ""
+    status, message = run_status(code), ""
     last = events[-1]
     if code in (kernel.UNDECIDED, kernel.INDETERMINATE):
-        status = "indeterminate" if code == kernel.INDETERMINATE else "inconsistent"
         message = last.decision.reason
     elif code == kernel.SINGULAR:
-        status = "inconsistent"
         message = (f"{last.guard} reached 0 in mode {module.MODES[last.from_mode]} at t = {t_stop:.9g} s: no contact "
                    "force keeps the stages together (a Painleve-type inconsistency), not integrated through")
         last.given = Decision("none", (), None, message)
     elif code == kernel.INCONSISTENT_START:
-        status = "inconsistent"
         message = (f"D or the jam factor is <= 0 where mode {module.MODES[phases[-1].mode]} begins at "
                    f"t = {t_stop:.9g} s: no contact force keeps the stages together")
     elif code == kernel.TOO_MANY_EVENTS:
-        status, message = STATUS[code], f"{len(events)} events"
+        message = f"{len(events)} events"
     elif code == kernel.CHATTERING:
-        status, message = STATUS[code], f"{kernel.MAX_SAME_TIME} decisions at t = {t_stop:.9g} s"
+        message = f"{kernel.MAX_SAME_TIME} decisions at t = {t_stop:.9g} s"
     elif code != kernel.FINISHED:
-        status, message = STATUS.get(code, f"status {code}"), f"the integrator stopped at t = {t_stop:.9g} s"
+        message = f"the integrator stopped at t = {t_stop:.9g} s"
     counters = record.counters
     return ChainRun(status, message, float(t_stop), phases, events, record.out.t, record.out.y,
                     int(counters[segment.N_STEPS] + counters[segment.N_REJECTED]), _trip(module, chain.trip))

@@ -23,7 +23,8 @@ def add_parser(sub) -> None:
     simulate.add_argument("scene", help="a shipped scene name (paper, paper-literal, ...), a scene file "
                           "(.toml) or a generated module's .py path")
     simulate.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
-                          help="a free parameter's value: a plain number in SI units (F2=-5000) or a "
+                          help="a free parameter's value (a chain scene: any of its values, mu_1=0.08, and "
+                               "voltage): a plain number in SI units (F2=-5000) or a "
                                "number with a unit of the parameter's quantity (F2='-5 kN', "
                                "m2='200 kg'); repeatable")
     add_setting_options(simulate, SETTING_OPTIONS)
@@ -108,11 +109,9 @@ def _run_chain(args: argparse.Namespace) -> int:
     from tswm_runtime.simulation.chain import plot, simulate_chain, summary
     from tswm_runtime.simulation.simulate import METHODS, SimulationInputError
 
-    if args.set:
-        raise UsageError("--set: a chain scene has no free parameters; change its scene file")
     module, overrides, method = chain_inputs(args, SETTING_OPTIONS)
     try:
-        result = simulate_chain(module, method=METHODS[method], **overrides)
+        result = simulate_chain(module, parse_sets(args.set), method=METHODS[method], **overrides)
     except SimulationInputError as error:
         raise setting_error(error, overrides) from None
     print(f"chain {module.SCENE} ({plural(module.STAGES, 'stage')}, {_origin(args.scene, module)})")

@@ -10,7 +10,7 @@ import sys
 
 from tswm_common.text import printable
 from tswm_runtime.common.words import plural
-from tswm_runtime.sweeps import DEFAULT_CHUNK, DEFAULT_WAIT_FOR_WORKERS
+from tswm_runtime.sweeps import CHAIN_CHUNK, DEFAULT_CHUNK, DEFAULT_WAIT_FOR_WORKERS
 from tswm_runtime.cli.common import (MAX_MESSAGE, UsageError, add_setting_options, chain_inputs, output_directory,
                                      prepare_kernels, run_method, setting_error, setting_overrides)
 
@@ -68,30 +68,37 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _run_chain(args: argparse.Namespace) -> int:
-    """A chain scene: its sizing table over --grid voltage=... mu_k=... (tswm_runtime/sweeps/chain.py)."""
-    import os
-
-    from tswm_common.files import write_atomic
-    from tswm_runtime.simulation.simulate import METHODS
+    """A chain scene: its sizing table over --grid NAME=... of its values and voltage, one module for all
+    cases (tswm_runtime/sweeps/chain.py)."""
+    from tswm_runtime.simulation.simulate import METHODS, SimulationInputError
     from tswm_runtime.sweeps.chain import ChainSweepError, parse_grid, sizing
+    from tswm_runtime.sweeps.sweep import SweepInputError, SweepInterrupted
 
     if args.samples is not None or args.range or args.scheduler:
         raise UsageError("--samples/--range/--scheduler: a chain sweep takes --grid only")
     module, overrides, method = chain_inputs(args, SWEEP_SETTINGS)
     overrides = {k: v for k, v in overrides.items() if v is not None}
     try:
-        grid = parse_grid(args.grid, module.STAGES)
-    except ChainSweepError as error:
+        grid = parse_grid(args.grid, module)
+        outcome = sizing(module, grid, {**overrides, "method": METHODS[method]}, output=args.output,
+                         chunk_size=CHAIN_CHUNK if args.chunk_size is None else args.chunk_size,
+                         progress=not args.no_progress, prune=args.prune, notice=_notice)
+    except (ChainSweepError, SweepInputError) as error:
         raise UsageError(str(error)) from None
-    table = sizing(args.scene, grid, {**overrides, "method": METHODS[method]},
-                   notice=(lambda text: None) if args.no_progress else _notice)
+    except SimulationInputError as error:
+        raise setting_error(error, overrides) from None
+    except SweepInterrupted as stop:
+        print(f"tswm sweep: {stop}", file=sys.stderr)
+        return 1
+    for warning in outcome.warnings:
+        _notice(warning)
+    table = outcome.table
     print(f"chain {module.SCENE}: sizing table, {plural(len(table), 'case')}")
     print(table.to_string(index=False, float_format=lambda x: f"{x:.6g}"))
     counts = table["status"].value_counts()
     print("  status: " + ", ".join(f"{k} {v}" for k, v in counts.items()))
-    if args.output:
-        path = write_atomic(os.path.join(args.output, f"{module.SCENE}-sizing.csv"), table.to_csv(index=False))
-        print(f"  wrote {path}")
+    if outcome.csv is not None:
+        print(f"  wrote {outcome.csv} (and .parquet, .json; chunks in {args.output}/chunks)")
     return 0
 
 
@@ -101,6 +108,7 @@ def _run(args: argparse.Namespace) -> int:
 
     if is_chain(args.scene):
         return _run_chain(args)
+    args.chunk_size = DEFAULT_CHUNK if args.chunk_size is None else args.chunk_size
     spec, cold = prepare_kernels(args.scene, ("integrate", "batch"))
     from tswm_runtime.model.scenes import load_model
     from tswm_runtime.simulation.simulate import SimulationInputError
@@ -189,8 +197,8 @@ def add_parser(sub) -> None:
     sweep.add_argument("--seed", type=int, default=0, help="random seed for --samples (default 0)")
     sweep.add_argument("-o", "--output", metavar="DIR", help="write DIR/chunks/, DIR/SCENE-sweep.parquet, "
                        ".csv and .json (without -o: print the summary only, no resume)")
-    sweep.add_argument("--chunk-size", type=int, default=DEFAULT_CHUNK, metavar="N",
-                       help=f"cases per chunk (default {DEFAULT_CHUNK})")
+    sweep.add_argument("--chunk-size", type=int, metavar="N",
+                       help=f"cases per chunk (default {DEFAULT_CHUNK}; a chain scene's {CHAIN_CHUNK})")
     sweep.add_argument("--scheduler", metavar="ADDRESS",
                        help="run the chunks on a dask.distributed scheduler at ADDRESS; 'local' starts a "
                             "LocalCluster in this process")

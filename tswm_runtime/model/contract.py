@@ -76,20 +76,26 @@ CHAIN_CONSTANTS = {
     "GUARDS": "('D', 'jam', 'N_1', ..., 'N_N', 'v0', 'seat', 'switch', 'delay')",
     "GUARD_DIRECTIONS": "per mode, per guard",
     "OBSERVABLES": "() (the stage forces come from stage_forces)", "RUN": "t_end, v0, rtol, atol, max_steps",
-    "PSI": "per stage (Psi_t, Psi_i) of forward sliding", "LEVER_IN": "per stage", "LEVER_OUT": "per stage",
-    "INERTIA": "per body", "SPEED_FACTORS": "v_j / v_0 per body",
-    "P_NAMES": "('switch', 't_pick', 'seated', 'voltage'): the slots of p, set by the runtime (the first three at "
-               "its events)",
+    "PARAM_NAMES": "the scene's values, slots P_VALUES.. of p", "PARAM_UNITS": "their SI units",
+    "PARAM_KEYS": "their scene keys", "PARAM_DEFAULTS": "the scene's values in SI",
+    "PARAM_RANGES": "per value (lo, hi, lo included, hi included); hi may name another value",
+    "DERIVED": "what prepare(p) derives into the slots P_DERIVED..",
+    "P_NAMES": "every slot of p: the latches ('switch', 't_pick', 'seated', 'voltage'; the first three set by the "
+               "runtime at its events), the values, the derived slots",
+    "P_VALUES": "first value slot", "P_DERIVED": "first derived slot", "P_GAMMA": "per stage its slope",
+    "P_RHO": "per stage its friction angle", "P_PSI": "per stage Psi_t, Psi_i of forward sliding",
+    "P_LEVER_IN": "per stage", "P_LEVER_OUT": "per stage", "P_SPEED": "v_j / v_0 per body",
+    "P_SLACK": "the valve's Coulomb friction magnitude", "P_DELAY": "s from the switch's pick-up to the motor's cut",
+    "P_SEAT": "the seat's travel on the last body (-1: no seat)",
     "SWITCH_ON": "-1: no torque switch, 0: on body 0's drive torque, k: on stage k's force on its output body",
-    "SWITCH_SETTING": "pick-up setting", "SWITCH_HYSTERESIS": "drop-out below setting - hysteresis",
-    "SWITCH_DELAY": "s from pick-up to the motor's cut", "HAS_SEAT": "whether the last body has a seat",
-    "SEAT": "the seat's travel on the last body", "LOAD_FRICTION": "the valve's Coulomb friction magnitude",
+    "HAS_SEAT": "whether the last body has a seat",
 }
 CHAIN_FUNCTIONS = {
     "rhs": "as above", "jac": "as above", "guards": "as above", "observe": "fills nothing",
     "impact": "NaN: nothing collides", "accel": "accel(mode, t, y, p) -> a_0",
     "body_forces": "body_forces(t, y, p, direction) -> (F_0, ..., F_N), the valve's friction against direction",
     "stage_forces": "stage_forces(mode, t, y, p, out): per stage (on its input body, on its output body, N)",
+    "prepare": "prepare(p): the derived slots of p from its values, once per run",
 }
 
 

@@ -56,16 +56,6 @@ def load_chain_model(scene: str | Path) -> ModuleType:
     return load_module(module_for_chain(scene))
 
 
-def load_chain_variant(scene: str | Path, mu: dict[int, float]) -> ModuleType:
-    """The module of a chain scene (file or shipped name) with stage k's friction coefficient mu[k]: derived
-    and generated into the user cache on first use (SymPy), as a sweep over friction needs."""
-    from derivation.chain.scene import load_chain
-    from derivation.model_cache import module_for_chain_scene
-
-    chain = load_chain(str(scene) if _shipped_chain(str(scene)) else Path(scene))
-    return load_module(module_for_chain_scene(chain.with_friction(mu)))
-
-
 def model_spec(scene: str | Path) -> str:
     """A shipped scene name or a generated module's .py path, as ``load_module`` takes it; a scene
     file (.toml) is generated into the user cache first (this imports derivation/ and SymPy)."""

@@ -14,7 +14,8 @@ from types import ModuleType
 
 import numpy as np
 
-from tswm_runtime.chains.run import RESTING, ChainRun, run_chain
+from tswm_runtime.chains.run import RESTING, ChainRun, run_chain, speed_factor
+from tswm_runtime.simulation.chain_values import chain_values
 from tswm_runtime.simulation.drive_train import UNITS, answers, drive_train_lines
 from tswm_runtime.simulation.simulate import (ATOL_RANGE, DEFAULT_MAX_EVENTS, DEFAULT_POINTS, MAX_EVENTS, MAX_POINTS,
                                               MAX_STEPS, RTOL_RANGE, _check, _finite)
@@ -58,6 +59,7 @@ class ChainResult:
     n_steps: int
     answers: dict | None = None  # the drive train's: trip, peak after it, extra travel, hold, stall margin
     samples: tuple = ()          # (t, q0, v0, stage forces) of the sliding phases' samples, NaN between phases
+    p: np.ndarray | None = None  # p at the start: latches, the scene's values as run, derived slots
 
     @property
     def trip(self) -> dict | None:
@@ -96,17 +98,21 @@ def settings(module: ModuleType, overrides: dict) -> dict:
     return run
 
 
-def simulate_chain(module: ModuleType, method: int = 0, **overrides) -> ChainResult:
-    """One run of a chain module by ``method`` (segment.DOPRI5 or ROSENBROCK23); t_end, v0, rtol, atol,
-    max_steps, points, max_events and voltage (the motor's U / U_n) override the scene's."""
-    run = settings(module, overrides)
+def simulate_chain(module: ModuleType, params: dict | None = None, method: int = 0, **overrides) -> ChainResult:
+    """One run of a chain module by ``method`` (segment.DOPRI5 or ROSENBROCK23); ``params`` replace the
+    scene's values by name (PARAM_NAMES and ``voltage``, the motor's U / U_n; numbers in SI or strings with
+    a unit, checked as the scene reader checks them); t_end, v0, rtol, atol, max_steps, points, max_events
+    and voltage override the scene's run."""
+    values, voltage = chain_values(module, params)
+    run = settings(module, {**overrides, **({"voltage": voltage} if voltage is not None else {})})
     t_out = np.linspace(0.0, run["t_end"], run["points"])
     result = run_chain(module, t_end=run["t_end"], v0=run["v0"], rtol=run["rtol"], atol=run["atol"], t_out=t_out,
-                       method=method, max_steps=run["max_steps"], max_events=run["max_events"], voltage=run["voltage"])
+                       method=method, max_steps=run["max_steps"], max_events=run["max_events"], voltage=run["voltage"],
+                       values=values)
     return ChainResult(module.SCENE, result.status, result.message, result.t_stop,
                        tuple(_stage(module, result, k) for k in range(module.STAGES)), _events(module, result),
                        result.t, result.y[:, 0], result.y[:, 1], result.n_steps, answers(module, result, run["voltage"]),
-                       _samples(module, result))
+                       _samples(module, result), result.p)
 
 
 def _samples(module: ModuleType, run: ChainRun) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -128,7 +134,7 @@ def plot(result: ChainResult, module: ModuleType, path) -> object:
     t, q0, v0, forces = result.samples
     stages = [(f"stage {k + 1} ({module.STAGE_KINDS[k]})", UNITS[module.BODY_MOTIONS[k]],
                UNITS[module.BODY_MOTIONS[k + 1]]) for k in range(module.STAGES)]
-    return plot_stages(path, f"{module.SCENE}: {result.status}", t, module.SPEED_FACTORS[-1] * q0, v0, forces,
+    return plot_stages(path, f"{module.SCENE}: {result.status}", t, speed_factor(module, result.p) * q0, v0, forces,
                        stages, result.trip["t"] if result.trip else None)
 
 

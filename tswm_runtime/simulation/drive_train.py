@@ -4,7 +4,7 @@ travel, whether the seat holds after power off (and which stage self-locks), the
 The thrust is the last stage's force on the last body (the stem). Peaks are taken over the sliding
 phases' samples (their ends and output points); after the trip the motor is off, the bodies' forces
 are affine in q0, which is monotone in a sliding phase, so the peak after the trip is exact. A stage
-self-locks when its inverse-tractive FTF Psi_i <= 0 (the module's PSI, derived): tan(gamma) <= the
+self-locks when its inverse-tractive FTF Psi_i <= 0 (derived from the run's p by the module's prepare): tan(gamma) <= the
 effective friction. The stall margin is the motor's pull-out torque at the scene's voltage (the
 table's largest torque times (U/U_n)^2) over the torque the chain needs at the trip: the drive torque
 that holds the thrust at the trip while every stage slides forward tractive at constant speed, from
@@ -13,11 +13,13 @@ bodies' own forces are not counted). Above 1 the motor can reach the trip quasi-
 """
 from __future__ import annotations
 
-import math
 from types import ModuleType
 
+import numpy as np
+
 from tswm_common.chain_decision import internal_forces
-from tswm_runtime.chains.run import RESTING, ChainRun
+from tswm_runtime.chains.batch import VERDICTS, hold_verdict
+from tswm_runtime.chains.run import RESTING, ChainRun, numbers, speed_factor
 
 UNITS = {"rotation": "N m", "translation": "N"}
 
@@ -32,7 +34,8 @@ def answers(module: ModuleType, run: ChainRun, voltage: float | None = None) -> 
            "voltage": getattr(module, "MOTOR_VOLTAGE", None) if voltage is None else voltage}
     if trip is None:
         return out
-    travel = float(module.SPEED_FACTORS[-1] * trip["y"][0])
+    factor = speed_factor(module, run.p)
+    travel = float(factor * trip["y"][0])
     thrust = None if trip["forces"] is None else float(trip["forces"][3 * n - 2])
     out["trip"] = {"t": trip["t"], "thrust": thrust, "drive": trip["drive"], "travel": travel}
     after = [(t, y, f) for phase in run.phases if phase.mode != RESTING and phase.latches[module.P_SWITCH]
@@ -40,15 +43,35 @@ def answers(module: ModuleType, run: ChainRun, voltage: float | None = None) -> 
     if after:
         t, _, forces = max(after, key=lambda s: abs(s[2][3 * n - 2]))
         out["peak_after_trip"] = {"thrust": float(forces[3 * n - 2]), "t": float(t)}
-        out["extra_travel"] = max(float(module.SPEED_FACTORS[-1] * y[0]) for _, y, _ in after) - travel
+        out["extra_travel"] = max(float(factor * y[0]) for _, y, _ in after) - travel
     else:
         out["extra_travel"] = 0.0
     if thrust is not None:
-        out["needed"] = thrust * math.prod(psi_t * r_in / r_out for (psi_t, _), r_in, r_out
-                                           in zip(module.PSI, module.LEVER_IN, module.LEVER_OUT))
+        out["needed"] = float(needed_torque(module, run.p, thrust))
         if out["pull_out"] is not None and out["needed"] > 0:
-            out["stall_margin"] = out["pull_out"] / out["needed"]
+            out["stall_margin"] = float(stall_margin(module, run.p, thrust, out["voltage"]))
     return out
+
+
+def needed_torque(module: ModuleType, p: np.ndarray, thrust):
+    """The drive torque that holds ``thrust`` with every stage sliding forward tractive at constant speed,
+    from the Psi_t and levers in p (the run's p, or one per row with a thrust per row)."""
+    p = np.asarray(p)
+    factor = 1.0
+    for k in range(module.STAGES):
+        psi_t, r_in, r_out = p[..., module.P_PSI + 2 * k], p[..., module.P_LEVER_IN + k], p[..., module.P_LEVER_OUT + k]
+        factor = factor * (psi_t * r_in / r_out)
+    return thrust * factor
+
+
+def stall_margin(module: ModuleType, p: np.ndarray, thrust, voltage):
+    """Pull-out torque at ``voltage`` over the torque ``thrust`` needs (``needed_torque``; numbers or one
+    per row); NaN where that torque is <= 0 or the thrust unknown (NaN), or without a motor."""
+    needed = np.asarray(needed_torque(module, p, thrust), dtype=float)
+    if not hasattr(module, "MOTOR_TORQUE"):
+        return np.full(needed.shape, np.nan)
+    pull_out = float(max(module.MOTOR_TORQUE)) * np.asarray(voltage, dtype=float)**2
+    return np.divide(pull_out, needed, out=np.full(np.broadcast(pull_out, needed).shape, np.nan), where=needed > 0)
 
 
 def _pull_out(module: ModuleType, voltage: float | None) -> float | None:
@@ -61,29 +84,19 @@ def _pull_out(module: ModuleType, voltage: float | None) -> float | None:
 def _holds(module: ModuleType, run: ChainRun) -> dict:
     """After the motor's cut: does the chain rest on its seat at the end, which stages self-lock, and the
     admissible internal forces where every stage is stuck (statically undetermined for two stages or more)."""
-    locking = [k + 1 for k, (_, psi_i) in enumerate(module.PSI) if psi_i <= 0]
+    psi = numbers(module, run.p).psi
+    locking = [k + 1 for k, (_, psi_i) in enumerate(psi) if psi_i <= 0]
     last = run.phases[-1] if run.phases else None
     resting = last is not None and last.mode == RESTING and run.status == "finished"
     seated = bool(module.HAS_SEAT and last is not None and last.latches[module.P_SEATED] > 0.5)
     ever_seated = bool(module.HAS_SEAT and any(p.latches[module.P_SEATED] > 0.5 for p in run.phases))
     rest = next((e.decision for e in reversed(run.events) if e.to_mode == RESTING), None) if resting else None
     undetermined = [list(map(list, xs)) for xs in rest.internal] if rest is not None and module.STAGES > 1 else []
-    if run.trip is None:
-        verdict = "no trip: the motor was not cut"
-    elif not module.HAS_SEAT:
-        verdict = "no seat in the scene"
-    elif run.status != "finished":
-        verdict = f"undecided: the run stopped ({run.status})"
-    elif seated:
-        verdict = ("holds" if locking else "holds, though no stage self-locks") if resting else \
-            "undecided: still moving on the seat at the end of the run"
-    elif ever_seated:
-        verdict = "seat lost: no stage self-locks" if not locking else "seat lost"
-    else:
-        verdict = "rests before the seat (never reached it)" if resting else \
-            "undecided: still moving before the seat at the end of the run"
-    return {"verdict": verdict, "self_locking": locking, "seated": seated, "resting": resting,
-            "undetermined": undetermined}
+    code = hold_verdict(run.trip is not None, bool(module.HAS_SEAT), run.status == "finished", seated, resting,
+                        ever_seated, bool(locking))
+    verdict = VERDICTS[code].format(status=run.status)
+    return {"verdict": verdict, "self_locking": locking, "psi_i": [psi[k - 1][1] for k in locking], "seated": seated,
+            "resting": resting, "undetermined": undetermined}
 
 
 def drive_train_lines(answers: dict, module: ModuleType) -> list[str]:
@@ -107,8 +120,8 @@ def drive_train_lines(answers: dict, module: ModuleType) -> list[str]:
             lines.append(f"    peak thrust after the trip: {peak['thrust']:.6g} {thrust_unit} at t = {peak['t']:.9g} s")
         lines.append(f"    extra travel after the trip: {answers['extra_travel']:.6g} {travel_unit}")
     holds = answers["holds"]
-    locking = ", ".join(f"stage {k} ({module.STAGE_KINDS[k - 1]}, Psi_i = {module.PSI[k - 1][1]:.6g} <= 0)"
-                        for k in holds["self_locking"]) or "none"
+    locking = ", ".join(f"stage {k} ({module.STAGE_KINDS[k - 1]}, Psi_i = {psi_i:.6g} <= 0)"
+                        for k, psi_i in zip(holds["self_locking"], holds["psi_i"])) or "none"
     lines.append(f"    after power off: {holds['verdict']}; self-locking: {locking}")
     if holds["undetermined"]:
         internal = tuple(tuple(map(tuple, xs)) for xs in holds["undetermined"])

@@ -60,13 +60,15 @@ def rows_digest(P: np.ndarray) -> str:
     return hashlib.sha256(repr(P.shape).encode() + P.tobytes()).hexdigest()
 
 
-def chunk_key(module: ModuleType, run: dict, P: np.ndarray, index: int, runtime: str | None = None) -> dict:
-    """Everything a chunk's rows depend on, as a JSON-able dict."""
+def chunk_key(module: ModuleType, run: dict, P: np.ndarray, index: int, runtime: str | None = None,
+              params: tuple[str, ...] | None = None) -> dict:
+    """Everything a chunk's rows depend on, as a JSON-able dict; ``params`` names P's columns (the
+    module's PARAM_NAMES unless given)."""
     return {"format": KEY_FORMAT, "index": index, "scene": module.SCENE,
             "scene_digest": getattr(module, "SCENE_DIGEST", None), "model_digest": model_digest(module),
             "runtime_version": __version__, "runtime_digest": runtime or runtime_digest(),
             "settings": json.loads(json.dumps(run, sort_keys=True, default=str)),
-            "params": list(module.PARAM_NAMES), "rows": int(P.shape[0]), "rows_digest": rows_digest(P)}
+            "params": list(module.PARAM_NAMES if params is None else params), "rows": int(P.shape[0]), "rows_digest": rows_digest(P)}
 
 
 def chunk_name(key: dict) -> str:

@@ -321,8 +321,37 @@ def sweep(model: str | ModuleType, P: np.ndarray, overrides: dict | None = None,
     out = Path(output) if output is not None else None
     runtime = chunks.runtime_digest()
     keys = [chunks.chunk_key(module, run, P[a:b], i, runtime) for i, (a, b) in enumerate(bounds)]
+
+    def compute(todo, finish, bar):
+        if client is None:
+            _run_here(module, P, run, bounds, todo, finish, bar)
+        else:
+            cluster.run_chunks(client, module, P, run, bounds, todo, finish, wait_for_workers=wait_for_workers,
+                               notice=notice, bar=bar)
+
+    frames, outcome = in_chunks(keys, P, bounds, [*module.PARAM_NAMES, *RESULT_COLUMNS], out, compute,
+                                desc=module.SCENE, progress=progress, prune=prune, notice=notice)
+    outcome.rows = (_concat(frames) if frames else case_table(module, P[:0], run))
+    if out is not None:
+        with_units = written_names(module)
+        written = outcome.rows.rename_columns([with_units[name] for name in outcome.rows.column_names])
+        outcome.parquet, outcome.csv = write_tables(out / f"{module.SCENE}-sweep", written, {
+            "scene": module.SCENE, "scene_digest": getattr(module, "SCENE_DIGEST", None),
+            "model_digest": keys[0]["model_digest"] if keys else chunks.model_digest(module),
+            "runtime_version": __version__, "runtime_digest": runtime, "settings": run,
+            "cases": int(P.shape[0]), "chunk_size": chunk_size, "chunks": [chunks.chunk_name(key) for key in keys]})
+    outcome.seconds = time.perf_counter() - start
+    return outcome
+
+
+def in_chunks(keys: list[dict], P: np.ndarray, bounds: list[tuple[int, int]], column_names: list[str],
+              out: Path | None, compute, *, desc: str, progress: bool, prune: bool, notice=None):
+    """(the chunks' tables in order, SweepOutcome without rows): each chunk (rows P[a:b] of ``bounds``,
+    its key in ``keys``) read from out/chunks when its file proves it holds them (``chunks.read_chunk``),
+    the others computed by ``compute(todo, finish, bar)``, which calls ``finish(i, table)`` for each
+    (written there atomically at once). Ctrl-C raises SweepInterrupted, a lost cluster
+    SweepClusterLost, after the chunks finished so far are on disk."""
     names = [chunks.chunk_name(key) for key in keys]
-    column_names = [*module.PARAM_NAMES, *RESULT_COLUMNS]
     tables: dict[int, object] = {}
     outcome = SweepOutcome(rows=None, parquet=None, csv=None)
     todo = []
@@ -355,13 +384,9 @@ def sweep(model: str | ModuleType, P: np.ndarray, overrides: dict | None = None,
     if progress and todo:
         from tqdm import tqdm
 
-        bar = tqdm(total=len(bounds), initial=len(outcome.skipped), unit="chunk", desc=module.SCENE)
+        bar = tqdm(total=len(bounds), initial=len(outcome.skipped), unit="chunk", desc=desc)
     try:
-        if client is None:
-            _run_here(module, P, run, bounds, todo, finish, bar)
-        else:
-            cluster.run_chunks(client, module, P, run, bounds, todo, finish, wait_for_workers=wait_for_workers,
-                               notice=notice, bar=bar)
+        compute(todo, finish, bar)
     except KeyboardInterrupt:
         raise SweepInterrupted(f"interrupted: {_safe(outcome, len(bounds), out)}") from None
     except cluster.ClusterError as error:
@@ -369,22 +394,17 @@ def sweep(model: str | ModuleType, P: np.ndarray, overrides: dict | None = None,
     finally:
         if bar:
             bar.close()
-    frames = [tables[i] for i in range(len(bounds))]
-    outcome.rows = (_concat(frames) if frames else case_table(module, P[:0], run))
-    if out is not None:
-        stem = module.SCENE
-        with_units = written_names(module)
-        written = outcome.rows.rename_columns([with_units[name] for name in outcome.rows.column_names])
-        outcome.parquet = write_atomic(out / f"{stem}-sweep.parquet", columns.parquet(written))
-        outcome.csv = write_atomic(out / f"{stem}-sweep.csv", _csv_bytes(written))
-        write_atomic(out / f"{stem}-sweep.json", json.dumps({
-            "scene": module.SCENE, "scene_digest": getattr(module, "SCENE_DIGEST", None),
-            "model_digest": keys[0]["model_digest"] if keys else chunks.model_digest(module),
-            "runtime_version": __version__, "runtime_digest": runtime, "settings": run,
-            "cases": int(P.shape[0]), "chunk_size": chunk_size, "chunks": names,
-            "columns": written.column_names}, indent=2, default=str))
-    outcome.seconds = time.perf_counter() - start
-    return outcome
+    return [tables[i] for i in range(len(bounds))], outcome
+
+
+def write_tables(stem: Path, written, provenance: dict) -> tuple[Path, Path]:
+    """The table (a pyarrow Table, units in its column names) as STEM.parquet and STEM.csv, and what
+    produced it (``provenance`` and the columns) as STEM.json, each written atomically."""
+    parquet = write_atomic(stem.with_name(stem.name + ".parquet"), columns.parquet(written))
+    csv = write_atomic(stem.with_name(stem.name + ".csv"), _csv_bytes(written))
+    write_atomic(stem.with_name(stem.name + ".json"), json.dumps({**provenance, "columns": written.column_names},
+                                                                 indent=2, default=str))
+    return parquet, csv
 
 
 def _concat(frames: list):
