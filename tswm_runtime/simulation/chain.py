@@ -103,22 +103,38 @@ def simulate_chain(module: ModuleType, method: int = 0, **overrides) -> ChainRes
     t_out = np.linspace(0.0, run["t_end"], run["points"])
     result = run_chain(module, t_end=run["t_end"], v0=run["v0"], rtol=run["rtol"], atol=run["atol"], t_out=t_out,
                        method=method, max_steps=run["max_steps"], max_events=run["max_events"], voltage=run["voltage"])
+    sliding = [phase for phase in result.phases if phase.mode != RESTING]
+    peaks = _peaks(sliding, module.STAGES)
     return ChainResult(module.SCENE, result.status, result.message, result.t_stop,
-                       tuple(_stage(module, result, k) for k in range(module.STAGES)), _events(module, result),
-                       result.t, result.y[:, 0], result.y[:, 1], result.n_steps, answers(module, result, run["voltage"]),
-                       _samples(module, result))
+                       tuple(_stage(module, result, k, peaks[k]) for k in range(module.STAGES)),
+                       _events(module, result), result.t, result.y[:, 0], result.y[:, 1], result.n_steps,
+                       answers(module, result, run["voltage"]), _samples(sliding, module.STAGES))
 
 
-def _samples(module: ModuleType, run: ChainRun) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def _samples(sliding: list, stages: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The sliding phases' samples as arrays (t, q0, v0, forces with 3 columns per stage), a NaN row after
     each phase so that plotted lines break where the chain rests or a force jumps."""
-    rows = []
-    for phase in run.phases:
-        if phase.mode != RESTING:
-            rows += [(t, *y, *forces) for t, y, forces in phase.samples]
-            rows.append((phase.t_end, *[np.nan] * (2 + 3 * module.STAGES)))
-    table = np.array(rows, dtype=float).reshape(-1, 3 + 3 * module.STAGES)
+    width = 3 + 3 * stages
+    breaks = np.full((len(sliding), width), np.nan)
+    breaks[:, 0] = [phase.t_end for phase in sliding]
+    table = np.concatenate([part for j, phase in enumerate(sliding) for part in (phase.table, breaks[j:j + 1])]
+                           or [np.empty((0, width))])
     return table[:, 0], table[:, 1], table[:, 2], table[:, 3:]
+
+
+def _peaks(sliding: list, stages: int) -> list[dict]:
+    """Per stage, FORCES -> Peak over the sliding phases' samples (None: no samples): the first sample of
+    largest magnitude (a NaN first sample stays the peak, later NaNs never are, as comparisons have it)."""
+    table = np.concatenate([phase.table for phase in sliding] or [np.empty((0, 3 + 3 * stages))])
+    if table.shape[0] == 0:
+        return [dict.fromkeys(FORCES) for _ in range(stages)]
+    forces = table[:, 3:]
+    size = np.abs(forces)
+    size[np.isnan(size)] = -1.0
+    rows = np.argmax(size, axis=0)
+    rows[np.isnan(forces[0])] = 0
+    values, times = forces[rows, np.arange(forces.shape[1])].tolist(), table[rows, 0].tolist()
+    return [{name: Peak(values[3 * k + j], times[3 * k + j]) for j, name in enumerate(FORCES)} for k in range(stages)]
 
 
 def plot(result: ChainResult, module: ModuleType, path) -> object:
@@ -136,20 +152,14 @@ def _regime(module: ModuleType, mode: int, k: int) -> tuple[str, str]:
     return ("resting", "") if mode == RESTING else (module.MODE_REGIMES[mode][k], module.MODE_FLANKS[mode][k])
 
 
-def _stage(module: ModuleType, run: ChainRun, k: int) -> StageSummary:
+def _stage(module: ModuleType, run: ChainRun, k: int, peaks: dict) -> StageSummary:
     phases: list[StagePhase] = []
-    peaks: dict = {name: None for name in FORCES}
     for phase in run.phases:
         regime, flank = _regime(module, phase.mode, k)
         if phases and (phases[-1].regime, phases[-1].flank) == (regime, flank):
             phases[-1] = StagePhase(regime, flank, phases[-1].t_start, phase.t_end)
         else:
             phases.append(StagePhase(regime, flank, phase.t_start, phase.t_end))
-        for t, _, forces in phase.samples:
-            for j, name in enumerate(FORCES):
-                value = float(forces[3 * k + j])
-                if peaks[name] is None or abs(value) > abs(peaks[name].value):
-                    peaks[name] = Peak(value, t)
     return StageSummary(module.STAGE_KINDS[k], tuple(phases), tuple(p.t_start for p in phases[1:]), peaks)
 
 
