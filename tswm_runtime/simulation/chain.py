@@ -9,13 +9,15 @@ stages or more (the decision gives their admissible intervals) and are not count
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
+from functools import cached_property
 from types import ModuleType
 
 import numpy as np
 
 from tswm_runtime.chains.run import RESTING, ChainRun, run_chain
-from tswm_runtime.simulation.drive_train import UNITS, answers, drive_train_lines
+from tswm_runtime.simulation.drive_train import UNITS, drive_train_lines
+from tswm_runtime.simulation.drive_train import answers as drive_train_answers
 from tswm_runtime.simulation.simulate import (ATOL_RANGE, DEFAULT_MAX_EVENTS, DEFAULT_POINTS, MAX_EVENTS, MAX_POINTS,
                                               MAX_STEPS, RTOL_RANGE, _check, _finite)
 
@@ -46,18 +48,41 @@ class StageSummary:
 
 @dataclass(frozen=True)
 class ChainResult:
+    """One chain run; its per-stage summaries, the drive train's answers and the samples' table are
+    built from the run on first access (a caller that reads the outcome alone never builds them)."""
+
     scene: str
     status: str
     message: str
     t_stop: float
-    stages: tuple[StageSummary, ...]
     events: tuple[EventRow, ...]  # t, guard, from, to (None: stop), outcome, reason
     t: np.ndarray
     q0: np.ndarray
     v0: np.ndarray
     n_steps: int
-    answers: dict | None = None  # the drive train's: trip, peak after it, extra travel, hold, stall margin
-    samples: tuple = ()          # (t, q0, v0, stage forces) of the sliding phases' samples, NaN between phases
+    run: ChainRun = field(repr=False, compare=False)
+    module: ModuleType = field(repr=False, compare=False)
+    voltage: float | None = None  # the run's U / U_n (None: the scene's)
+
+    @cached_property
+    def stages(self) -> tuple[StageSummary, ...]:
+        """Per stage its regimes, switch times and force peaks while sliding."""
+        peaks = _peaks(self._sliding, self.module.STAGES)
+        return tuple(_stage(self.module, self.run, k, peaks[k]) for k in range(self.module.STAGES))
+
+    @cached_property
+    def answers(self) -> dict:
+        """The drive train's: trip, peak after it, extra travel, hold, stall margin."""
+        return drive_train_answers(self.module, self.run, self.voltage)
+
+    @cached_property
+    def samples(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(t, q0, v0, stage forces) of the sliding phases' samples, NaN between phases."""
+        return _samples(self._sliding, self.module.STAGES)
+
+    @property
+    def _sliding(self) -> list:
+        return [phase for phase in self.run.phases if phase.mode != RESTING]
 
     @property
     def trip(self) -> dict | None:
@@ -103,12 +128,8 @@ def simulate_chain(module: ModuleType, method: int = 0, **overrides) -> ChainRes
     t_out = np.linspace(0.0, run["t_end"], run["points"])
     result = run_chain(module, t_end=run["t_end"], v0=run["v0"], rtol=run["rtol"], atol=run["atol"], t_out=t_out,
                        method=method, max_steps=run["max_steps"], max_events=run["max_events"], voltage=run["voltage"])
-    sliding = [phase for phase in result.phases if phase.mode != RESTING]
-    peaks = _peaks(sliding, module.STAGES)
-    return ChainResult(module.SCENE, result.status, result.message, result.t_stop,
-                       tuple(_stage(module, result, k, peaks[k]) for k in range(module.STAGES)),
-                       _events(module, result), result.t, result.y[:, 0], result.y[:, 1], result.n_steps,
-                       answers(module, result, run["voltage"]), _samples(sliding, module.STAGES))
+    return ChainResult(module.SCENE, result.status, result.message, result.t_stop, _events(module, result), result.t,
+                       result.y[:, 0], result.y[:, 1], result.n_steps, result, module, run["voltage"])
 
 
 def _samples(sliding: list, stages: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
