@@ -235,3 +235,35 @@ def test_the_shipped_motor_settles_where_it_meets_the_load_through_both_stages(c
     assert result.status == "finished"
     assert [(p.regime, p.flank) for s in result.stages for p in s.phases] == [("tractive", "a")] * 2
     assert result.v0[-1] == pytest.approx(steady, rel=1e-7)
+
+
+def test_a_force_peak_is_the_first_sample_of_largest_magnitude_over_the_sliding_phases():
+    """By hand over two sliding phases' samples (t, q0, v0, one stage's three forces): input -3 at t = 2
+    (the later -3 at t = 4 is as large, not larger), output 5 at t = 3 (the NaN at t = 4 is never a peak),
+    normal NaN at t = 1 (a NaN first sample is compared with nothing and stays, as comparisons have it)."""
+    from types import SimpleNamespace
+
+    from tswm_runtime.simulation.chain import _peaks
+
+    first = np.array([[1.0, 0, 0, 1.0, 2.0, np.nan], [2.0, 0, 0, -3.0, 1.0, 7.0]])
+    second = np.array([[3.0, 0, 0, 2.0, 5.0, 9.0], [4.0, 0, 0, 3.0, np.nan, -9.5]])
+    [peaks] = _peaks([SimpleNamespace(table=first), SimpleNamespace(table=second)], 1)
+    assert (peaks["input"].value, peaks["input"].t) == (-3.0, 2.0)
+    assert (peaks["output"].value, peaks["output"].t) == (5.0, 3.0)
+    assert math.isnan(peaks["normal"].value) and peaks["normal"].t == 1.0
+    assert _peaks([], 2) == [dict.fromkeys(("input", "output", "normal"))] * 2
+
+
+def test_a_result_read_for_its_outcome_builds_no_summaries(chain_module, monkeypatch):
+    """The stages' summaries, the drive train's answers and the samples' table are built on first access:
+    a caller reading the outcome (a sweep's case, the bench) never pays for them."""
+    from tswm_runtime.simulation import chain as simulation
+
+    def unread(*_):
+        raise AssertionError("built though not read")
+    for name in ("_peaks", "_stage", "_samples", "drive_train_answers"):
+        monkeypatch.setattr(simulation, name, unread)
+    result = simulate_chain(chain_module(wedges("two-switching", **SWITCHING)), **TIGHT)
+    assert result.status == "finished" and result.events[0]["guard"] == "start"
+    with pytest.raises(AssertionError, match="not read"):
+        result.stages

@@ -243,15 +243,18 @@ def run_status(code: int) -> str:
 
 
 def _result(module, code: int, t_stop: float, record: Record, chain: kernel.ChainRecord) -> ChainRun:
-    n_phases, _, n_events = chain.counts
+    """The run from its records; phases and events keep views into them (a run's records are its own)."""
+    n_phases, _, n_events = chain.counts.tolist()
     n_p = len(module.P_NAMES)
-    phases = [Phase(int(mode), float(f[0]), float(f[1]), f[2:].copy(), chain.samples[s0:s1])
-              for (mode, s0, s1), f in zip(chain.phases[:n_phases], chain.phase_f[:n_phases])]
-    events = []
-    for (guard, before, after, outcome), f in zip(chain.events[:n_events], chain.event_f[:n_events]):
-        events.append(ChainEvent(float(f[0]), "start" if guard == compiled.START else module.GUARDS[guard],
-                                 int(before), None if after == compiled.NO_MODE else int(after),
-                                 compiled.OUTCOMES[outcome], (module, f[1:3].copy(), f[3:3 + n_p].copy())))
+    phase_f, event_f = chain.phase_f, chain.event_f
+    times = phase_f[:n_phases, :2].tolist()
+    phases = [Phase(mode, *times[j], phase_f[j, 2:], chain.samples[s0:s1])
+              for j, (mode, s0, s1) in enumerate(chain.phases[:n_phases].tolist())]
+    times = event_f[:n_events, 0].tolist()
+    events = [ChainEvent(times[e], "start" if guard == compiled.START else module.GUARDS[guard], before,
+                         None if after == compiled.NO_MODE else after, compiled.OUTCOMES[outcome],
+                         (module, event_f[e, 1:3], event_f[e, 3:3 + n_p]))
+              for e, (guard, before, after, outcome) in enumerate(chain.events[:n_events].tolist())]
     status, message = run_status(code), ""
     last = events[-1]
     if code in (kernel.UNDECIDED, kernel.INDETERMINATE):

@@ -9,14 +9,16 @@ stages or more (the decision gives their admissible intervals) and are not count
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
+from functools import cached_property
 from types import ModuleType
 
 import numpy as np
 
 from tswm_runtime.chains.run import RESTING, ChainRun, run_chain, speed_factor
 from tswm_runtime.simulation.chain_values import chain_values
-from tswm_runtime.simulation.drive_train import UNITS, answers, drive_train_lines
+from tswm_runtime.simulation.drive_train import UNITS, drive_train_lines
+from tswm_runtime.simulation.drive_train import answers as drive_train_answers
 from tswm_runtime.simulation.simulate import (ATOL_RANGE, DEFAULT_MAX_EVENTS, DEFAULT_POINTS, MAX_EVENTS, MAX_POINTS,
                                               MAX_STEPS, RTOL_RANGE, _check, _finite)
 
@@ -47,19 +49,46 @@ class StageSummary:
 
 @dataclass(frozen=True)
 class ChainResult:
+    """One chain run; its per-stage summaries, the drive train's answers and the samples' table are
+    built from the run on first access (a caller that reads the outcome alone never builds them)."""
+
     scene: str
     status: str
     message: str
     t_stop: float
-    stages: tuple[StageSummary, ...]
     events: tuple[EventRow, ...]  # t, guard, from, to (None: stop), outcome, reason
     t: np.ndarray
     q0: np.ndarray
     v0: np.ndarray
     n_steps: int
-    answers: dict | None = None  # the drive train's: trip, peak after it, extra travel, hold, stall margin
-    samples: tuple = ()          # (t, q0, v0, stage forces) of the sliding phases' samples, NaN between phases
-    p: np.ndarray | None = None  # p at the start: latches, the scene's values as run, derived slots
+    run: ChainRun = field(repr=False, compare=False)
+    module: ModuleType = field(repr=False, compare=False)
+    voltage: float | None = None  # the run's U / U_n (None: the scene's)
+
+    @cached_property
+    def stages(self) -> tuple[StageSummary, ...]:
+        """Per stage its regimes, switch times and force peaks while sliding."""
+        peaks = _peaks(self._sliding, self.module.STAGES)
+        return tuple(_stage(self.module, self.run, k, peaks[k]) for k in range(self.module.STAGES))
+
+    @cached_property
+    def answers(self) -> dict:
+        """The drive train's: trip, peak after it, extra travel, hold, stall margin."""
+        return drive_train_answers(self.module, self.run, self.voltage)
+
+    @cached_property
+    def samples(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(t, q0, v0, stage forces) of the sliding phases' samples, NaN between phases."""
+        return _samples(self._sliding, self.module.STAGES)
+
+    @property
+    def p(self) -> np.ndarray:
+        """p at the start: latches, the scene's values as run, derived slots."""
+        return self.run.p
+
+    @property
+    def _sliding(self) -> list:
+        return [phase for phase in self.run.phases if phase.mode != RESTING]
 
     @property
     def trip(self) -> dict | None:
@@ -109,22 +138,34 @@ def simulate_chain(module: ModuleType, params: dict | None = None, method: int =
     result = run_chain(module, t_end=run["t_end"], v0=run["v0"], rtol=run["rtol"], atol=run["atol"], t_out=t_out,
                        method=method, max_steps=run["max_steps"], max_events=run["max_events"], voltage=run["voltage"],
                        values=values)
-    return ChainResult(module.SCENE, result.status, result.message, result.t_stop,
-                       tuple(_stage(module, result, k) for k in range(module.STAGES)), _events(module, result),
-                       result.t, result.y[:, 0], result.y[:, 1], result.n_steps, answers(module, result, run["voltage"]),
-                       _samples(module, result), result.p)
+    return ChainResult(module.SCENE, result.status, result.message, result.t_stop, _events(module, result), result.t,
+                       result.y[:, 0], result.y[:, 1], result.n_steps, result, module, run["voltage"])
 
 
-def _samples(module: ModuleType, run: ChainRun) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def _samples(sliding: list, stages: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The sliding phases' samples as arrays (t, q0, v0, forces with 3 columns per stage), a NaN row after
     each phase so that plotted lines break where the chain rests or a force jumps."""
-    rows = []
-    for phase in run.phases:
-        if phase.mode != RESTING:
-            rows += [(t, *y, *forces) for t, y, forces in phase.samples]
-            rows.append((phase.t_end, *[np.nan] * (2 + 3 * module.STAGES)))
-    table = np.array(rows, dtype=float).reshape(-1, 3 + 3 * module.STAGES)
+    width = 3 + 3 * stages
+    breaks = np.full((len(sliding), width), np.nan)
+    breaks[:, 0] = [phase.t_end for phase in sliding]
+    table = np.concatenate([part for j, phase in enumerate(sliding) for part in (phase.table, breaks[j:j + 1])]
+                           or [np.empty((0, width))])
     return table[:, 0], table[:, 1], table[:, 2], table[:, 3:]
+
+
+def _peaks(sliding: list, stages: int) -> list[dict]:
+    """Per stage, FORCES -> Peak over the sliding phases' samples (None: no samples): the first sample of
+    largest magnitude (a NaN first sample stays the peak, later NaNs never are, as comparisons have it)."""
+    table = np.concatenate([phase.table for phase in sliding] or [np.empty((0, 3 + 3 * stages))])
+    if table.shape[0] == 0:
+        return [dict.fromkeys(FORCES) for _ in range(stages)]
+    forces = table[:, 3:]
+    size = np.abs(forces)
+    size[np.isnan(size)] = -1.0
+    rows = np.argmax(size, axis=0)
+    rows[np.isnan(forces[0])] = 0
+    values, times = forces[rows, np.arange(forces.shape[1])].tolist(), table[rows, 0].tolist()
+    return [{name: Peak(values[3 * k + j], times[3 * k + j]) for j, name in enumerate(FORCES)} for k in range(stages)]
 
 
 def plot(result: ChainResult, module: ModuleType, path) -> object:
@@ -142,20 +183,14 @@ def _regime(module: ModuleType, mode: int, k: int) -> tuple[str, str]:
     return ("resting", "") if mode == RESTING else (module.MODE_REGIMES[mode][k], module.MODE_FLANKS[mode][k])
 
 
-def _stage(module: ModuleType, run: ChainRun, k: int) -> StageSummary:
+def _stage(module: ModuleType, run: ChainRun, k: int, peaks: dict) -> StageSummary:
     phases: list[StagePhase] = []
-    peaks: dict = {name: None for name in FORCES}
     for phase in run.phases:
         regime, flank = _regime(module, phase.mode, k)
         if phases and (phases[-1].regime, phases[-1].flank) == (regime, flank):
             phases[-1] = StagePhase(regime, flank, phases[-1].t_start, phase.t_end)
         else:
             phases.append(StagePhase(regime, flank, phase.t_start, phase.t_end))
-        for t, _, forces in phase.samples:
-            for j, name in enumerate(FORCES):
-                value = float(forces[3 * k + j])
-                if peaks[name] is None or abs(value) > abs(peaks[name].value):
-                    peaks[name] = Peak(value, t)
     return StageSummary(module.STAGE_KINDS[k], tuple(phases), tuple(p.t_start for p in phases[1:]), peaks)
 
 
