@@ -1,6 +1,7 @@
 """`tswm paper` on first contact: it says what it does before any heavy work, and its progress
 bar moves through every stage, compiling included."""
 import io
+import os
 import subprocess
 import sys
 
@@ -122,3 +123,25 @@ def test_cli_exits_1_naming_the_second_process_when_it_fails(tmp_path, monkeypat
     assert main(["paper", "-o", str(tmp_path), "--no-derivation", "--no-progress"]) == 1
     err = capsys.readouterr().err
     assert "tswm paper: error: the second process" in err and "no_such_scene" in err
+
+
+# The first process's share of a cold compile, with numba's jit off (nothing compiles): which kernel
+# modules it imports.
+FIRST_PART = """
+import sys
+from tswm_runtime.cli import paper
+paper._compile_first_part()
+print(" ".join(sorted(m for m in sys.modules if m.startswith("tswm_runtime.hybrid."))))
+"""
+
+
+def test_first_process_compiles_the_entry_without_the_segment_kernel():
+    """The first process compiles the machine's entry (integrate_at) before it waits for the second,
+    which compiles the segment kernel meanwhile: importing entry must not import the segment kernel
+    (it would compile it here too, or wait for it)."""
+    run = subprocess.run([sys.executable, "-c", FIRST_PART], capture_output=True, text=True,
+                         env={**os.environ, "NUMBA_DISABLE_JIT": "1"})
+    assert run.returncode == 0, run.stderr
+    imported = run.stdout.split()
+    assert "tswm_runtime.hybrid.entry" in imported and "tswm_runtime.hybrid.machine" in imported
+    assert "tswm_runtime.hybrid.segments" not in imported

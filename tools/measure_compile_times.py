@@ -6,7 +6,7 @@ fresh NUMBA_CACHE_DIR:
 
     segment       import hybrid.segments (the segment kernel run_segment, part of "integrate";
                   ``tswm paper`` compiles it in its second process), everything cold
-    integrate     import hybrid.entry and hybrid.rows (compiles integrate_hybrid, run_segment,
+    integrate     import hybrid.entry, hybrid.rows and hybrid.segments (compiles integrate_hybrid, run_segment,
                   integrate_at, fill_rows, states_at and no_jacobian), everything cold
     batch         import hybrid.batch (run_batch, parallel) with the integrate group cached
     METHOD        segment.attempt_function(METHOD): the step of dopri5, rosenbrock23, rodas4, with the
@@ -60,7 +60,8 @@ def main() -> int:
         seconds["segment"] = timed("import tswm_runtime.hybrid.segments", cache, "import numpy, numba")
         print(f"segment {seconds['segment']:.1f} s", flush=True)
     with tempfile.TemporaryDirectory() as cache:
-        seconds["integrate"] = timed("import tswm_runtime.hybrid.entry, tswm_runtime.hybrid.rows", cache,
+        seconds["integrate"] = timed("import tswm_runtime.hybrid.entry, tswm_runtime.hybrid.rows, "
+                                     "tswm_runtime.hybrid.segments", cache,
                                      "import numpy, numba")
         print(f"integrate {seconds['integrate']:.1f} s", flush=True)
         seconds["batch"] = timed("import tswm_runtime.hybrid.batch", cache,

@@ -76,11 +76,13 @@ def _cold_parts() -> tuple[dict[str, float], str | None]:
 
 
 def _compile_first_part() -> None:
-    """This process's share of a cold compile (compiled on import, else loaded): the mode machine
-    and the output rows, then the models not in plan.BACKGROUND_SCENES. Not the segment kernel
-    (``hybrid.segments``, imported by ``hybrid.entry``): the second process compiles it meanwhile."""
+    """This process's share of a cold compile (compiled on import, else loaded): the mode machine,
+    the output rows and the machine's entry (``hybrid.entry``), then the models not in
+    plan.BACKGROUND_SCENES. Not the segment kernel (``hybrid.segments``, which entry imports at its
+    first run only): the second process compiles it meanwhile."""
     import tswm_runtime.hybrid.machine  # noqa: F401
     import tswm_runtime.hybrid.rows  # noqa: F401
+    import tswm_runtime.hybrid.entry  # noqa: F401
     from tswm_runtime.model.contract import load_module
     from tswm_runtime.paper import plan
 

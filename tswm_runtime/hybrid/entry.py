@@ -27,7 +27,6 @@ from numba import types
 
 from tswm_runtime.hybrid.addressed import ADDRESSES, model_functions, segment_function
 from tswm_runtime.hybrid.machine import HYBRID_SIG, INVALID_INPUT, integrate_hybrid
-from tswm_runtime.hybrid.segments import run_segment
 from tswm_runtime.jit import cache_guard
 from tswm_runtime.integration import segment
 from tswm_runtime.jit.addresses import function_at
@@ -170,6 +169,10 @@ def functions(method: int, model) -> tuple:
     key = (method, model.rhs, model.jac, model.guards, model.observe, model.impact)
     known = _FUNCTIONS.get(key)
     if known is None:
+        # imported here, not with this module: integrate_at compiles without the segment kernel (``tswm
+        # paper`` compiles the two in its two processes at once)
+        from tswm_runtime.hybrid.segments import run_segment
+
         attempt, stiff = segment.method_steps(method)  # compiled, or loaded from the cache, on first use
         known = (address(integrate_hybrid, HYBRID_SIG), jit_address(integrate_hybrid, HYBRID_SIG),
                  getattr(attempt, "address", attempt),  # jit off: the function itself

@@ -458,7 +458,8 @@ def _rising_to_end(fns, seg, k, mon, s):
     v_a = _window_value(fns, seg, k, t_a, s)
     slope_a = (_window_value(fns, seg, k, t_a + d, s) - v_a) * (width / d)
     slope_b = (v_hi - _window_value(fns, seg, k, t_hi - d, s)) * (width / d)
-    return -events.hermite_lowest(-1.0, v_a, v_hi, slope_a, slope_b) <= v_hi
+    # s = -1 as an int64, the type clear_of_zero's guard signs give it: one compiled hermite_lowest, not two
+    return -events.hermite_lowest(-1, v_a, v_hi, slope_a, slope_b) <= v_hi
 
 
 @njit(error_model="numpy")

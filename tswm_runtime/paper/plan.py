@@ -11,8 +11,9 @@ SCENES = {"consistent": "paper", "literal": "paper-literal", "runup": "paper-run
           "lostmotion": "paper-lostmotion"}   # reading key -> its shipped scene
 #: The scenes whose models the second process compiles (beside the segment kernel and the dopri5 step);
 #: the first compiles the others after its kernels, so that both have about as much to compile (a cold
-#: run measured: the segment kernel 31 s CPU, the mode machine 22 s, the sweep kernel 5.5 s, a model 3-4 s).
-BACKGROUND_SCENES = ("paper",)
+#: run measured, CPU: the segment kernel 32.8 s and the dopri5 step 1.6 s in the second; the mode machine
+#: 20.7 s, the sweep kernel 5.7 s, states_at 2.8 s and the entry 2.5 s in the first; a model 3.6-4.8 s).
+BACKGROUND_SCENES = ("paper", "paper-runup")
 
 KERNELS, BATCH, MODELS = ("the mode machine and models", "the sweep kernel",
                           "the segment kernel, the dopri5 step and models (second process)")

@@ -211,6 +211,7 @@ def compile_into_cache(groups, spec) -> None:
     from tswm_runtime.simulation.simulate import METHODS
     from tswm_runtime.integration import segment
     from tswm_runtime.model.contract import load_module
+    import tswm_runtime.hybrid.segments  # noqa: F401  (the segment kernel: entry imports it at its first run only)
 
     if "batch" in groups:
         import tswm_runtime.hybrid.batch  # noqa: F401
