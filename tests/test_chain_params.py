@@ -80,3 +80,15 @@ def test_tswm_simulate_prints_the_values_it_set(capsys):
 
     assert main(["simulate", "mov", "--set", "mu_1=0.08", "--set", "force_2=-5 kN", "--set", "voltage=0.9"]) == 0
     assert "  values set: mu_1 = 0.08, force_2 = -5000 N, voltage = 0.9\n" in capsys.readouterr().out
+
+
+def test_modes_that_differ_in_a_stages_regime_share_their_functions():
+    """The shipped mov module: its 8 sliding modes (2 directions x 2 regimes x 2 stages) call one accel, one
+    contact and one stage_forces function, each stage's friction angle signed by its regime (rho_sign_k)."""
+    import re
+    from pathlib import Path
+
+    source = (Path(__file__).resolve().parents[1] / "generated" / "mov.py").read_text()
+    assert [len(re.findall(rf"^def {name}_\d+\(t, y, p, direction, rho_sign_1, rho_sign_2\):", source, re.M))
+            for name in ("accel", "contact", "stage_forces")] == [1, 1, 1]
+    assert "rho_2 = rho_sign_2*p[D_rho_2]" in source
