@@ -106,13 +106,21 @@ def scene_module(module_once):
 
 @pytest.fixture(scope="session")
 def chain_module(module_once):
-    """chain_module(toml_text) -> the generated, imported chain module (compiled once per test run)."""
+    """chain_module(toml_text) -> the chain module of the text's scene: one generated and compiled module per
+    chain structure (its source but for the scene's name, values and run: tests/chains.py ``structure``),
+    shared by every text of that structure, with the text's own constants (its values as PARAM_DEFAULTS,
+    its run, its name) in place of the first text's."""
     from derivation.chain.codegen import generate_chain_module
     from derivation.chain.scene import parse_chain
+    from tests.chains import structure, with_constants
 
-    def write(text, folder):
-        chain = parse_chain(text, "test chain")
-        path = folder / f"{chain.name.replace('-', '_')}.py"
-        path.write_text(generate_chain_module(chain))
-        return path
-    return lambda text: module_once(text, lambda folder: write(text, folder))
+    def load(text):
+        source = generate_chain_module(parse_chain(text, "test chain"))
+        key, own = structure(source)
+
+        def write(folder):
+            path = folder / f"chain_{key[:16]}.py"
+            path.write_text(source)
+            return path
+        return with_constants(module_once(key, write), own)
+    return load

@@ -97,9 +97,10 @@ def _mode(module, direction: int, regime: str) -> int:
                 if d == direction and set(r) == {regime})
 
 
-def _stage_forces(module, mode: int, t: float, y) -> np.ndarray:
+def _stage_forces(module, mode: int, t: float, y, p: np.ndarray) -> np.ndarray:
+    """The module's stage forces in ``mode`` at (t, y) under the run's p (its values and derived slots)."""
     out = np.empty(3 * module.STAGES)
-    module.stage_forces(mode, t, np.asarray(y, float), np.empty(0), out)
+    module.stage_forces(mode, t, np.asarray(y, float), p, out)
     return out
 
 
@@ -123,7 +124,7 @@ def test_steady_efficiency_of_each_stage_and_of_the_chain(chain_module, flow):
     assert np.max(np.abs(result.v0 - direction * SPEED)) <= 1e-8 * SPEED
     mode = _mode(module, direction, regime)
     for t, q0, v0 in zip(result.t, result.q0, result.v0):
-        forces = _stage_forces(module, mode, t, (q0, v0))
+        forces = _stage_forces(module, mode, t, (q0, v0), result.p)
         measured = []
         for k in range(3):
             on_input, on_output = forces[3 * k] * hand.speed(k), forces[3 * k + 1] * hand.speed(k + 1)
@@ -204,7 +205,7 @@ def test_kinetic_energy_change_is_input_work_less_each_stages_friction_work(chai
     assert result.status == "finished"
     assert [len(s.switches) for s in result.stages] == [2, 2] and any(e["guard"] == "v0" for e in result.events)
     speed = np.cumprod([1.0, math.tan(GAMMA[0]), math.tan(GAMMA[1])])
-    forces = np.array([_stage_forces(module, m, t, (q, v))
+    forces = np.array([_stage_forces(module, m, t, (q, v), result.p)
                        for m, t, q, v in zip(_modes_at(module, result), result.t, result.q0, result.v0)])
     dq0 = np.diff(result.q0)
     mid = lambda x: (x[1:] + x[:-1]) / 2           # noqa: E731  trapezoid in q_0 between output points

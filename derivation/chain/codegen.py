@@ -54,19 +54,21 @@ class _Code:
         self.slots = slots
         self.printer = _Printer()
 
-    def reads(self, used: set) -> list[str]:
-        """``name = p[SLOT]`` for each value or derived symbol in ``used``, in slot order."""
-        return [f"{s} = p[{slot}]" for s, slot in self.slots.items() if s in used]
+    def reads(self, used: set, signed: bool = False) -> list[str]:
+        """``name = p[SLOT]`` for each value or derived symbol in ``used``, in slot order; ``signed``: each
+        stage's friction angle times the argument ``rho_sign_k`` (its regime's sign, ``_rho_signs``)."""
+        sign = {rho: f"{rho.name.replace('rho', 'rho_sign')}*" for rho in self.sym.rho} if signed else {}
+        return [f"{s} = {sign.get(s, '')}p[{slot}]" for s, slot in self.slots.items() if s in used]
 
-    def body(self, exprs: list[sp.Expr], direction: str = "0.0") -> tuple[list[str], list[str]]:
+    def body(self, exprs: list[sp.Expr], direction: str = "0.0", signed: bool = False) -> tuple[list[str], list[str]]:
         """Lines and results; the body forces of a sliding mode in ``direction`` (a number or the argument's
-        name)."""
+        name); ``signed``: the friction angles signed by the arguments ``rho_sign_k``."""
         exprs = [sp.sympify(e) for e in exprs]
         used = set().union(*(e.free_symbols for e in exprs))
         lines = []
         if used & set(self.sym.force):
             lines.append(f"{', '.join(map(str, self.sym.force))} = body_forces(t, y, p, {direction})")
-        lines += self.reads(used)
+        lines += self.reads(used, signed)
         if q0 in used:
             lines.append("q_0 = y[0]")
         if MOTOR in used:
@@ -80,8 +82,8 @@ class _Code:
         return lines, [self.printer.doprint(e) for e in reduced]
 
     def function(self, name: str, doc: str, exprs: list[sp.Expr], args: str = "t, y, p",
-                 direction: str = "0.0") -> dict:
-        lines, results = self.body(exprs, direction)
+                 direction: str = "0.0", signed: bool = False) -> dict:
+        lines, results = self.body(exprs, direction, signed)
         return {"name": name, "args": args, "doc": doc, "lines": lines, "result": ", ".join(results)}
 
 
@@ -191,40 +193,57 @@ def _signs(exprs: dict, shared: dict) -> dict[str, tuple[int, ...]] | None:
     return out
 
 
+def _rho_signs(mode: dyn.SlidingMode, base: dyn.SlidingMode) -> tuple[int, ...]:
+    """Per stage +1 where the mode's regime is the base mode's, -1 where it is the other: there the stage's FTF
+    is the base's with -rho for rho (tan(gamma + rho) against tan(gamma - rho))."""
+    return tuple(1 if r == b else -1 for r, b in zip(mode.regimes, base.regimes))
+
+
+def _with_rho_signs(code: _Code, exprs: dict, signs: tuple[int, ...]) -> dict:
+    """The expressions with each stage's friction angle times its sign."""
+    flip = {rho: s * rho for rho, s in zip(code.sym.rho, signs) if s < 0}
+    return {name: [e.subs(flip, simultaneous=True) for e in own] for name, own in exprs.items()} if flip else exprs
+
+
 def _mode_calls(chain: ChainScene, code: _Code, modes: list[dyn.SlidingMode]) -> tuple[list[dict], list[dict]]:
-    """The per-mode functions, one set per group of mirror modes (the first mode of a group gives its
-    expressions; the body forces in the direction the caller passes), and per mode the call: the group's
-    functions, its direction and which results change sign."""
+    """The per-mode functions, one set per group of modes that are the first's with some stages' friction
+    angles negated (the other regime of a stage: the sign passed as ``rho_sign_k``) and mirrored (the same
+    regimes on the other flanks in the other direction: the body forces in the direction the caller passes),
+    each checked in SymPy, expression by expression, equal or opposite; per mode the call: the group's
+    functions, its direction and rho signs and which results change sign."""
     functions, calls, groups = [], [], []     # groups: (first index, its expressions)
     for index, mode in enumerate(modes):
         exprs = _mode_exprs(chain, code, mode)
-        found = next(((first, signs) for first, base in groups
-                      if (signs := _signs(exprs, base)) is not None), None)
+        found = next(((first, rho, signs) for first, base in groups
+                      if (signs := _signs(exprs, _with_rho_signs(code, base, rho := _rho_signs(mode, modes[first]))))
+                      is not None), None)
         if found is None:
             groups.append((index, exprs))
-            found = (index, {name: (1,) * len(e) for name, e in exprs.items()})
+            found = (index, (1,) * len(mode.regimes), {name: (1,) * len(e) for name, e in exprs.items()})
             functions += _group_functions(code, index, modes, exprs)
-        first, signs = found
-        calls.append({"group": first, "direction": f"{mode.direction:.1f}", "accel_sign": "-" if signs["accel"][0] < 0
-                      else "", "contact_flips": [k for k, sg in enumerate(signs["contact"]) if sg < 0],
+        first, rho, signs = found
+        args = ", ".join([f"{mode.direction:.1f}", *(f"{s:.1f}" for s in rho)])
+        calls.append({"group": first, "args": args, "accel_sign": "-" if signs["accel"][0] < 0 else "",
+                      "contact_flips": [k for k, sg in enumerate(signs["contact"]) if sg < 0],
                       "force_flips": [k for k, sg in enumerate(signs["stage_forces"]) if sg < 0]})
     for group, _ in groups:
         members = [f"{i} ({modes[i].name})" for i, call in enumerate(calls) if call["group"] == group]
         for f in functions:
             if f["group"] == group:
-                f["doc"] += "; modes " + ", ".join(members) + " (their body forces in `direction`)"
+                f["doc"] += "; modes " + ", ".join(members) + " (their body forces in `direction`, each stage's " \
+                            "friction angle times `rho_sign_k`)"
     return functions, calls
 
 
 def _group_functions(code: _Code, index: int, modes: list[dyn.SlidingMode], exprs: dict) -> list[dict]:
-    args = "t, y, p, direction"
+    args = ", ".join(["t, y, p, direction", *(f"rho_sign_{k + 1}" for k in range(len(modes[index].regimes)))])
     docs = {"accel": "a_0",
             "contact": "(D, jam, N_1, ..., N_N, measured): the denominator, the stages' jam factors' product and each "
                        "stage's normal force; the mode holds while each is >= 0 (D, jam > 0); what the torque switch "
                        "measures",
             "stage_forces": "per stage (on its input body, on its output body, normal force)"}
     return [{**code.function(f"{name}_{index}", f"{docs[name]} in mode {index}: {modes[index].name}", e, args=args,
-                             direction="direction"), "group": index} for name, e in exprs.items()]
+                             direction="direction", signed=True), "group": index} for name, e in exprs.items()]
 
 
 def _jacobian(code: _Code, chain: ChainScene, mode: dyn.SlidingMode) -> tuple[sp.Expr, sp.Expr]:

@@ -110,12 +110,19 @@ def _run_chain(args: argparse.Namespace) -> int:
     from tswm_runtime.simulation.simulate import METHODS, SimulationInputError
 
     module, overrides, method = chain_inputs(args, SETTING_OPTIONS)
+    params = parse_sets(args.set)
     try:
-        result = simulate_chain(module, parse_sets(args.set), method=METHODS[method], **overrides)
+        result = simulate_chain(module, params, method=METHODS[method], **overrides)
     except SimulationInputError as error:
         raise setting_error(error, overrides) from None
     print(f"chain {module.SCENE} ({plural(module.STAGES, 'stage')}, {_origin(args.scene, module)})")
     print(f"  run: t_end = {result.t[-1]:g} s, v0(0) = {module.RUN['v0']:g} (body 0, SI), {method}")
+    if params:
+        slot = {name: (module.P_VALUES + j, unit) for j, (name, unit) in enumerate(zip(module.PARAM_NAMES,
+                                                                                       module.PARAM_UNITS))}
+        slot["voltage"] = (module.P_VOLTAGE, "")
+        print("  values set: " + ", ".join(f"{name} = {result.p[slot[name][0]]:g} {slot[name][1]}".rstrip()
+                                           for name in params))
     print("\n".join(summary(result, module)))
     if args.output:
         path = write_atomic(os.path.join(args.output, f"{module.SCENE}-summary.json"),

@@ -1,0 +1,94 @@
+"""A chain scene's values are run-time parameters: the generated code depends on the chain's structure only,
+and `tswm simulate --set`, `tswm.simulate(params)` and the run's p take any value by name, with units,
+checked as the scene reader checks them."""
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from tests.chains import DEG, structure, wedges
+
+
+def _source(text: str) -> str:
+    from derivation.chain.codegen import generate_chain_module
+    from derivation.chain.scene import parse_chain
+
+    return generate_chain_module(parse_chain(text, "t.toml"))
+
+
+def test_the_generated_code_depends_on_the_structure_only():
+    """Two value sets of one structure (other slopes, friction, masses, forces, a spring's stiffness 0 or not)
+    give one module but for the scene's own lines (name, values, run); another flank set or a spring
+    missing gives another."""
+    base = structure(_source(wedges("a", (30.0, 5.0), (0.1, 0.15), (1.0, 1.0, 1.0), (0.0, 0.0, -50.0))))
+    other = structure(_source(wedges("b", (20.0, 8.0), (0.3, 0.0), (2.0, 3.0, 4.0), (5.0, 1.0, 7.0), spring=1e3,
+                                     v0=-2.0, t_end=1.5)))
+    assert base[0] == other[0] and base[1] != other[1]
+    text = wedges("a", (30.0, 5.0), (0.1, 0.15), (1.0, 1.0, 1.0), (0.0, 0.0, -50.0))
+    one_flank = text.replace('mu = 0.1\n', 'mu = 0.1\nflanks = ["a"]\n', 1)
+    assert structure(_source(one_flank))[0] != base[0]
+
+
+@pytest.fixture(scope="module")
+def mov():
+    from tswm_runtime.model.contract import load_module
+
+    return load_module("mov")
+
+
+def test_values_set_by_name_reach_the_run_with_their_units(mov):
+    """mu_1 = 0.08 and force_2 = -5 kN through tswm.simulate: p holds them in SI, the worm's derived Psi_t is
+    the closed form tan(lambda + atan(mu / cos alpha_n)) (lambda 4.76 deg, alpha_n 20 deg), and the torque
+    the trip thrust needs is the thrust times prod Psi_t r_in / r_out by hand (r 25 mm / 80 mm, d_m 16 mm,
+    the nut's Psi_t from its own closed form); the default run differs."""
+    import tswm_runtime as tswm
+
+    result = tswm.simulate("mov", {"mu_1": "0.08", "force_2": "-5 kN"})
+    p = result.p
+    assert p[mov.P_VALUES + mov.PARAM_NAMES.index("mu_1")] == 0.08
+    assert p[mov.P_VALUES + mov.PARAM_NAMES.index("force_2")] == -5000.0
+    worm = math.tan(4.76 * DEG + math.atan(0.08 / math.cos(20 * DEG)))
+    lam = math.atan(0.004 / (math.pi * 0.016))
+    alpha_n = math.atan(math.tan(15 * DEG) * math.cos(lam))
+    nut = math.tan(lam + math.atan(0.15 / math.cos(alpha_n)))
+    assert p[mov.P_PSI] == pytest.approx(worm, rel=1e-14) and p[mov.P_PSI + 2] == pytest.approx(nut, rel=1e-14)
+    a = result.answers
+    assert a["needed"] == pytest.approx(a["trip"]["thrust"] * worm * 0.025 / 0.08 * nut * 0.008, rel=1e-13)
+    assert a["trip"]["t"] != tswm.simulate("mov").answers["trip"]["t"]
+
+
+@pytest.mark.parametrize("item, message", [
+    ("F_2=1", "parameter 'F_2': chain scene 'mov' has no such value (values: lead_angle_1, "),
+    ("mu_1=-0.1", "parameter mu_1 = -0.1 (stage[1].mu): must be >= 0 and < 10"),
+    ("lead_angle_1=90 deg", "parameter lead_angle_1 = 90 deg (stage[1].lead_angle): must be > 0 deg and < 90 deg"),
+    ("lead_angle_1=88 deg", "stage 1: slope 88 deg + effective friction angle 3.04"),
+    ("force_2=1 kg", "parameter force_2 = '1 kg': 'kg' is a mass unit"),
+    ("switch_hysteresis=30 kN", "parameter switch_hysteresis = 30000 N (switch.hysteresis): must be >= 0 N and < "
+                                "switch_setting"),
+    ("voltage=3", "voltage = 3.0: must be U / U_n in (0, 2]"),
+])
+def test_tswm_simulate_refuses_a_bad_value_naming_it(capsys, item, message):
+    from tswm_runtime.cli import main
+
+    assert main(["simulate", "mov", "--set", item]) == 2
+    assert message in capsys.readouterr().err
+
+
+def test_tswm_simulate_prints_the_values_it_set(capsys):
+    from tswm_runtime.cli import main
+
+    assert main(["simulate", "mov", "--set", "mu_1=0.08", "--set", "force_2=-5 kN", "--set", "voltage=0.9"]) == 0
+    assert "  values set: mu_1 = 0.08, force_2 = -5000 N, voltage = 0.9\n" in capsys.readouterr().out
+
+
+def test_modes_that_differ_in_a_stages_regime_share_their_functions():
+    """The shipped mov module: its 8 sliding modes (2 directions x 2 regimes x 2 stages) call one accel, one
+    contact and one stage_forces function, each stage's friction angle signed by its regime (rho_sign_k)."""
+    import re
+    from pathlib import Path
+
+    source = (Path(__file__).resolve().parents[1] / "generated" / "mov.py").read_text()
+    assert [len(re.findall(rf"^def {name}_\d+\(t, y, p, direction, rho_sign_1, rho_sign_2\):", source, re.M))
+            for name in ("accel", "contact", "stage_forces")] == [1, 1, 1]
+    assert "rho_2 = rho_sign_2*p[D_rho_2]" in source
