@@ -126,7 +126,10 @@ def test_the_message_names_what_is_compiled_and_a_measured_time():
     (["-m", "tswm_runtime.cli", "sweep", "paper", "--samples", "4", "--range", "F2=-20000:5000"],
      ("integration kernels", "sweep kernel", "the model `paper`")),
     (["-c", "from tswm_runtime.simulation.simulate import simulate; simulate('paper')"], ("integration kernels",)),
-], ids=["cli-simulate", "cli-sweep", "api-simulate"])
+    (["-m", "tswm_runtime.cli", "simulate", "mov"], ("integration kernels", "drive-train kernel")),
+    (["-m", "tswm_runtime.cli", "sweep", "mov", "--grid", "voltage=0.9,1"],
+     ("integration kernels", "drive-train kernel", "drive-train sweep kernel")),
+], ids=["cli-simulate", "cli-sweep", "api-simulate", "cli-simulate-chain", "cli-sweep-chain"])
 def test_a_first_run_with_an_empty_cache_says_what_it_compiles(tmp_path, argv, expected):
     line = _first_stderr_line([sys.executable, *argv], tmp_path)
     assert line.startswith("tswm: compiling "), line

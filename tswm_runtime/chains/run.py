@@ -37,12 +37,16 @@ from functools import cached_property
 import numpy as np
 
 from tswm_common.chain_decision import Candidate, Decision, Statics, decide_numbers
-from tswm_runtime.chains import rules as compiled
-from tswm_runtime.chains import kernel
-from tswm_runtime.hybrid import entry
-from tswm_runtime.integration import segment
-from tswm_runtime.jit.signatures import GUARDS_SIG, address
-from tswm_runtime.jit.structures import EventLog, Outputs, Record, Settings, StepLog, Tolerances
+from tswm_runtime.jit import coldstart
+
+coldstart.announce(("integrate", "chain"))  # before the next imports compile the kernels, if not cached
+
+from tswm_runtime.chains import rules as compiled  # noqa: E402
+from tswm_runtime.chains import kernel  # noqa: E402
+from tswm_runtime.hybrid import entry  # noqa: E402
+from tswm_runtime.integration import segment  # noqa: E402
+from tswm_runtime.jit.signatures import GUARDS_SIG, address  # noqa: E402
+from tswm_runtime.jit.structures import EventLog, Outputs, Record, Settings, StepLog, Tolerances  # noqa: E402
 
 RESTING = compiled.RESTING   # the mode index of the resting chain (no mode of the module)
 STATUS = {segment.STEP_TOO_SMALL: "step-too-small", segment.MAX_STEPS: "max-steps",

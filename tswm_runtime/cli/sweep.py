@@ -70,6 +70,9 @@ def run(args: argparse.Namespace) -> int:
 def _run_chain(args: argparse.Namespace) -> int:
     """A chain scene: its sizing table over --grid NAME=... of its values and voltage, one module for all
     cases (tswm_runtime/sweeps/chain.py)."""
+    from tswm_runtime.jit import coldstart
+
+    coldstart.announce(("integrate", "chain", "chain-batch"))   # one message before any of them compiles
     from tswm_runtime.simulation.simulate import METHODS, SimulationInputError
     from tswm_runtime.sweeps.chain import ChainSweepError, parse_grid, sizing
     from tswm_runtime.sweeps.sweep import SweepInputError, SweepInterrupted

@@ -215,6 +215,10 @@ def compile_into_cache(groups, spec) -> None:
 
     if "batch" in groups:
         import tswm_runtime.hybrid.batch  # noqa: F401
+    if "chain" in groups:
+        import tswm_runtime.chains.kernel  # noqa: F401
+    if "chain-batch" in groups:
+        import tswm_runtime.chains.batch  # noqa: F401
     for method in METHOD_GROUPS:
         if method in groups:
             segment.attempt_function(METHODS[method])

@@ -22,16 +22,20 @@ from types import ModuleType
 import numpy as np
 import pyarrow as pa
 
-from tswm_runtime.chains.batch import run_cases
-from tswm_runtime.chains.run import latches
-from tswm_runtime.model.values import ValueInputError, quantities, si_value
-from tswm_runtime.simulation.chain import settings
-from tswm_runtime.simulation.chain_values import chain_values, unknown_value
-from tswm_runtime.simulation.drive_train import UNITS, stall_margin
-from tswm_runtime.simulation.simulate import SimulationInputError
-from tswm_runtime.sweeps import CHAIN_CHUNK, chunks, columns
-from tswm_runtime.sweeps.grid import GridError, parse_items
-from tswm_runtime.sweeps.sweep import SweepOutcome, check_size, in_chunks, write_tables
+from tswm_runtime.jit import coldstart
+
+coldstart.announce(("integrate", "chain", "chain-batch"))  # before the next import compiles them, if not cached
+
+from tswm_runtime.chains.batch import run_cases  # noqa: E402
+from tswm_runtime.chains.run import latches  # noqa: E402
+from tswm_runtime.model.values import ValueInputError, quantities, si_value  # noqa: E402
+from tswm_runtime.simulation.chain import settings  # noqa: E402
+from tswm_runtime.simulation.chain_values import chain_values, unknown_value  # noqa: E402
+from tswm_runtime.simulation.drive_train import UNITS, stall_margin  # noqa: E402
+from tswm_runtime.simulation.simulate import SimulationInputError  # noqa: E402
+from tswm_runtime.sweeps import CHAIN_CHUNK, chunks, columns  # noqa: E402
+from tswm_runtime.sweeps.grid import GridError, parse_items  # noqa: E402
+from tswm_runtime.sweeps.sweep import SweepOutcome, check_size, in_chunks, write_tables  # noqa: E402
 
 SOURCES = ("chains/batch.py", "chains/run.py", "simulation/chain.py", "simulation/chain_values.py",
            "simulation/drive_train.py", "sweeps/chain.py")
