@@ -91,4 +91,5 @@ def test_modes_that_differ_in_a_stages_regime_share_their_functions():
     source = (Path(__file__).resolve().parents[1] / "generated" / "mov.py").read_text()
     assert [len(re.findall(rf"^def {name}_\d+\(t, y, p, direction, rho_sign_1, rho_sign_2\):", source, re.M))
             for name in ("accel", "contact", "stage_forces")] == [1, 1, 1]
-    assert "rho_2 = rho_sign_2*p[D_rho_2]" in source
+    assert "rho_sign_2*p[D_rho_2]" in source.split("def wedge_numbers(p, rho_sign_1, rho_sign_2):")[1].split("@njit")[0]
+    assert source.count("= wedge_numbers(p, rho_sign_1, rho_sign_2)") == 3   # once in each of the three

@@ -54,11 +54,37 @@ class _Code:
         self.slots = slots
         self.printer = _Printer()
 
+    @property
+    def wedge_groups(self) -> tuple:
+        """What every mode's functions read: each stage's slope, friction angle and levers, each body's inertia."""
+        sym = self.sym
+        return sym.gamma, sym.rho, sym.lever_in, sym.lever_out, sym.inertia
+
+    @property
+    def wedge(self) -> list[sp.Symbol]:
+        return [s for group in self.wedge_groups for s in group]
+
+    @property
+    def rho_signs(self) -> str:
+        return ", ".join(rho.name.replace("rho", "rho_sign") for rho in self.sym.rho)
+
+    def wedge_reader(self) -> dict:
+        """The function that reads ``wedge`` from p, the friction angles signed by the arguments ``rho_sign_k``."""
+        sign = {rho: f"{rho.name.replace('rho', 'rho_sign')}*" for rho in self.sym.rho}
+        return {"name": "wedge_numbers", "args": f"p, {self.rho_signs}", "lines": [],
+                "doc": "(gamma_k, rho_k, r_in_k, r_out_k per stage, M_j per body) from p, each stage's friction "
+                       "angle rho_k times `rho_sign_k` (its regime's sign)",
+                "result": "(" + ",\n            ".join(", ".join(f"{sign.get(s, '')}p[{self.slots[s]}]" for s in group)
+                                                   for group in self.wedge_groups) + ")"}
+
     def reads(self, used: set, signed: bool = False) -> list[str]:
-        """``name = p[SLOT]`` for each value or derived symbol in ``used``, in slot order; ``signed``: each
-        stage's friction angle times the argument ``rho_sign_k`` (its regime's sign, ``_rho_signs``)."""
-        sign = {rho: f"{rho.name.replace('rho', 'rho_sign')}*" for rho in self.sym.rho} if signed else {}
-        return [f"{s} = {sign.get(s, '')}p[{slot}]" for s, slot in self.slots.items() if s in used]
+        """``name = p[SLOT]`` for each value or derived symbol in ``used``, in slot order; ``signed``: the
+        ``wedge`` numbers in one call of ``wedge_numbers`` with the arguments ``rho_sign_k``."""
+        lines, own = [], [s for s in self.slots if s in used]
+        if signed and used & set(self.wedge):
+            lines.append(f"{', '.join(map(str, self.wedge))} = wedge_numbers(p, {self.rho_signs})")
+            own = [s for s in own if s not in self.wedge]
+        return lines + [f"{s} = p[{self.slots[s]}]" for s in own]
 
     def body(self, exprs: list[sp.Expr], direction: str = "0.0", signed: bool = False) -> tuple[list[str], list[str]]:
         """Lines and results; the body forces of a sliding mode in ``direction`` (a number or the argument's
@@ -278,7 +304,7 @@ def generate_chain_module(chain: ChainScene) -> str:
     functions = [code.function("body_forces", "(F_0, ..., F_N): each body's force or torque (the motor's while "
                                "powered), a spring's part -stiffness q_j with q_j = (v_j/v_0) q_0, the valve's force "
                                "on the last body moving in `direction` (0: at rest, without its friction)",
-                               _forces(chain, code, DIRECTION), args="t, y, p, direction")]
+                               _forces(chain, code, DIRECTION), args="t, y, p, direction"), code.wedge_reader()]
     shared, calls = _mode_calls(chain, code, modes)
     functions += shared
     guards = ("D", "jam", *(f"N_{k + 1}" for k in range(n)), "v0", *SWITCHED_GUARDS)
