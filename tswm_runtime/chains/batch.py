@@ -159,14 +159,14 @@ def run_chain_batch(chain_at, functions, chain_addresses, c, settings, y0, P, t_
     n_cases, n_p, stages = P.shape[0], P.shape[1], c.stages
     method, t_end, max_steps = settings.method, settings.t_end, settings.max_steps
     tol = Tolerances(settings.tol.rtol, settings.tol.atol, settings.tol.hmin, settings.tol.hmax)
+    run = _chain_at(chain_at)
     for chunk in prange((n_cases + CHUNK_CASES - 1) // CHUNK_CASES):
         record, rec = _records(t_out, n_p, stages, room)
         p = np.empty(n_p)
+        case_settings = Settings(method, t_end, tol, max_steps)
         for case in range(chunk * CHUNK_CASES, min((chunk + 1) * CHUNK_CASES, n_cases)):
             _reset(record, p, P[case])
-            run = _chain_at(chain_at)
-            status, t_stop = run(functions, chain_addresses, c, Settings(method, t_end, tol, max_steps), y0, p,
-                                 record, rec, max_events)
+            status, t_stop = run(functions, chain_addresses, c, case_settings, y0, p, record, rec, max_events)
             _answer(status, t_stop, record, rec, c, room, P[case], answers.f[case], answers.i[case])
 
 
