@@ -9,7 +9,7 @@ import pandas as pd
 import pytest
 
 from tswm_runtime.sweeps import chunks
-from tswm_runtime.sweeps import sweep as sweep_module
+from tswm_runtime.sweeps import rows as sweep_rows
 from tswm_runtime.cli import main
 from tswm_runtime.model.contract import load_module
 from tswm_runtime.sweeps.sweep import grid_cases, parse_grid, read_table, sweep
@@ -125,7 +125,7 @@ def test_changed_runtime_reuses_nothing(paper, cases, tmp_path, monkeypatch):
 
 def test_ctrl_c_keeps_complete_chunks_and_the_rerun_resumes(paper, cases, reference, tmp_path, monkeypatch,
                                                               capsys):
-    real = sweep_module.case_table
+    real = sweep_rows.case_table
     calls = []
 
     def interrupted_on_second(module, P, run):
@@ -134,7 +134,7 @@ def test_ctrl_c_keeps_complete_chunks_and_the_rerun_resumes(paper, cases, refere
             raise KeyboardInterrupt
         return real(module, P, run)
 
-    monkeypatch.setattr(sweep_module, "case_table", interrupted_on_second)
+    monkeypatch.setattr(sweep_rows, "case_table", interrupted_on_second)
     argv = ["sweep", "paper", "--grid", "F2=-15000:-1000:6", "--chunk-size", "2", "-o", str(tmp_path),
             "--no-progress"]
     assert main(argv + ["--t-end", "1"]) == 1
@@ -143,7 +143,7 @@ def test_ctrl_c_keeps_complete_chunks_and_the_rerun_resumes(paper, cases, refere
     assert "Traceback" not in err
     assert len(chunk_files(tmp_path)) == 1 and not list((tmp_path / "chunks").glob("*.tmp"))
     assert not (tmp_path / "paper-sweep.parquet").exists()
-    monkeypatch.setattr(sweep_module, "case_table", real)
+    monkeypatch.setattr(sweep_rows, "case_table", real)
     assert main(argv + ["--t-end", "1"]) == 0
     assert "reused 1" in capsys.readouterr().out
     expected = sweep(paper, cases, {"t_end": 1.0}, chunk_size=2).table

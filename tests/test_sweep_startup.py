@@ -66,3 +66,23 @@ def test_the_command_ends_at_once_with_its_status_and_all_written(tmp_path):
                          capture_output=True, text=True, cwd=ROOT)
     assert bad.returncode == 2 and "--grid 'F2_after=1:2'" in bad.stderr, bad.stderr
     assert "interpreter teardown ran" not in bad.stdout
+
+
+CHAIN = """
+import json, sys
+import tswm_runtime.sweeps.chain
+imported = [name for name in {single!r} if name in sys.modules]
+from tswm_runtime.cli import main
+assert main(['sweep', 'mov', '--grid', 'voltage=0.9,1.0', '--no-progress']) == 0
+print(json.dumps([imported, [name for name in {single!r} if name in sys.modules]]))
+"""
+SINGLE_STAGE = ("tswm_runtime.hybrid.batch", "tswm_runtime.sweeps.rows")
+
+
+def test_a_chain_sweep_loads_no_single_stage_batch_kernel():
+    """Importing the chain sweep, and `tswm sweep mov` run to its end, leave the single-stage batch kernel
+    (hybrid/batch.py) and the scene sweep's rows (sweeps/rows.py, which loads it) unimported."""
+    done = subprocess.run([sys.executable, "-c", CHAIN.format(single=SINGLE_STAGE)], capture_output=True, text=True,
+                          cwd=ROOT)
+    assert done.returncode == 0, done.stderr
+    assert json.loads(done.stdout.splitlines()[-1]) == [[], []]

@@ -2,7 +2,7 @@
 
 ``Problem`` turns evaluation points (rows of free parameter values) into model values,
 per-case statuses and scaled residuals. Peaks: the model runs on the jitted batch
-(``sweep.run_cases``: all cases of all evaluation points in one parallel call);
+(``rows.run_cases``: all cases of all evaluation points in one parallel call);
 ``magnitude=True`` compares |S1m|, |S2m| instead of the signed values. Time histories:
 ``simulate()`` per case, read at the measured times (``history_values``): v1 by the
 Result's Hermite interpolation (``Result.sol``), S1 and S2 linearly between output points
@@ -101,7 +101,7 @@ class Problem:
         return self._history(X)
 
     def _peaks(self, X):
-        from tswm_runtime.sweeps.sweep import run_cases
+        from tswm_runtime.sweeps.rows import run_cases
 
         k, n = X.shape[0], len(self.measured.cases)
         table = run_cases(self.module, self.matrix(X), self.run)

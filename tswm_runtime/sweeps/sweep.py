@@ -11,7 +11,9 @@ without recomputing them. With a dask.distributed ``Client`` the chunks run as t
 its workers instead (``cluster.py``: every worker checked first, the model shipped with the
 work). The rows of a chunk come from ``rows.case_table``, as Arrow columns, and every table is
 written by pyarrow (parquet, and CSV by ``pyarrow.csv``); pandas is imported only for a caller
-that reads ``SweepOutcome.table``.
+that reads ``SweepOutcome.table``. ``rows`` (and with it the batch kernel) is imported by ``sweep``
+when it runs, not with this module: the chain sweep (``chain.py``) uses ``in_chunks`` and the size
+checks here and never the scene batch.
 
 One row per case: the free parameters, then
 
@@ -64,7 +66,6 @@ from tswm_common.files import write_atomic
 from tswm_runtime.simulation.simulate import settings, unknown_parameter
 from tswm_runtime.sweeps import chunks, cluster, columns
 from tswm_runtime.sweeps.grid import MAX_CASES, GridError, parse_items
-from tswm_runtime.sweeps.rows import case_table, run_cases  # noqa: F401  (run_cases: the fit's evaluations)
 
 LOG = logging.getLogger("tswm_runtime.sweep")
 # Size bounds (docs/promises.md): above LARGE_SWEEP cases a sweep states its size and needs --large;
@@ -310,6 +311,8 @@ def sweep(model: str | ModuleType, P: np.ndarray, overrides: dict | None = None,
     """
     import time
 
+    from tswm_runtime.sweeps import rows   # loads (or compiles, saying so first) the batch kernel
+
     start = time.perf_counter()
     if not isinstance(model, ModuleType):
         coldstart.announce((), model)
@@ -331,7 +334,7 @@ def sweep(model: str | ModuleType, P: np.ndarray, overrides: dict | None = None,
 
     frames, outcome = in_chunks(keys, P, bounds, [*module.PARAM_NAMES, *RESULT_COLUMNS], out, compute,
                                 desc=module.SCENE, progress=progress, prune=prune, notice=notice)
-    outcome.rows = (_concat(frames) if frames else case_table(module, P[:0], run))
+    outcome.rows = (_concat(frames) if frames else rows.case_table(module, P[:0], run))
     if out is not None:
         with_units = written_names(module)
         written = outcome.rows.rename_columns([with_units[name] for name in outcome.rows.column_names])
@@ -437,8 +440,10 @@ def _safe(outcome: SweepOutcome, total: int, out: Path | None) -> str:
 
 def _run_here(module, P, run, bounds, todo, finish, bar) -> None:
     """Compute the chunks ``todo`` in this process on all cores; ``finish`` stores each."""
+    from tswm_runtime.sweeps import rows
+
     for i in todo:
         a, b = bounds[i]
-        finish(i, case_table(module, P[a:b], run))
+        finish(i, rows.case_table(module, P[a:b], run))
         if bar:
             bar.update()
