@@ -60,12 +60,16 @@ def test_values_set_by_name_reach_the_run_with_their_units(mov):
 
 @pytest.mark.parametrize("item, message", [
     ("F_2=1", "parameter 'F_2': chain scene 'mov' has no such value (values: lead_angle_1, "),
-    ("mu_1=-0.1", "parameter mu_1 = -0.1 (stage[1].mu): must be >= 0 and < 10"),
-    ("lead_angle_1=90 deg", "parameter lead_angle_1 = 90 deg (stage[1].lead_angle): must be > 0 deg and < 90 deg"),
-    ("lead_angle_1=88 deg", "stage 1: slope 88 deg + effective friction angle 3.04"),
+    ("mu_1=-0.1", "parameter mu_1 = -0.1: must be >= 0 and < 10 (stage[1].mu in the scene file)"),
+    ("lead_angle_1=90 deg", "parameter lead_angle_1 = 90 deg: must be > 0 deg and < 90 deg (stage[1].lead_angle in the "
+                            "scene file)"),
+    ("lead_angle_1=88 deg", "parameters derived gamma_1 = 88 deg and derived rho_1 = 3.04577253 deg: must keep slope "
+                            "+ effective friction angle < 90 deg, else the stage jams (stage[1] in the scene file)"),
     ("force_2=1 kg", "parameter force_2 = '1 kg': 'kg' is a mass unit"),
-    ("switch_hysteresis=30 kN", "parameter switch_hysteresis = 30000 N (switch.hysteresis): must be >= 0 N and < "
-                                "switch_setting"),
+    ("switch_hysteresis=30 kN", "parameter switch_hysteresis = 30000 N: must be < switch_setting (switch_setting = "
+                                "20000 N; switch.hysteresis in the scene file)"),
+    ("switch_hysteresis=-1 N", "parameter switch_hysteresis = -1 N: must be >= 0 N and < switch_setting "
+                               "(switch.hysteresis in the scene file)"),
     ("voltage=3", "voltage = 3.0: must be U / U_n in (0, 2]"),
 ])
 def test_tswm_simulate_refuses_a_bad_value_naming_it(capsys, item, message):
@@ -73,6 +77,25 @@ def test_tswm_simulate_refuses_a_bad_value_naming_it(capsys, item, message):
 
     assert main(["simulate", "mov", "--set", item]) == 2
     assert message in capsys.readouterr().err
+
+
+def test_a_chain_value_out_of_range_is_refused_as_a_scene_parameter_is(capsys):
+    """mu_2 = 12 (the scene reader's range for a stage's mu: [0, 10)) through tswm.simulate and through
+    `tswm simulate --set` (exit 2): one message naming the value with its unit, the range and the scene
+    file's key, in the form a single-stage scene's free parameter gets (m2 = 0 kg for paper-runup)."""
+    import tswm_runtime as tswm
+    from tswm_runtime.cli import main
+    from tswm_runtime.simulation.simulate import SimulationInputError
+
+    expected = "parameter mu_2 = 12: must be >= 0 and < 10 (stage[2].mu in the scene file)"
+    with pytest.raises(SimulationInputError) as refused:
+        tswm.simulate("mov", {"mu_2": 12})
+    assert str(refused.value) == expected
+    assert main(["simulate", "mov", "--set", "mu_2=12"]) == 2
+    assert capsys.readouterr().err.strip() == f"tswm simulate: error: {expected}"
+    with pytest.raises(SimulationInputError) as single:
+        tswm.simulate("paper-runup", {"m2": 0.0})
+    assert str(single.value) == "parameter m2 = 0 kg: must be > 0 kg (wedge.m2 in the scene file)"
 
 
 def test_tswm_simulate_prints_the_values_it_set(capsys):

@@ -373,7 +373,7 @@ def test_tswm_sweep_mov_gives_a_sizing_table_and_keeps_failed_cases(tmp_path, ca
                  "--no-progress"]) == 0
     assert "chain mov: sizing table, 4 cases" in capsys.readouterr().out
     table = pd.read_csv(tmp_path / "mov-sizing.csv")
-    refused = "error: parameter mu_2 = 11 (stage[2].mu): must be >= 0 and < 10"
+    refused = "error: parameter mu_2 = 11: must be >= 0 and < 10 (stage[2].mu in the scene file)"
     assert list(table["status"]) == ["finished", refused] * 2           # the first --grid item varies slowest
     assert not (tmp_path / "cache").exists()
     low, nominal = table.iloc[0], table.iloc[2]

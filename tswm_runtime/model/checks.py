@@ -10,7 +10,11 @@ scene file's, without SymPy or the scene reader. A check is one of
     ("less", name, key, other, allowed)          value(name) < value(other)
     ("jam", gamma, key, rho_key, law, allowed)   gamma + largest friction angle < 90 deg
 
-``allowed`` is the rule as the scene reader words it, in display units.
+``allowed`` is the rule as the scene reader words it, in display units. A chain module carries its
+values' ranges instead (``PARAM_RANGES``, beside ``PARAM_KEYS``); ``module_checks`` words them as these
+checks, and each stage's jam rule as a "jam" check on the slope and effective friction angle that the
+module's ``prepare`` derives (slots of its p named in ``P_NAMES``, which ``violations`` fills for them).
+Every message names the value with its unit (angles in degrees), the rule and the scene file's key.
 """
 from __future__ import annotations
 
@@ -18,6 +22,9 @@ import math
 from types import ModuleType
 
 import numpy as np
+
+from tswm_common import units
+from tswm_runtime.model.values import quantities
 
 DEG = math.pi / 180
 
@@ -52,10 +59,13 @@ def _holds(check: tuple, value, finite=np.isfinite) -> np.ndarray:
 
 
 def _message(module: ModuleType, check: tuple, value) -> str:
-    units = dict(zip(module.PARAM_NAMES, module.PARAM_UNITS))
+    known = quantities(module)
 
-    def show(name: str) -> str:
-        return f"{name} = {float(value(name)):.9g} {units.get(name, '')}".rstrip()
+    def show(name: str, quantity: str | None = None) -> str:
+        si, quantity = known.get(name, ("", quantity))
+        if quantity in units.DISPLAY:
+            return f"{name} = {units.in_display(float(value(name)), quantity):.9g} {units.display_unit(quantity)}"
+        return f"{name} = {float(value(name)):.9g} {si or ''}".rstrip()
 
     kind = check[0]
     if kind == "range":
@@ -63,8 +73,56 @@ def _message(module: ModuleType, check: tuple, value) -> str:
     if kind == "bound":
         return f"parameter {show(check[1])}: must be {check[5]} ({check[2]} in the scene file)"
     if kind == "less":
-        return f"parameter {show(check[1])}: must be {check[4]} ({show(check[3])})"
-    return f"parameters {show(check[1])} and {show(check[3])}: must keep {check[5]}"
+        return f"parameter {show(check[1])}: must be {check[4]} ({show(check[3])}; {check[2]} in the scene file)"
+    return (f"parameters {show(check[1], 'angle')} and {show(check[3], 'angle')}: must keep {check[5]} ({check[2]} in "
+            "the scene file)")
+
+
+def module_checks(module: ModuleType) -> tuple:
+    """The module's rules as checks: its PARAM_CHECKS, or a chain module's ranges and jam rules
+    (``_chain_checks``), worded once per module."""
+    if not hasattr(module, "PARAM_RANGES"):
+        return getattr(module, "PARAM_CHECKS", ())
+    known = _CHAIN_CHECKS.get(module)
+    if known is None:
+        known = _chain_checks(module)
+        if len(_CHAIN_CHECKS) >= 256:
+            _CHAIN_CHECKS.clear()
+        _CHAIN_CHECKS[module] = known
+    return known
+
+
+_CHAIN_CHECKS: dict = {}
+
+
+def _chain_checks(module: ModuleType) -> tuple:
+    """A chain module's PARAM_RANGES (lo, hi, lo included, hi included; None: no bound; hi the name of a
+    sibling value, which the value must stay below) as "range" and "less" checks, and per stage the scene
+    reader's jam rule: slope + effective friction angle (derived by ``prepare``) < 90 deg."""
+    checks = []
+    for name, key, (lo, hi, lo_in, hi_in) in zip(module.PARAM_NAMES, module.PARAM_KEYS, module.PARAM_RANGES):
+        quantity = quantities(module)[name][1] or "dimensionless"
+        sibling = hi if isinstance(hi, str) else None
+        bound = [f"{'>=' if lo_in else '>'} {units.show(lo, quantity)}" if lo is not None else "",
+                 f"{'<=' if hi_in else '<'} {sibling or units.show(hi, quantity)}" if hi is not None else ""]
+        checks.append(("range", name, key, lo, None if sibling else hi, lo_in, hi_in,
+                       " and ".join(b for b in bound if b) or "finite"))
+        if sibling:
+            checks.append(("less", name, key, sibling, f"< {sibling}"))
+    for k in range(module.STAGES):
+        checks.append(("jam", module.P_NAMES[module.P_GAMMA + k], f"stage[{k + 1}]", module.P_NAMES[module.P_RHO + k],
+                       "constant", "slope + effective friction angle < 90 deg, else the stage jams"))
+    return tuple(checks)
+
+
+def _derived(module: ModuleType, P: np.ndarray) -> dict:
+    """A chain module's derived slots (P_NAMES from P_DERIVED on) for rows P of its values, by its prepare."""
+    p = np.zeros((P.shape[0], len(module.P_NAMES)))
+    p[:, module.P_VALUES:module.P_DERIVED] = P
+    for row in p:
+        module.prepare(row)
+    return {name: p[0, j] if P.shape[0] == 1 else p[:, j]
+            for j, name in enumerate(module.P_NAMES) if j >= module.P_DERIVED}
 
 
 def violations(module: ModuleType, P: np.ndarray) -> list[str]:
@@ -73,12 +131,20 @@ def violations(module: ModuleType, P: np.ndarray) -> list[str]:
     # one row (simulate's every call): numbers, not arrays of one (numpy's per-call cost was ~25 us a row)
     free = {name: P[0, j] if P.shape[0] == 1 else P[:, j] for j, name in enumerate(module.PARAM_NAMES)}
 
+    derived: dict = {}
+
     def value(name: str):
-        return free[name] if name in free else module.FIXED[name]
+        if name in free:
+            return free[name]
+        if hasattr(module, "PARAM_RANGES"):    # a chain module: its derived slots, worked out once
+            if not derived:
+                derived.update(_derived(module, P))
+            return derived[name]
+        return module.FIXED[name]
 
     reasons = [""] * P.shape[0]
     with np.errstate(all="ignore"):
-        held = [(check, _holds(check, value)) for check in getattr(module, "PARAM_CHECKS", ())]
+        held = [(check, _holds(check, value)) for check in module_checks(module)]
     for check, ok in held:
         if ok is True or (np.ndim(ok) == 0 and ok):
             continue
