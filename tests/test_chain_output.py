@@ -1,5 +1,7 @@
 """What `tswm simulate` prints of a chain is true: internal forces the statics fix are printed as values,
-the hold verdict says what the run showed, the stall margin says why it is missing. Values by hand."""
+the hold verdict says what the run showed, the stall margin is the pull-out torque over the needed one or
+says why it is missing, the peak and extra travel after the trip come from the phases after the cut. The
+answers are computed from a chain record written here (chains/answers.py, as for a run); values by hand."""
 from __future__ import annotations
 
 import math
@@ -48,22 +50,33 @@ P = np.array([0.0, 0.0, 0.0, 1.0, *WORM, *NUT, 1.0, 1.0, 1.0, 1.0, 1.0, 0.5, 0.0
 def module(**changes) -> SimpleNamespace:
     """A two-stage drive train module's constants: worm and nut as above, a seat, a thrust switch, a motor."""
     return SimpleNamespace(**{"STAGES": 2, "P_PSI": 4, "P_LEVER_IN": 8, "P_LEVER_OUT": 10, "P_SPEED": 12,
-                              "P_SLACK": 15, "HAS_SEAT": True, "SWITCH_ON": 2, "P_SWITCH": 0,
+                              "P_SLACK": 15, "P_VOLTAGE": 3, "HAS_SEAT": True, "SWITCH_ON": 2, "P_SWITCH": 0,
                               "P_SEATED": 2, "TRIPPED": 2, "STAGE_KINDS": ("wedge", "wedge"),
                               "BODY_MOTIONS": ("translation",) * 3, "MOTOR_TORQUE": (30.0, 10.0), "MOTOR_VOLTAGE": 1.0,
                               **changes})
 
 
 def phase(mode, seated: bool, samples=(), tripped=True):
+    """A phase in ``mode`` (RESTING = -1) with its latches and samples (t, q0, v0, six stage forces)."""
     return SimpleNamespace(mode=mode, latches=(2 if tripped else 0, 0.0, 1.0 if seated else 0.0), samples=samples)
 
 
-def run(phases, status="finished", thrust=100.0):
-    """A run that tripped at t = 1 s with ``thrust`` on the last body; the last phase's mode -1 is resting."""
-    forces = [0.0] * 6
-    forces[4] = thrust
-    return SimpleNamespace(phases=phases, status=status, events=[], p=P,
-                           trip={"t": 1.0, "y": (0.1, 0.0), "forces": forces, "drive": 3.0})
+def run(phases, status="finished", thrust=100.0, p=P):
+    """A run that tripped at t = 1 s with ``thrust`` on the last body, as the kernel's chain record holds it."""
+    from tswm_runtime.chains.kernel import ChainRecord
+    from tswm_runtime.integration.segment import MAX_STEPS
+
+    samples = [row for ph in phases for row in ph.samples]
+    bounds = np.cumsum([0] + [len(ph.samples) for ph in phases])
+    rows = [np.concatenate([(j, j + 1.0), p]) for j in range(len(phases))]
+    for row, ph in zip(rows, phases):
+        row[2:5] = ph.latches
+    trip = np.array([1.0, 0.1, 0.0, 3.0, 0.0, 0.0, 0.0, 0.0, thrust, 0.0, 0.0])
+    record = ChainRecord(np.array([(ph.mode, a, b) for ph, a, b in zip(phases, bounds, bounds[1:])], np.int64),
+                         np.array(rows), np.array(samples, dtype=float).reshape(-1, 9), np.zeros((1, 4), np.int64),
+                         np.zeros((1, 3 + p.size)), trip, np.array([len(phases), len(samples), 0], np.int64))
+    return SimpleNamespace(phases=phases, status=status, code={"finished": 0, "max-steps": MAX_STEPS}[status],
+                           t_stop=5.0, n_steps=0, events=[], p=p, record=record)
 
 
 @pytest.mark.parametrize("phases, status, verdict", [
@@ -90,3 +103,32 @@ def test_the_stall_margin_says_why_it_is_missing():
     assert out["needed"] == pytest.approx(needed, rel=1e-14) and out["stall_margin"] is None
     lines = drive_train_lines(out, module())
     assert f"    stall margin: - (pull-out 30 N; the trip thrust needs {needed:.6g} N <= 0 at body 0)" in lines
+
+
+def test_the_stall_margin_is_the_pull_out_torque_at_the_voltage_over_the_needed_torque():
+    """At U/U_n = 0.9 the motor pulls out at 30 N m x 0.81 = 24.3 N m; a trip thrust of 100 N needs
+    100 x Psi_t1 x Psi_t2 (levers 1) = 17.299 N m at body 0 (by hand), so the margin is 24.3 / 17.299."""
+    p = P.copy()
+    p[3] = 0.9
+    needed = 100.0 * WORM[0] * NUT[0]
+    out = answers(module(), run([phase(0, True), phase(-1, True)], p=p), voltage=0.9)
+    assert out["pull_out"] == pytest.approx(30.0 * 0.81, rel=1e-15)
+    assert out["needed"] == pytest.approx(needed, rel=1e-14)
+    assert out["stall_margin"] == pytest.approx(30.0 * 0.81 / needed, rel=1e-14)
+    line = f"    stall margin: {30.0 * 0.81 / needed:.4g} (pull-out 24.3 N at U/U_n = 0.9 over 17.299 N needed at the"
+    assert f"{line} trip thrust)" in drive_train_lines(out, module())
+
+
+def test_the_peak_and_the_extra_travel_after_the_trip_are_read_from_the_tripped_phases():
+    """Samples before the trip (switch armed) are not counted; after it the thrust's largest magnitude
+    (-250 N at t = 2.5 s, beyond 200 N at 2 s) is the peak, and the extra travel is the farthest travel
+    (q0 = 0.7, times the speed factor 0.05) less the travel at the trip (0.1 x 0.05), by hand."""
+    def sample(t, q0, thrust):
+        return [t, q0, 0.0, 0.0, 0.0, 0.0, 0.0, thrust, 0.0]
+    phases = [phase(0, False, [sample(0.5, 0.05, 900.0)], tripped=False),
+              phase(0, False, [sample(1.5, 0.3, 50.0), sample(2.0, 0.7, 200.0)]),
+              phase(1, True, [sample(2.5, 0.6, -250.0)]), phase(-1, True)]
+    out = answers(module(), run(phases))
+    assert out["peak_after_trip"] == {"thrust": -250.0, "t": 2.5}
+    assert out["extra_travel"] == pytest.approx(0.05 * 0.7 - 0.05 * 0.1, rel=1e-15)
+    assert out["trip"] == {"t": 1.0, "thrust": 100.0, "drive": 3.0, "travel": 0.1 * 0.05}

@@ -1,6 +1,7 @@
 """The chain batch (tswm_runtime/chains/batch.py) against single runs, and the chain sweep's chunks
-(tswm_runtime/sweeps/chain.py): every answer of every case as simulate_chain and drive_train give it,
-bit for bit, over grids with cases that stall, never trip, stop (too many events, a Painleve case at
+(tswm_runtime/sweeps/chain.py): every answer of every case as simulate_chain gives it, bit for bit (both
+read it from their run's record with chains/answers.py; the runs themselves are the batch's and
+run_chain's), over grids with cases that stall, never trip, stop (too many events, a Painleve case at
 the start) or are refused; a chunk removed is recomputed alone and the table is the same."""
 from __future__ import annotations
 
@@ -14,7 +15,6 @@ from tswm_runtime.chains.batch import run_cases
 from tswm_runtime.chains.run import first_room
 from tswm_runtime.model.contract import load_module
 from tswm_runtime.simulation.chain import settings, simulate_chain
-from tswm_runtime.simulation.drive_train import stall_margin
 from tswm_runtime.sweeps import columns
 from tswm_runtime.sweeps.chain import case_rows, sizing
 
@@ -40,10 +40,10 @@ def _batch_and_single(module, voltages, overrides, params=None):
                       t_out=np.linspace(0.0, run["t_end"], run["points"]), max_steps=run["max_steps"],
                       max_events=run["max_events"])
     singles = [simulate_chain(module, case, **overrides) for case in cases]
-    return P, batch, singles
+    return batch, singles
 
 
-def _assert_same(module, P, batch, singles):
+def _assert_same(batch, singles):
     assert [batch.status_words[k] for k in batch.status] == [r.status for r in singles]
     assert [batch.verdict_words[k] for k in batch.verdict] == [r.answers["holds"]["verdict"] for r in singles]
     expected = {"t_stop": [r.t_stop for r in singles], "events": [len(r.events) for r in singles],
@@ -57,8 +57,8 @@ def _assert_same(module, P, batch, singles):
     expected["extra_travel"] = [_number(r.answers["extra_travel"]) for r in singles]
     for name, values in expected.items():
         np.testing.assert_array_equal(getattr(batch, name), np.array(values), err_msg=name)
-    np.testing.assert_array_equal(stall_margin(module, P, batch.thrust, P[:, module.P_VOLTAGE]),
-                                  [_number(r.answers["stall_margin"]) for r in singles])
+    for name in ("needed", "pull_out", "stall_margin"):
+        np.testing.assert_array_equal(getattr(batch, name), [_number(r.answers[name]) for r in singles], err_msg=name)
 
 
 @pytest.mark.parametrize("overrides", [{}, {"t_end": 2.2}, {"max_events": 3}], ids=["scene", "short", "few-events"])
@@ -68,8 +68,8 @@ def test_the_batch_gives_every_answer_of_single_runs(overrides):
     3 s, above it holds; a run of 2.2 s ends before the hold is decided; 3 events stop the runs that move
     (too-many-events) beside those that finish. Each case's answers equal the single run's bit for bit."""
     module = load_module("mov")
-    P, batch, singles = _batch_and_single(module, VOLTAGES, overrides)
-    _assert_same(module, P, batch, singles)
+    batch, singles = _batch_and_single(module, VOLTAGES, overrides)
+    _assert_same(batch, singles)
     words = {r.answers["holds"]["verdict"] for r in singles}
     if not overrides:
         assert {"no trip: the motor was not cut", "holds",
@@ -84,8 +84,8 @@ def test_the_batch_gives_the_single_runs_answers_for_any_friction(mu_2):
     """mu_2 a slot of p: the stem nut does not self-lock at 0.05 (tan 4.55 deg = 0.0796 > 0.05 / cos 15 deg),
     self-locks at 0.15 and 0.3; every answer per case equals the single run's with the same values."""
     module = load_module("mov")
-    P, batch, singles = _batch_and_single(module, [0.8, 1.0], {}, {"mu_2": mu_2})
-    _assert_same(module, P, batch, singles)
+    batch, singles = _batch_and_single(module, [0.8, 1.0], {}, {"mu_2": mu_2})
+    _assert_same(batch, singles)
     assert [r.answers["holds"]["self_locking"] == [2] for r in singles] == [mu_2 > 0.1] * 2
 
 
@@ -93,9 +93,9 @@ def test_the_batch_reports_a_painleve_case_as_the_single_run(chain_module):
     """A light input on a heavy output through a self-locking wedge: indeterminate at the start, in the
     batch as in the single run (no motor, no switch: no trip)."""
     module = chain_module(PAINLEVE)
-    P, batch, singles = _batch_and_single(module, [1.0, 1.0], TIGHT)
+    batch, singles = _batch_and_single(module, [1.0, 1.0], TIGHT)
     assert [r.status for r in singles] == ["indeterminate"] * 2
-    _assert_same(module, P, batch, singles)
+    _assert_same(batch, singles)
 
 
 def test_a_run_of_more_phases_than_the_first_record_holds_is_run_again_with_more_room(chain_module):
@@ -104,9 +104,9 @@ def test_a_run_of_more_phases_than_the_first_record_holds_is_run_again_with_more
     gives the single run's answers."""
     module = chain_module(wedges("oscillator", gammas=(30.0,), mus=(0.0,), masses=(1.0, 1.0), forces=(0.0, 0.0),
                                  spring=400.0, v0=1.0, t_end=12.0))
-    P, batch, singles = _batch_and_single(module, [1.0, 1.0, 1.0], {})
+    batch, singles = _batch_and_single(module, [1.0, 1.0, 1.0], {})
     assert [r.status for r in singles] == ["finished"] * 3 and len(singles[0].events) > first_room(1000) + 1
-    _assert_same(module, P, batch, singles)
+    _assert_same(batch, singles)
 
 
 def test_a_refused_case_is_recorded_and_the_sweep_goes_on():

@@ -9,7 +9,8 @@ fresh NUMBA_CACHE_DIR:
     integrate     import hybrid.entry, hybrid.rows and hybrid.segments (compiles integrate_hybrid, run_segment,
                   integrate_at, fill_rows, states_at and no_jacobian), everything cold
     batch         import hybrid.batch (run_batch, parallel) with the integrate group cached
-    chain         import chains.kernel (run_chain_at, a drive train's whole run) with the integrate group cached
+    chain         import chains.answers (run_chain_at, a drive train's whole run, and answer_run, its answers)
+                  with the integrate group cached
     chain-batch   import chains.batch (run_chain_batch, parallel) with the chain group cached
     METHOD        segment.attempt_function(METHOD): the step of dopri5, rosenbrock23, rodas4, with the
                   integrate group cached
@@ -69,10 +70,10 @@ def main() -> int:
         seconds["batch"] = timed("import tswm_runtime.hybrid.batch", cache,
                                  "import tswm_runtime.hybrid.entry, tswm_runtime.hybrid.rows")
         print(f"batch {seconds['batch']:.1f} s", flush=True)
-        seconds["chain"] = timed("import tswm_runtime.chains.kernel", cache,
+        seconds["chain"] = timed("import tswm_runtime.chains.answers", cache,
                                  "import tswm_runtime.hybrid.entry, tswm_runtime.hybrid.rows, tswm_runtime.hybrid.segments")
         print(f"chain {seconds['chain']:.1f} s", flush=True)
-        seconds["chain-batch"] = timed("import tswm_runtime.chains.batch", cache, "import tswm_runtime.chains.kernel")
+        seconds["chain-batch"] = timed("import tswm_runtime.chains.batch", cache, "import tswm_runtime.chains.answers")
         print(f"chain-batch {seconds['chain-batch']:.1f} s", flush=True)
         for name, code in (("dopri5", "DOPRI5"), ("rosenbrock23", "ROSENBROCK23"),
                            ("rodas4", "RODAS4")):  # simulate.METHODS

@@ -101,6 +101,8 @@ class ChainRun:
     n_steps: int
     trip: dict | None = None     # t, y, mode, stage forces (None at rest), drive just before the switch cut the motor
     p: np.ndarray | None = field(default=None, repr=False)   # p at the start: latches, values, derived slots
+    code: int = 0                # the kernel's status code
+    record: kernel.ChainRecord | None = field(default=None, repr=False)   # the chain record the run wrote
 
 
 def latches(module, y: np.ndarray, voltage: float | None = None, values: np.ndarray | None = None) -> np.ndarray:
@@ -278,7 +280,8 @@ def _result(module, code: int, t_stop: float, record: Record, chain: kernel.Chai
         message = f"the integrator stopped at t = {t_stop:.9g} s"
     counters = record.counters
     return ChainRun(status, message, float(t_stop), phases, events, record.out.t, record.out.y,
-                    int(counters[segment.N_STEPS] + counters[segment.N_REJECTED]), _trip(module, chain.trip))
+                    int(counters[segment.N_STEPS] + counters[segment.N_REJECTED]), _trip(module, chain.trip),
+                    code=int(code), record=chain)
 
 
 def _trip(module, trip: np.ndarray) -> dict | None:

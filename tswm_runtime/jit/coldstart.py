@@ -72,7 +72,8 @@ GROUPS = {
     "dopri5": ("the dopri5 step", [("integration/segment.py", "dopri5_attempt", True)]),
     "rosenbrock23": ("the rosenbrock23 step", [("integration/segment.py", "rosenbrock23_attempt", True)]),
     "rodas4": ("the rodas4 step", [("integration/segment.py", "rodas4_attempt", True)]),
-    "chain": ("the drive-train kernel (a chain's whole run)", [("chains/kernel.py", "run_chain_at", True)]),
+    "chain": ("the drive-train kernel (a chain's whole run, its answers)", [("chains/kernel.py", "run_chain_at", True),
+                                                                          ("chains/answers.py", "answer_run", True)]),
     "chain-batch": ("the drive-train sweep kernel", [("chains/batch.py", "run_chain_batch", True)]),
 }
 #: The step groups each method (``simulate.METHODS``) compiles: auto switches between dopri5's and rodas4's

@@ -216,7 +216,7 @@ def compile_into_cache(groups, spec) -> None:
     if "batch" in groups:
         import tswm_runtime.hybrid.batch  # noqa: F401
     if "chain" in groups:
-        import tswm_runtime.chains.kernel  # noqa: F401
+        import tswm_runtime.chains.answers  # noqa: F401  (with it the chain kernel)
     if "chain-batch" in groups:
         import tswm_runtime.chains.batch  # noqa: F401
     for method in METHOD_GROUPS:

@@ -31,13 +31,13 @@ from tswm_runtime.chains.run import latches  # noqa: E402
 from tswm_runtime.model.values import ValueInputError, quantities, si_value  # noqa: E402
 from tswm_runtime.simulation.chain import settings  # noqa: E402
 from tswm_runtime.simulation.chain_values import chain_values, unknown_value  # noqa: E402
-from tswm_runtime.simulation.drive_train import UNITS, stall_margin  # noqa: E402
+from tswm_runtime.simulation.drive_train import UNITS  # noqa: E402
 from tswm_runtime.simulation.simulate import SimulationInputError  # noqa: E402
 from tswm_runtime.sweeps import CHAIN_CHUNK, chunks, columns  # noqa: E402
 from tswm_runtime.sweeps.grid import GridError, parse_items  # noqa: E402
 from tswm_runtime.sweeps.sweep import SweepOutcome, check_size, in_chunks, write_tables  # noqa: E402
 
-SOURCES = ("chains/batch.py", "chains/run.py", "simulation/chain.py", "simulation/chain_values.py",
+SOURCES = ("chains/answers.py", "chains/batch.py", "chains/run.py", "simulation/chain.py", "simulation/chain_values.py",
            "simulation/drive_train.py", "sweeps/chain.py")
 
 
@@ -158,12 +158,11 @@ def _table(module: ModuleType, run: dict, method: int, swept: list[str], values:
         full[ok] = x
         return full
 
-    margin = np.full(ok.size, np.nan)
-    margin[ok] = stall_margin(module, P, a.thrust, P[:, module.P_VOLTAGE])
     numbers = [a.t_trip, a.thrust, a.drive, a.travel, a.peak, a.t_peak, a.extra_travel]
     cells = [*(columns.numbers(np.ascontiguousarray(values[:, k])) for k in range(values.shape[1])),
              columns.texts([*a.status_words, *refused], status), *(columns.numbers(spread(x)) for x in numbers),
-             columns.texts([*a.verdict_words, "-"], spread(a.verdict, len(a.verdict_words))), columns.numbers(margin),
+             columns.texts([*a.verdict_words, "-"], spread(a.verdict, len(a.verdict_words))),
+             columns.numbers(spread(a.stall_margin)),
              columns.numbers(spread(a.t_stop)), columns.numbers(spread(a.events, 0)),
              columns.numbers(spread(a.steps, 0))]
     return columns.table(dict(zip(names, cells)))
