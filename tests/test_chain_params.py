@@ -58,6 +58,24 @@ def test_values_set_by_name_reach_the_run_with_their_units(mov):
     assert a["trip"]["t"] != tswm.simulate("mov").answers["trip"]["t"]
 
 
+def test_mov_with_no_switch_delay_trips_at_the_setting_and_its_stall_margin_is_the_closed_form():
+    """The thrust switch on the stem with no delay cuts the motor where the thrust reaches its 20 kN setting;
+    the torque that thrust needs through the worm (lambda 4.76 deg, alpha_n 20 deg, mu 0.05, r 25 mm / 80 mm)
+    and the Tr 18x4 nut (d_m 16 mm, mu 0.15) is 20 kN x prod Psi_t r_in / r_out by hand, the pull-out torque
+    at U/U_n = 0.9 the motor table's 54.45 N m x 0.81, and the stall margin their ratio."""
+    import tswm_runtime as tswm
+
+    a = tswm.simulate("mov", {"switch_delay": 0.0, "voltage": 0.9}).answers
+    worm = math.tan(4.76 * DEG + math.atan(0.05 / math.cos(20 * DEG)))
+    lam = math.atan(0.004 / (math.pi * 0.016))
+    nut = math.tan(lam + math.atan(0.15 / math.cos(math.atan(math.tan(15 * DEG) * math.cos(lam)))))
+    needed = 20e3 * worm * 0.025 / 0.08 * nut * 0.008
+    assert a["trip"]["thrust"] == pytest.approx(20e3, rel=1e-9)
+    assert a["needed"] == pytest.approx(needed, rel=1e-9)
+    assert a["pull_out"] == pytest.approx(54.45 * 0.81, rel=1e-14)
+    assert a["stall_margin"] == pytest.approx(54.45 * 0.81 / needed, rel=1e-9)
+
+
 @pytest.mark.parametrize("item, message", [
     ("F_2=1", "parameter 'F_2': chain scene 'mov' has no such value (values: lead_angle_1, "),
     ("mu_1=-0.1", "parameter mu_1 = -0.1: must be >= 0 and < 10 (stage[1].mu in the scene file)"),
