@@ -42,7 +42,7 @@ def test_groups_split_at_the_open_stages():
     g = cl.groups(3, (1, 3))
     assert g.first == (0, 1, 3) and g.of_body == (0, 1, 1, 2)
     assert g.factors[0] == 1 and g.factors[1] == 1 and g.factors[3] == 1
-    assert sp.simplify(g.factors[2] - sp.Symbol("r_in_2", positive=True) * sp.tan(g2) / sp.Symbol("r_out_2", positive=True)) == 0
+    assert sp.simplify(g.factors[2] - r3 * sp.tan(g2) / r4) == 0      # body 2 behind body 1 through stage 2
     assert cl.groups(2, ()).first == (0,)
 
 
@@ -159,3 +159,35 @@ def test_impulse_masses_with_friction_inside_a_group_follow_its_ftf():
     dv = sp.solve(sp.Eq(M1 * c1 * sp.Symbol("dv"), r3 + r2 * W), sp.Symbol("dv"))[0]
     _equal(im.m1.subs(Psi, psi_value), (1 / (r3 * c1 * dv)).subs(Psi, psi_value))
     assert sp.simplify(im.m2 - M2 / r4**2) == 0
+
+
+def test_with_e_zero_the_groups_leave_the_impact_moving_as_the_rigid_chain():
+    """e = 0, frictionless stage 2 (stage 1 sliding tractive): after the impulse the gap's rate is 0, so body
+    2's speed is the rigid chain's speed factor times v0 (dynamics.speed_factors)."""
+    im = cl.impact(2, (2,), 2, "a")
+    chain = cl.open_chain(2, (2,))
+    psi = {chain.psi[0]: cl.sliding_psi(1, dyn.TRACTIVE, 1)}
+    at = {**NUMBERS, v0: 20.0, v2: -0.3}
+    nu = chain.gap_rate[2]
+    w = im.W.subs(psi)
+    P = {sp.Symbol("P_n", real=True): -nu / w[0, 0], sp.Symbol("P_t", real=True): 0}
+    after = {v0: v0 + im.jumps[0].subs(psi).subs(P), v2: v2 + im.jumps[1].subs(psi).subs(P)}
+    rigid = dyn.speed_factors(dyn.symbols(2))[2]
+    assert abs(float(sp.N(nu.subs(after, simultaneous=True).subs(at)))) < 1e-15
+    _equal(after[v2], rigid * after[v0], at)
+
+
+@pytest.mark.parametrize("regimes, f", [((dyn.TRACTIVE, dyn.TRACTIVE), 1), ((dyn.TRACTIVE, dyn.INVERSE), -1)])
+def test_a_closed_stage_opens_where_its_switching_function_crosses_zero(regimes, f):
+    """Stage 2 loaded on flank f (a: tractive forward, b: inverse-tractive): were it cut, the gap would move
+    onto that flank (f g'' < 0) exactly where its normal force, of phi_2's sign, is > 0. At phi_2 = 0 the open
+    chain's g'' is 0: the flanks part with zero relative normal acceleration (and speed)."""
+    rigid = dyn.sliding(1, regimes)
+    chain = cl.open_chain(2, (2,))
+    gap_accel = chain.gap_accel[2].subs({chain.psi[0]: cl.sliding_psi(1, regimes[0], 1)})
+    values = {s: v for s, v in {**NUMBERS, rho2: 0.12}.items() if s != F2}
+    for force in (-400.0, -40.0, 3.0, 50.0):
+        phi, g = (float(sp.N(e.subs({**values, F2: force}))) for e in (rigid.switching[1], gap_accel))
+        assert f * g * phi < 0, (force, phi, g)
+    zero = sp.solve(rigid.switching[1].subs(values), F2)[0]
+    assert abs(float(sp.N(gap_accel.subs({**values, F2: zero})))) < 1e-12
