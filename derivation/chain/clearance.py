@@ -98,7 +98,7 @@ def _balance(stages: int, open_stages: tuple[int, ...], external: list[sp.Expr],
     newton = [sp.Eq(sym.inertia[j] * grouping.factors[j] * u[grouping.of_body[j]], on_body[j])
               for j in range(stages + 1)]
     solved = sp.solve(newton, [*u, *(W[i] for i in closed)], dict=True)[0]
-    return tuple(sp.factor(solved[x]) for x in u), {i + 1: sp.factor(solved[W[i]]) for i in closed}
+    return tuple(solved[x] for x in u), {i + 1: solved[W[i]] for i in closed}
 
 
 @lru_cache(maxsize=None)
@@ -157,7 +157,7 @@ def _reduced_mass(stages: int, open_stages: tuple[int, ...], body: int, lever: s
     grouping = groups(stages, open_stages)
     unit = [lever if j == body else sp.Integer(0) for j in range(stages + 1)]
     jumps, _ = _balance(stages, open_stages, unit, "dv")
-    return sp.factor(1 / (lever * grouping.factors[body] * jumps[grouping.of_body[body]]))
+    return sp.together(1 / (lever * grouping.factors[body] * jumps[grouping.of_body[body]]))
 
 
 @lru_cache(maxsize=None)
@@ -172,4 +172,4 @@ def impact(stages: int, open_stages: tuple[int, ...], stage: int, flank: str) ->
     at = {mech.m1: m1, mech.m2: m2, mech.gamma: sym.gamma[k]}
     jump_in = frame.jump_v1.subs(at) / (sym.lever_in[k] * grouping.factors[k])
     jump_out = frame.jump_v2.subs(at) / (sym.lever_out[k] * grouping.factors[stage])
-    return Impact(stage, flank, m1, m2, frame.W.subs(at), (sp.factor(jump_in), sp.factor(jump_out)))
+    return Impact(stage, flank, m1, m2, frame.W.subs(at), (sp.together(jump_in), sp.together(jump_out)))
