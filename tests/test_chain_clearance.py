@@ -191,3 +191,24 @@ def test_a_closed_stage_opens_where_its_switching_function_crosses_zero(regimes,
         assert f * g * phi < 0, (force, phi, g)
     zero = sp.solve(rigid.switching[1].subs(values), F2)[0]
     assert abs(float(sp.N(gap_accel.subs({**values, F2: zero})))) < 1e-12
+
+
+def test_two_open_stages_leave_a_middle_group_moving_alone():
+    """Three stages, 1 and 3 open: body 0 alone, bodies 1 and 2 through stage 2 (sliding tractive backward on
+    flank b: Q (-cos(rho) n + sin(rho) t) on body 2 leans against its slip, R1 = Q sin(g + rho) on x1 and
+    R2 = -Q cos(g + rho) on x2, by hand), body 3 alone."""
+    g3, rho3 = sp.Symbol("gamma_3", positive=True), sp.Symbol("rho_3", nonnegative=True)
+    r5, r6 = sp.symbols("r_in_3 r_out_3", positive=True)
+    M3, F3 = sp.Symbol("M_3", positive=True), sp.Symbol("F_3", real=True)
+    v1, v3 = sp.symbols("v_1 v_3", real=True)
+    chain = cl.open_chain(3, (1, 3))
+    assert chain.groups.first == (0, 1, 3) and set(chain.stage_force) == {2}
+    psi = {chain.psi[1]: cl.sliding_psi(2, dyn.TRACTIVE, -1)}
+    k = r3 * sp.tan(g2) / r4                                      # v2 / v1
+    # M1 a1 = F1 + r3 Q sin(g2 + rho2), M2 k a1 = F2 - r4 Q cos(g2 + rho2): eliminate Q
+    a1 = (F1 + F2 * r3 * sp.tan(g2 + rho2) / r4) / (M1 + M2 * k * r3 * sp.tan(g2 + rho2) / r4)
+    at = {**NUMBERS, rho2: 0.12, g3: 0.4, rho3: 0.05, r5: 0.3, r6: 1.5, M3: 3.0, F3: -2.0}
+    assert [sp.simplify(a - b) for a, b in zip((chain.accel[0], chain.accel[2]), (F0 / M0, F3 / M3))] == [0, 0]
+    _equal(chain.accel[1].subs(psi), a1, at)
+    assert sp.simplify(chain.gap_rate[1] - (r2 * v1 * sp.cos(g1) - r1 * v0 * sp.sin(g1))) == 0
+    assert sp.simplify(chain.gap_rate[3] - (r6 * v3 * sp.cos(g3) - r5 * k * v1 * sp.sin(g3))) == 0
