@@ -41,8 +41,16 @@ class Groups:
     def accel(self, group: int) -> sp.Symbol:
         return sp.Symbol(f"a_{self.first[group]}", real=True)
 
-    def body_speed(self, j: int) -> sp.Expr:
-        return self.factors[j] * self.speed(self.of_body[j])
+
+def _psi(stages: int) -> tuple[sp.Symbol, ...]:
+    """The FTF of every stage as a symbol, Psi_1 .. Psi_N."""
+    return tuple(sp.Symbol(f"Psi_{i + 1}", real=True) for i in range(stages))
+
+
+def _wedge(stage: int) -> dict:
+    """mechanics' wedge symbols renamed to stage ``stage`` (1-based)."""
+    sym = dyn.symbols(stage)
+    return {mech.gamma: sym.gamma[stage - 1], mech.rho: sym.rho[stage - 1]}
 
 
 def groups(stages: int, open_stages: tuple[int, ...]) -> Groups:
@@ -87,7 +95,7 @@ def _balance(stages: int, open_stages: tuple[int, ...], external: list[sp.Expr],
     each closed stage's W_i."""
     sym = dyn.symbols(stages)
     grouping = groups(stages, open_stages)
-    psi = tuple(sp.Symbol(f"Psi_{i + 1}", real=True) for i in range(stages))
+    psi = _psi(stages)
     W = tuple(sp.Symbol(f"W_{i + 1}", real=True) for i in range(stages))
     closed = [i for i in range(stages) if i + 1 not in open_stages]
     on_body = list(external)
@@ -117,24 +125,19 @@ def open_chain(stages: int, open_stages: tuple[int, ...]) -> OpenChain:
         rate[k] = flight.normal_speed.subs(at).subs({mech.v1: v1, mech.v2: v2}, simultaneous=True)
         gap_accel[k] = sp.together(flight.normal_speed.subs(at).subs({mech.v1: a1, mech.v2: a2}, simultaneous=True)
                                    .subs(accels))
-    return OpenChain(grouping, tuple(sp.Symbol(f"Psi_{i + 1}", real=True) for i in range(stages)), accel, force,
-                     rate, gap_accel)
+    return OpenChain(grouping, _psi(stages), accel, force, rate, gap_accel)
 
 
 def sliding_psi(stage: int, regime: str, direction: int) -> sp.Expr:
     """Stage ``stage``'s (1-based) FTF sliding in ``regime`` with its group moving in ``direction``."""
-    sym = dyn.symbols(stage)
-    return mech.sliding(dyn.flank(regime, direction), direction).psi.subs(
-        {mech.gamma: sym.gamma[stage - 1], mech.rho: sym.rho[stage - 1]})
+    return mech.sliding(dyn.flank(regime, direction), direction).psi.subs(_wedge(stage))
 
 
 def normal_force(chain: OpenChain, stage: int, regime: str, direction: int) -> sp.Expr:
     """N of closed stage ``stage`` from its force on its output body (R2 is N times a factor), with
     every Psi still a symbol: the switching function of the stage's opening is its numerator."""
-    sym = dyn.symbols(stage)
     mode = mech.sliding(dyn.flank(regime, direction), direction)
-    factor = sp.diff(mode.R2, mech.N).subs({mech.gamma: sym.gamma[stage - 1], mech.rho: sym.rho[stage - 1]})
-    return chain.stage_force[stage] / factor
+    return chain.stage_force[stage] / sp.diff(mode.R2, mech.N).subs(_wedge(stage))
 
 
 @dataclass(frozen=True)
