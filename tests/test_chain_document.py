@@ -88,3 +88,15 @@ def test_scene_text_reaches_latex_escaped():
     assert "\\input{" not in tex and "\\end{document}" in tex and tex.count("\\end{document}") == 1
     assert "\\textbackslash{}input\\{/etc/passwd\\}" in tex and "100\\%" in tex and "\\&" in tex and "\\#1" in tex
     assert "\\$x" in tex
+
+
+def test_the_document_shows_the_last_stage_open(msl_document):
+    """Stage 2 of the two-stage chain open: groups from bodies 0 and 2, the gap's rate in both groups' speeds,
+    the effective masses; the stem (body 2) alone has m2 = M_2 / r_out,2^2."""
+    section = _sections(msl_document)["An open stage (clearance; derived, not simulated yet)"]
+    texts = " ".join(b[1] for b in section.blocks if b[0] == "text")
+    assert "groups that start at bodies 0, 2" in texts and "runtime refuses a clearance" in texts
+    equations = [line for b in section.blocks if b[0] == "math" for line in b[1]]
+    assert [e.split(" = ")[0] for e in equations] == ["a_{0}", "a_{2}", "\\dot g_{2}", "m_1", "m_2", "W_{nn}"]
+    assert "v_{0}" in equations[2] and "v_{2}" in equations[2]
+    assert equations[4] == "m_2 = \\frac{M_{2}}{r_{\\mathrm{out},2}^{2}}", equations[4]

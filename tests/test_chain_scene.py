@@ -129,3 +129,43 @@ def test_cli_derive_of_a_bad_chain_names_the_key(tmp_path, capsys):
     path.write_text(VALVE.replace("mu = 0.05", "mu = -1"))
     assert main(["derive", str(path)]) == 2
     assert "stage[1].mu = -1: must be in [0, 10)" in capsys.readouterr().err
+
+
+CLEARANCE_BAD = [
+    ('clearance = "-0.1 mm"\nrestitution = 0.5', "", ["stage[2].clearance = -0.1 mm", "must be >= 0 m"]),
+    ('clearance = "0.1 mm"\nrestitution = 0.5', 'gap_2 = "0.2 mm"',
+     ["run.gap_2 = 0.2 mm", "must be in [0, 0.0001] m (below stage[2].clearance)"]),
+    ('clearance = "0.1 mm"\nrestitution = 0.5', 'gap_2 = "-0.001 mm"', ["run.gap_2 = -0.001 mm", "in [0, 0.0001] m"]),
+    ('clearance = "0.1 mm"', "", ["stage[2].restitution", "missing required key", "in [0, 1]"]),
+    ('clearance = "0.1 mm"\nrestitution = 1.5', "", ["stage[2].restitution = 1.5", "must be in [0, 1]"]),
+    ("", 'gap_2 = "0.05 mm"', ["run.gap_2", "needs a clearance in stage 2: give stage[2].clearance"]),
+    ("restitution = 0.5", "", ["stage[2].restitution", "needs a clearance in stage 2"]),
+    ("", 'gap_3 = "0.05 mm"', ["run.gap_3", "unknown key", "gap_1, gap_2"]),
+    ('clearance = { value = "0.1 mm", free = true }\nrestitution = 0.5', "", ["stage[2].clearance", "free parameters"]),
+    # a valid clearance is refused, never ignored: the chain's kernel integrates rigid chains only
+    ('clearance = "0.1 mm"\nrestitution = 0.5', 'gap_2 = "0.05 mm"',
+     ['stage[2].clearance = "0.1 mm"', "not supported yet", "one rigid body", "one-stage scene with wedge.clearance"]),
+]
+
+
+@pytest.mark.parametrize("stage, run, parts", CLEARANCE_BAD, ids=[s[:24] + r for s, r, _ in CLEARANCE_BAD])
+def test_a_stage_clearance_is_checked_and_refused(stage, run, parts):
+    text = VALVE.replace("mu = 0.15", f"mu = 0.15\n{stage}") + f"[run]\n{run}\n"
+    with pytest.raises(SceneError) as err:
+        parse_chain(text, "v.toml")
+    message = str(err.value)
+    assert message.startswith("v.toml: ")
+    for part in parts:
+        assert part in message, message
+
+
+def test_cli_refuses_a_stage_clearance_with_exit_2(tmp_path, capsys):
+    from tswm_runtime.cli import main
+
+    path = tmp_path / "gap.toml"
+    path.write_text(VALVE.replace("mu = 0.15", 'mu = 0.15\nclearance = "-0.1 mm"\nrestitution = 0'))
+    assert main(["simulate", str(path)]) == 2
+    assert "stage[2].clearance = -0.1 mm (= -0.0001 m): must be >= 0 m" in capsys.readouterr().err
+    path.write_text(VALVE.replace("mu = 0.15", 'mu = 0.15\nclearance = "0.1 mm"\nrestitution = 0'))
+    assert main(["simulate", str(path)]) == 2
+    assert "stage[2].clearance" in capsys.readouterr().err

@@ -10,6 +10,7 @@ import math
 import sympy as sp
 
 from derivation import mechanics as mech
+from derivation.chain import clearance as cl
 from derivation.chain import dynamics as dyn
 from derivation.chain import stages as st
 from derivation.chain.scene import ChainScene
@@ -100,6 +101,28 @@ def _rest(n_st: int) -> Section:
     s.math(f"k = {_l(k)} < 0 \\quad (\\gamma + \\rho < 90^\\circ)")
     s.text("so stage $k$ holds while")
     s.math(*(f"{_l(h)} \\le 0" for h in rest.holds))
+    return s
+
+
+def _open_stage(n_st: int) -> Section:
+    """The last stage open (a clearance there), from clearance.py: groups, gap kinematics, impact masses."""
+    k = n_st
+    chain = cl.open_chain(n_st, (k,))
+    hit = cl.impact(n_st, (k,), k, "a")
+    s = Section("An open stage (clearance; derived, not simulated yet)")
+    s.text(f"Were stage {k} open (a clearance between its flanks: the runtime refuses a clearance for now), it "
+           f"would transmit nothing and the chain would split into the groups that start at bodies "
+           f"{', '.join(str(j) for j in chain.groups.first)}, each moving with its first body's coordinate. Newton "
+           "for every body, each closed stage's forces tied by its FTF, gives each group's acceleration:")
+    s.math(*(f"a_{{{j}}} = {_l(a)}" for j, a in zip(chain.groups.first, chain.accel)))
+    s.text(f"Stage {k}'s normal gap $g_{{{k}}}$ (0 on flank a, the clearance on flank b) moves with the one-stage "
+           "gap kinematics $\\dot g = \\dot x_2 \\cos\\gamma - \\dot x_1 \\sin\\gamma$:")
+    s.math(f"\\dot g_{{{k}}} = {_l(chain.gap_rate[k])}")
+    s.text("When the gap closes the flanks collide: each group reduced to the stage's $x_1$ and $x_2$ by its "
+           "response to an impulse there (its closed stages tied by their FTFs) gives the effective masses of the "
+           "one-stage impact (its inverse mass in the flank's frame, Coulomb friction and restitution):")
+    s.math(f"m_1 = {_l(hit.m1)}", f"m_2 = {_l(hit.m2)}",
+           f"W_{{nn}} = {_l(hit.W[0, 0])}")
     return s
 
 
@@ -252,7 +275,7 @@ def build_chain_document(chain: ChainScene) -> dict:
               for p in (*(q for s in chain.stages for q in s.params.values()),
                         *(q for b in chain.bodies for q in (b.inertia, b.force)))]
     sections = [_stages(chain), _kinetostatics(), *_modes(len(chain.stages), reachable), _rest(len(chain.stages)),
-                _band(values), _decision(values), _audit(values, reachable)]
+                _open_stage(len(chain.stages)), _band(values), _decision(values), _audit(values, reachable)]
     return {"title": f"Derivation of the chain of stages for scene `{chain.name}`",
             "description": chain.description, "source": chain.source, "digest": chain.digest,
             "params": params, "sections": sections}

@@ -17,7 +17,8 @@ import sympy as sp
 from derivation.chain import stages as st
 from derivation.chain.dynamics import MAX_STAGES
 from derivation.chain.selector import ChainValues
-from derivation.scene import DEG, FLANKS, MAX_DESCRIPTION, NAME, Param, Rule, SceneError, _Reader, _toml, read_toml
+from derivation.scene import (CLEARANCE, DEG, FLANKS, IMPACT, MAX_DESCRIPTION, NAME, Param, Rule, SceneError, _Reader,
+                              _toml, read_toml)
 from derivation.scene import RUN as SCENE_RUN
 from tswm_common import units
 from tswm_common.text import printable
@@ -39,6 +40,8 @@ VALVE = {"packing": Rule("force", 0.0, lo_in=True, default=0.0), "dp": Rule("pre
 SEAT = {"seat": Rule("length"), "seat_stiffness": Rule("stiffness", 0.0)}
 SWITCH_TIMES = {"delay": Rule("time", 0.0, lo_in=True, default=0.0)}
 VOLTAGE = Rule("dimensionless", 0.0, 2.0, hi_in=True, default=1.0)   # U / U_n
+GAP = Rule("length", 0.0, "clearance", lo_in=True, hi_in=True, default=0.0)   # run.gap_k in [0, stage[k].clearance]
+STAGE_CLEARANCE = {"clearance": CLEARANCE, **IMPACT}
 RUN = {"t_end": SCENE_RUN["t_end"], "v0": Rule("dimensionless", -1e12, 1e12, lo_in=True, hi_in=True, default=0.0),
        "rtol": SCENE_RUN["rtol"], "atol": SCENE_RUN["atol"], "max_steps": SCENE_RUN["max_steps"]}
 
@@ -219,7 +222,7 @@ class _ChainReader(_Reader):
         path = f"stage[{k}]"
         kind = self.text(table, "kind", path, tuple(st.kinds()))
         keys = tuple(st.kinds()[kind].keys)
-        self.keys(table, path, ("kind", "flanks", *keys))
+        self.keys(table, path, ("kind", "flanks", *keys, *STAGE_CLEARANCE))
         params = _suffixed(self.params(table, path, {key: RULES[key] for key in keys}), k)
         for param in params.values():
             if param.free:
@@ -300,9 +303,25 @@ class _ChainReader(_Reader):
         voltage = self.number(table, "voltage", path, VOLTAGE, free_ok=False)[0]
         return Motor(*numbers, voltage)
 
-    def chain_run(self, doc: dict) -> ChainRun:
+    def clearances(self, stages: list[dict], run: dict) -> None:
+        """stage[k].clearance (>= 0) with stage[k].restitution (e in [0, 1]) and the start gap run.gap_k in
+        [0, clearance], checked; then refused: the chain's kernel integrates rigid chains only (one coordinate)."""
+        for k, table in enumerate(stages, 1):
+            path, gap = f"stage[{k}]", f"gap_{k}"
+            if "clearance" not in table:
+                for key, where in (("restitution", path), (gap, "run")):
+                    if key in (table if where == path else run):
+                        self.fail(f"{where}.{key}", f"needs a clearance in stage {k}: give stage[{k}].clearance")
+                continue
+            given = self.plain(table, path, STAGE_CLEARANCE)
+            self.number(run, gap, "run", GAP, free_ok=False, siblings=given)
+            self.fail(f"{path}.clearance", "a clearance (backlash) in a chain's stage is not supported yet: the chain "
+                      "moves as one rigid body; give the stage no clearance, or model the stage alone as a one-stage "
+                      "scene with wedge.clearance", _toml(table["clearance"]))
+
+    def chain_run(self, doc: dict, stages: int) -> ChainRun:
         table = self.table(doc, "run", required=False) or {}
-        self.keys(table, "run", tuple(RUN))
+        self.keys(table, "run", (*RUN, *(f"gap_{k}" for k in range(1, stages + 1))))
         value = {k: self.number(table, k, "run", rule, free_ok=False)[0] for k, rule in RUN.items()}
         return ChainRun(**{**value, "max_steps": int(value["max_steps"])})
 
@@ -312,7 +331,8 @@ class _ChainReader(_Reader):
         description = self.text(doc, "description", "", default="")
         if len(description) > MAX_DESCRIPTION:
             self.fail("description", f"{len(description)} characters: must be at most {MAX_DESCRIPTION}")
-        stages = tuple(self.stage(t, k) for k, t in enumerate(self.tables(doc, "stage", 1, MAX_STAGES), 1))
+        stage_tables = self.tables(doc, "stage", 1, MAX_STAGES)
+        stages = tuple(self.stage(t, k) for k, t in enumerate(stage_tables, 1))
         kinds = [st.kinds()[s.kind] for s in stages]
         for k in range(1, len(stages)):
             if kinds[k - 1].motion_out != kinds[k].motion_in:
@@ -322,5 +342,7 @@ class _ChainReader(_Reader):
         tables = self.tables(doc, "body", len(stages) + 1, len(stages) + 1)
         motions = [kinds[0].motion_in, *(kind.motion_out for kind in kinds)]
         bodies = tuple(self.body(t, j, m, j == len(stages)) for j, (t, m) in enumerate(zip(tables, motions)))
-        return ChainScene(name, description, stages, bodies, self.source, digest, self.chain_run(doc),
+        run = self.chain_run(doc, len(stages))
+        self.clearances(stage_tables, self.table(doc, "run", required=False) or {})
+        return ChainScene(name, description, stages, bodies, self.source, digest, run,
                           self.switch(doc, stages, motions))
