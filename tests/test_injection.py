@@ -3,6 +3,7 @@ import ast
 import re
 from pathlib import Path
 
+import numba
 import pytest
 
 from derivation.codegen import GenerationError, generate_module
@@ -62,8 +63,10 @@ def test_description_reaches_the_module_only_as_a_string_constant(description, h
     assert "os" not in {node.id for node in ast.walk(tree) if isinstance(node, ast.Name)}
 
 
-def test_the_payload_module_does_not_run_the_payload(hostile_modules, tmp_path):
-    """Executing the module's top level (numba compiles lazily) defines constants only."""
+def test_the_payload_module_does_not_run_the_payload(hostile_modules, tmp_path, monkeypatch):
+    """Executing the module's top level defines constants only (numba's compiles are switched off:
+    the generated functions' bodies are not the top level)."""
+    monkeypatch.setattr(numba.config, "DISABLE_JIT", True)
     marker = tmp_path / "pwned"
     source = hostile_modules[PAYLOAD].replace("/tmp/tswm-pwned", str(marker))
     path = tmp_path / "hostile.py"   # numba's cache=True needs the module's file to exist

@@ -25,9 +25,24 @@ DIRECT = {"consistent": ("paper", lambda m2, F2: {"m2": m2, "F2": F2}),
 
 
 @pytest.fixture(scope="module")
-def report(tmp_path_factory):
+def paper_run(tmp_path_factory):
+    """`tswm paper` on CASES without the derivation, once per module, in a process of its own (as a user runs it):
+    (the finished process, its output folder, whether SymPy was loaded)."""
     out = tmp_path_factory.mktemp("report")
-    return pr.build_report(out, CASES), out
+    cases = [arg for m2, F2 in CASES for arg in ("--case", f"{m2:g},{F2:g}")]
+    code = ("import sys; from tswm_runtime.cli import main; "
+            f"rc = main(['paper', '-o', {str(out)!r}, *{cases!r}, '--no-derivation']); "
+            "print('sympy loaded:', 'sympy' in sys.modules); sys.exit(rc)")
+    run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert run.returncode == 0, run.stderr
+    return run, out
+
+
+@pytest.fixture(scope="module")
+def report(paper_run):
+    """({'data': the JSON sidecar}, the output folder) of the module's `tswm paper` run."""
+    _, out = paper_run
+    return {"data": json.loads((out / "paper-report.json").read_text())}, out
 
 
 def _table3(out) -> list[dict]:
@@ -135,28 +150,25 @@ def test_figures_are_print_resolution(report):
         assert f"![{label} {scene}](figure2-{key}.png)" in md
 
 
-def test_cli_paper_does_not_load_sympy_without_the_derivation(tmp_path):
-    code = ("import sys; from tswm_runtime.cli import main; "
-            f"rc = main(['paper', '-o', {str(tmp_path)!r}, '--case', '200,-15000', '--no-derivation']); "
-            "assert rc == 0; assert 'sympy' not in sys.modules, 'sympy loaded'")
-    run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
-    assert run.returncode == 0, run.stderr
+def test_cli_paper_does_not_load_sympy_without_the_derivation(paper_run):
+    run, out = paper_run
+    assert "sympy loaded: False" in run.stdout
     # the progress bar names every stage, in order, after the first line
     assert run.stderr.startswith("tswm paper: the paper's cases in four readings")
     seen = [run.stderr.find(f", {stage}]") for stage in plan.estimates({}, derivation=False)]
     assert -1 not in seen and seen == sorted(seen), run.stderr
-    assert (tmp_path / "paper-report.html").exists() and not (tmp_path / "paper-derivation.md").exists()
+    assert (out / "paper-report.html").exists() and not (out / "paper-derivation.md").exists()
     # the CLI and the report state the same wall time, from the command's start, start-up included
     said = re.search(r"wall time (\d+\.\d\d) s from the start of `tswm paper` to the report "
                      r"\(start-up: imports and numba's compiled code (\d+\.\d\d) s; runs, checks, figures and "
                      r"derivation (\d+\.\d\d) s\)", run.stdout)
     assert said, run.stdout
-    timing = json.loads((tmp_path / "paper-report.json").read_text())["timing"]
+    timing = json.loads((out / "paper-report.json").read_text())["timing"]
     assert [f"{timing[k]:.2f}" for k in ("wall_s", "startup_s", "work_s")] == list(said.groups())
     assert timing["wall_s"] == pytest.approx(timing["startup_s"] + timing["work_s"], abs=1e-9)
     assert timing["startup_s"] > 0                    # the import of the report module is counted
-    assert said.group(0) in (tmp_path / "paper-report.md").read_text()
-    html = (tmp_path / "paper-report.html").read_text()
+    assert said.group(0) in (out / "paper-report.md").read_text()
+    html = (out / "paper-report.html").read_text()
     assert said.group(0).replace("`tswm paper`", "<code>tswm paper</code>").replace("'", "&#39;") in html
 
 
