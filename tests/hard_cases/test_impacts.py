@@ -324,7 +324,7 @@ def test_a_sweep_counts_the_impacts_and_their_energy(lab):
     first test: e = 0 takes one impact and ends the normal motion (the lost energy is that
     impact's); e = 1 loses nothing however often it bounces."""
     from tswm_runtime.simulation.simulate import settings
-    from tswm_runtime.sweeps.sweep import run_cases
+    from tswm_runtime.sweeps.rows import run_cases
 
     m1, m2, F1, c = 10.0, 100.0, 50.0, 1e-4
     names = lab.PARAM_NAMES

@@ -283,7 +283,7 @@ def test_a_sweep_counts_the_pickups_and_their_energy(lab):
     up in one impact (rigid wedge, rho = 5 deg) for any travel; e = 1 without friction bounces
     and loses nothing but the last, plastic, bounce's speck of energy."""
     from tswm_runtime.simulation.simulate import settings
-    from tswm_runtime.sweeps.sweep import run_cases
+    from tswm_runtime.sweeps.rows import run_cases
 
     rho = math.radians(5.0)
     cases = [dict(lost_motion_travel=L, friction_rho=rho, lost_motion_restitution=0.0) for L in (1e-3, 3e-3)]
