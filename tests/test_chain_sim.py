@@ -305,3 +305,17 @@ def test_a_run_reads_its_phases_from_its_record_on_first_access(chain_module):
     assert [phase.mode for phase in run.phases][0] == run.events[0].to_mode
     assert all(np.shares_memory(event.seen[1], run._chain.event_f) for event in run.events)
     assert [e["outcome"] for e in result.events] == [e.decision.outcome for e in run.events]
+
+
+def test_a_runs_start_is_its_own(chain_module):
+    """The p a run starts from (the scene's values prepared once per module and voltage) is a copy: writing
+    a run's p changes no later start, and each voltage has its own."""
+    from tswm_runtime.chains.run import latches
+
+    module = chain_module(wedges("two-switching", **SWITCHING))
+    first = latches(module, np.zeros(2))
+    expected = first.copy()
+    first[:] = np.nan
+    assert np.array_equal(latches(module, np.zeros(2)), expected)
+    assert latches(module, np.zeros(2), voltage=0.5)[module.P_VOLTAGE] == 0.5
+    assert np.array_equal(latches(module, np.zeros(2)), expected)

@@ -137,10 +137,17 @@ def latches(module, y: np.ndarray, voltage: float | None = None, values: np.ndar
     """The complete p at the start: the switch armed, the motor's voltage U / U_n (the scene's unless given),
     the scene's values (PARAM_DEFAULTS unless ``values``, one per PARAM_NAMES, in SI), the slots derived
     from them (the module's ``prepare``), and the seat pressed if the last body starts at or beyond it."""
-    p = np.zeros(len(module.P_NAMES))
-    p[module.P_VOLTAGE] = getattr(module, "MOTOR_VOLTAGE", 1.0) if voltage is None else voltage
-    p[module.P_VALUES:module.P_DERIVED] = module.PARAM_DEFAULTS if values is None else values
-    module.prepare(p)
+    prepared = _parts(module).prepared if values is None else {}   # the scene's values: remembered per voltage
+    known = prepared.get(voltage)
+    if known is None:
+        known = np.zeros(len(module.P_NAMES))
+        known[module.P_VOLTAGE] = getattr(module, "MOTOR_VOLTAGE", 1.0) if voltage is None else voltage
+        known[module.P_VALUES:module.P_DERIVED] = module.PARAM_DEFAULTS if values is None else values
+        module.prepare(known)
+        if len(prepared) >= 64:
+            prepared.clear()
+        prepared[voltage] = known
+    p = known.copy()
     p[module.P_SEATED] = float(module.HAS_SEAT and p[module.P_SPEED + module.STAGES] * y[0] >= p[module.P_SEAT])
     return p
 
@@ -187,7 +194,7 @@ class _ModuleParts(NamedTuple):
     """What a chain module's runs share (``_parts``): the compiled decision's tables, the addresses of its
     stage_forces and body_forces_into, and the parts of a Record that a chain's run never writes (the event
     log, the observables' maxima, the step log's rows: a chain keeps its phases and samples in its own record;
-    the output rows' modes and p)."""
+    the output rows' modes and p), and p prepared from the scene's values (copied by each run)."""
 
     module: object
     digest: str
@@ -198,6 +205,7 @@ class _ModuleParts(NamedTuple):
     no_steps: tuple
     out_mode: np.ndarray
     out_p: np.ndarray
+    prepared: dict      # voltage (None: the scene's) -> p with the scene's values prepared, the seat not yet set
 
 
 def _parts(module) -> _ModuleParts:
@@ -220,7 +228,7 @@ def _parts(module) -> _ModuleParts:
             module, module.SCENE_DIGEST, tables,
             (address(module.stage_forces, GUARDS_SIG), address(module.body_forces_into, GUARDS_SIG)),
             EventLog(np.empty(1), np.empty((1, 4), np.int64), np.empty((1, 2)), np.empty((1, 4))), np.zeros((0, 3)),
-            no_steps, np.empty(0, np.int64), np.empty((0, n_p)))
+            no_steps, np.empty(0, np.int64), np.empty((0, n_p)), {})
     return known
 
 
