@@ -35,3 +35,16 @@ def test_the_chain_bench_measures_a_factor(module):
     result = bench_chain.measure(module, rounds=1, log=lambda line: None)
     assert [v["level"] for v in result["verdicts"]] == list(bench_chain.LEVELS)
     assert all(v["tswm_s"] > 0 for v in result["verdicts"])
+
+
+def test_a_phase_starts_with_the_step_carried_over_its_event(module):
+    """Each of the swing's eight phases starts with the step the phase before proposed, not with a fresh
+    initial step and its climb (79 accepted and 4 rejected steps at rtol 1e-6 then, 65 and 6 now), at the
+    same error against the reference."""
+    from tswm_runtime.simulation.chain import simulate_chain
+
+    result = simulate_chain(module, rtol=1e-6, atol=1e-9, points=2)
+    assert result.status == "finished" and len(result.run.phases) == 8
+    assert result.n_steps <= 75
+    reference = bench_chain.peer_run("DOP853", bench_chain.REFERENCE_RTOL, bench_chain.REFERENCE_ATOL)
+    assert bench_chain.error(bench_chain.tswm_run(module, 1e-6, 1e-9), reference) < 2e-6

@@ -267,3 +267,55 @@ def test_a_result_read_for_its_outcome_builds_no_summaries(chain_module, monkeyp
     assert result.status == "finished" and result.events[0]["guard"] == "start"
     with pytest.raises(AssertionError, match="not read"):
         result.stages
+
+
+def test_the_output_times_are_linspaces():
+    """simulate_chain's output times (built without np.linspace's checks of general arguments) are
+    np.linspace(0, t_end, points), bit for bit."""
+    from tswm_runtime.simulation.chain import output_times
+
+    for t_end in (5.0, 0.1, 1e-9, 3.3, 77.7):
+        for points in (1, 2, 3, 7, 1000, 200001):
+            assert np.array_equal(output_times(t_end, points), np.linspace(0.0, t_end, points)), (t_end, points)
+
+
+def test_remembered_settings_are_checked_as_given(chain_module):
+    """The validated settings are remembered per module and overrides, their types included: points=True
+    (a bool, refused) does not pass as the points=1 checked before, nor a bad value after a good one."""
+    from tswm_runtime.simulation.chain import settings
+    from tswm_runtime.simulation.simulate import SimulationInputError
+
+    module = chain_module(wedges("two-switching", **SWITCHING))
+    assert settings(module, {"points": 1})["points"] == 1
+    assert settings(module, {"points": 1}) == settings(module, {"points": 1})
+    with pytest.raises(SimulationInputError, match="points"):
+        settings(module, {"points": True})
+    with pytest.raises(SimulationInputError, match="rtol"):
+        settings(module, {"rtol": float("nan")})
+    with pytest.raises(SimulationInputError, match="rtol"):
+        settings(module, {"rtol": [1e-6]})
+
+
+def test_a_run_reads_its_phases_from_its_record_on_first_access(chain_module):
+    """A run's phases and events are views into its own record, built when read; the events' states are the
+    ones the decisions saw (the Python decision there agrees with the compiled one)."""
+    result = simulate_chain(chain_module(wedges("two-switching", **SWITCHING)), **TIGHT)
+    run = result.run
+    assert "phases" not in vars(run)
+    assert [phase.mode for phase in run.phases][0] == run.events[0].to_mode
+    assert all(np.shares_memory(event.seen[1], run._chain.event_f) for event in run.events)
+    assert [e["outcome"] for e in result.events] == [e.decision.outcome for e in run.events]
+
+
+def test_a_runs_start_is_its_own(chain_module):
+    """The p a run starts from (the scene's values prepared once per module and voltage) is a copy: writing
+    a run's p changes no later start, and each voltage has its own."""
+    from tswm_runtime.chains.run import latches
+
+    module = chain_module(wedges("two-switching", **SWITCHING))
+    first = latches(module, np.zeros(2))
+    expected = first.copy()
+    first[:] = np.nan
+    assert np.array_equal(latches(module, np.zeros(2)), expected)
+    assert latches(module, np.zeros(2), voltage=0.5)[module.P_VOLTAGE] == 0.5
+    assert np.array_equal(latches(module, np.zeros(2)), expected)

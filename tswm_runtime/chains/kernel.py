@@ -97,17 +97,18 @@ def _consistent(guards, mode, t, y, p, g):
 
 
 @njit(error_model="numpy")
-def _slide(fns, run_segment, settings, c, mode, t, y, p, record, i, scratch):
-    """Integrate in ``mode`` from (t, y) to its first event or the end, handing over to the Painleve
-    approach where D heads for 0 and on in t after it; returns (status, t, guard, next output row)."""
-    q, h, singular = np.empty(0), 0.0, True
+def _slide(fns, run_segment, settings, c, mode, t, y, p, record, i, h, scratch):
+    """Integrate in ``mode`` from (t, y), first trying step h (<= 0: chosen), to its first event or the
+    end, handing over to the Painleve approach where D heads for 0 and on in t after it; returns
+    (status, t, guard, next output row, next step)."""
+    q, singular = np.empty(0), True
     while True:
         k_singular = 0 if singular and c.guard_direction[mode, 0] != 0 else -1
         ev = EventSettings(c.guard_direction[mode], 0.0, 0.0, True, k_singular, True)
         status, t, k, i, h, singular = run_segment(fns, settings, Segment(mode, p, ev), State(t, y, q, h), record, i,
                                                    scratch)
         if status != segment.APPROACH:
-            return status, t, k, i
+            return status, t, k, i, h
 
 
 @cache_guard.compile_cached(CHAIN_SIG, error_model="numpy", nogil=True)
@@ -127,7 +128,7 @@ def run_chain_at(functions, chain_addresses, c, settings, y0, p, record, rec, ma
     t, t_end, y = 0.0, settings.t_end, y0.copy()
     outcome, mode = settle(fns, chain_fns, c, t, y, p, RESTING, START, w, rec.trip)
     _event(rec, t, START, RESTING, mode, outcome, y, p)
-    status, same = FINISHED, 0
+    status, same, h = FINISHED, 0, 0.0
     while True:
         if rec.counts[0] + 1 >= rec.phases.shape[0] or rec.counts[2] + 1 >= rec.events.shape[0]:
             status = RECORD_FULL
@@ -139,6 +140,7 @@ def run_chain_at(functions, chain_addresses, c, settings, y0, p, record, rec, ma
             t_cut = p[c.p_pick] + p[c.p_delay] if p[c.p_switch] == c.picked else np.inf
             _open(rec, RESTING, t, p)
             _close(rec, min(t_cut, t_end))
+            h = 0.0   # leaving rest: a step chosen afresh
             for r in range(out.t.size):
                 if out.t[r] >= t:
                     out.y[r, 0], out.y[r, 1] = y[0], 0.0
@@ -161,8 +163,12 @@ def run_chain_at(functions, chain_addresses, c, settings, y0, p, record, rec, ma
             break
         i = np.searchsorted(out.t, t)
         i0 = i
-        counters[segment.N_SWITCHES] = 0  # each phase starts on DOPRI5 (method auto)
-        seg_status, t_new, k, i = _slide(fns, run_segment, settings, c, mode, t, y, p, record, i, scratch)
+        if counters[segment.N_SWITCHES] % 2 == 1:  # each phase starts on DOPRI5 (method auto): its step chosen
+            h = 0.0
+        counters[segment.N_SWITCHES] = 0
+        # the last phase's next step is carried over the event (as the mode machine does): no fresh
+        # initial step and no climb from it in each phase; DOPRI5's defect check judges it as any step
+        seg_status, t_new, k, i, h = _slide(fns, run_segment, settings, c, mode, t, y, p, record, i, h, scratch)
         for r in range(i0, i):
             if not _sample(chain_fns, rec, mode, out.t[r], out.y[r], p, w.forces):
                 status = RECORD_FULL

@@ -33,6 +33,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
 from functools import cached_property
+from typing import NamedTuple
 
 import numpy as np
 
@@ -46,7 +47,7 @@ from tswm_runtime.chains import kernel  # noqa: E402
 from tswm_runtime.hybrid import entry  # noqa: E402
 from tswm_runtime.integration import segment  # noqa: E402
 from tswm_runtime.jit.signatures import GUARDS_SIG, address  # noqa: E402
-from tswm_runtime.jit.structures import EventLog, Outputs, Record, Settings, StepLog, Tolerances  # noqa: E402
+from tswm_runtime.jit.structures import EventLog, Outputs, Record, StepLog  # noqa: E402
 
 RESTING = compiled.RESTING   # the mode index of the resting chain (no mode of the module)
 STATUS = {segment.STEP_TOO_SMALL: "step-too-small", segment.MAX_STEPS: "max-steps",
@@ -81,38 +82,74 @@ class ChainEvent:
     from_mode: int
     to_mode: int | None          # None: the run stops here
     outcome: str
-    seen: tuple = field(default=(), repr=False)  # (module, y, p) the decision saw; () when given
+    at: tuple = field(default=(), repr=False)  # (module, the run's event_f, its row): what the decision saw
     given: Decision | None = field(default=None, repr=False)
+
+    @property
+    def seen(self) -> tuple:
+        """(module, y, p) the decision saw, views into the run's record; () when given."""
+        if not self.at:
+            return ()
+        module, event_f, row = self.at
+        return module, event_f[row, 1:3], event_f[row, 3:3 + len(module.P_NAMES)]
 
     @cached_property
     def decision(self) -> Decision:
         return self.given if self.given is not None else decide(self.seen[0], self.t, *self.seen[1:])
 
 
-@dataclass
 class ChainRun:
-    status: str                  # "finished" or why the run stopped
-    message: str
-    t_stop: float
-    phases: list[Phase]
-    events: list[ChainEvent]
-    t: np.ndarray                # output times, and the states there (NaN after a stop)
-    y: np.ndarray
-    n_steps: int
-    trip: dict | None = None     # t, y, mode, stage forces (None at rest), drive just before the switch cut the motor
-    p: np.ndarray | None = field(default=None, repr=False)   # p at the start: latches, values, derived slots
-    code: int = 0                # the kernel's status code
-    record: kernel.ChainRecord | None = field(default=None, repr=False)   # the chain record the run wrote
+    """A chain run: status, message, t_stop, the output times t and states y there (NaN after a stop), the
+    steps taken (accepted and rejected), the trip (t, y, mode, stage forces (None at rest), drive just before
+    the switch cut the motor; None: no cut), p at the start (latches, values, derived slots), the kernel's status
+    code and the chain record the run wrote; its phases and events are read from that record (views into it)
+    on first access."""
+
+    def __init__(self, module, code: int, t_stop: float, record: Record, chain: kernel.ChainRecord):
+        self._module = module
+        self.code, self.record = int(code), chain   # the kernel's status code and the chain record the run wrote
+        self.status, self.message, self.t_stop = run_status(code), "", float(t_stop)
+        self.t, self.y = record.out.t, record.out.y
+        counters = record.counters
+        self.n_steps = int(counters[segment.N_STEPS] + counters[segment.N_REJECTED])
+        self.trip = _trip(module, chain.trip)
+        self.p: np.ndarray | None = None
+
+    @cached_property
+    def phases(self) -> list[Phase]:
+        chain = self.record
+        phase_f = chain.phase_f
+        n_phases = int(chain.counts[0])
+        times = phase_f[:n_phases, :2].tolist()
+        return [Phase(mode, *times[j], phase_f[j, 2:], chain.samples[s0:s1])
+                for j, (mode, s0, s1) in enumerate(chain.phases[:n_phases].tolist())]
+
+    @cached_property
+    def events(self) -> list[ChainEvent]:
+        module, chain = self._module, self.record
+        event_f, n_events = chain.event_f, int(chain.counts[2])
+        times = event_f[:n_events, 0].tolist()
+        return [ChainEvent(times[e], "start" if guard == compiled.START else module.GUARDS[guard], before,
+                           None if after == compiled.NO_MODE else after, compiled.OUTCOMES[outcome],
+                           (module, event_f, e))
+                for e, (guard, before, after, outcome) in enumerate(chain.events[:n_events].tolist())]
 
 
 def latches(module, y: np.ndarray, voltage: float | None = None, values: np.ndarray | None = None) -> np.ndarray:
     """The complete p at the start: the switch armed, the motor's voltage U / U_n (the scene's unless given),
     the scene's values (PARAM_DEFAULTS unless ``values``, one per PARAM_NAMES, in SI), the slots derived
     from them (the module's ``prepare``), and the seat pressed if the last body starts at or beyond it."""
-    p = np.zeros(len(module.P_NAMES))
-    p[module.P_VOLTAGE] = getattr(module, "MOTOR_VOLTAGE", 1.0) if voltage is None else voltage
-    p[module.P_VALUES:module.P_DERIVED] = module.PARAM_DEFAULTS if values is None else values
-    module.prepare(p)
+    prepared = _parts(module).prepared if values is None else {}   # the scene's values: remembered per voltage
+    known = prepared.get(voltage)
+    if known is None:
+        known = np.zeros(len(module.P_NAMES))
+        known[module.P_VOLTAGE] = getattr(module, "MOTOR_VOLTAGE", 1.0) if voltage is None else voltage
+        known[module.P_VALUES:module.P_DERIVED] = module.PARAM_DEFAULTS if values is None else values
+        module.prepare(known)
+        if len(prepared) >= 64:
+            prepared.clear()
+        prepared[voltage] = known
+    p = known.copy()
     p[module.P_SEATED] = float(module.HAS_SEAT and p[module.P_SPEED + module.STAGES] * y[0] >= p[module.P_SEAT])
     return p
 
@@ -155,12 +192,30 @@ def decide(module, t: float, y: np.ndarray, p: np.ndarray) -> Decision:
 
 
 
-def chain_tables(module) -> compiled.ChainTables:
-    """The compiled decision's tables of a chain module: its modes and the slots of p it reads (remembered
-    per module; the numbers themselves are in each run's p)."""
-    known = _TABLES.get(module.__name__)
-    if known is None or known[0] is not module:
-        n_modes = len(module.MODES)
+class _ModuleParts(NamedTuple):
+    """What a chain module's runs share (``_parts``): the compiled decision's tables, the addresses of its
+    stage_forces and body_forces_into, and the parts of a Record that a chain's run never writes (the event
+    log, the observables' maxima, the step log's rows: a chain keeps its phases and samples in its own record;
+    the output rows' modes and p), and p prepared from the scene's values (copied by each run)."""
+
+    module: object
+    digest: str
+    tables: compiled.ChainTables
+    functions: tuple[int, int]
+    event_log: EventLog
+    mon: np.ndarray
+    no_steps: tuple
+    out_mode: np.ndarray
+    out_p: np.ndarray
+    prepared: dict      # voltage (None: the scene's) -> p with the scene's values prepared, the seat not yet set
+
+
+def _parts(module) -> _ModuleParts:
+    """The module's shared parts, built on its first run and remembered per module (its identity and its
+    scene's digest: a module loaded again, or generated anew, gets its own)."""
+    known = _PARTS.get(module.__name__)
+    if known is None or known.module is not module or known.digest != module.SCENE_DIGEST:
+        n_modes, n_p = len(module.MODES), len(module.P_NAMES)
         ints = dict(stages=module.STAGES, p_psi=module.P_PSI, p_lever_in=module.P_LEVER_IN,
                     p_lever_out=module.P_LEVER_OUT, p_slack=module.P_SLACK, switch_on=module.SWITCH_ON,
                     p_delay=module.P_DELAY, p_switch=module.P_SWITCH, p_pick=module.P_PICK, p_seated=module.P_SEATED)
@@ -169,18 +224,28 @@ def chain_tables(module) -> compiled.ChainTables:
             guard_direction=np.array(module.GUARD_DIRECTIONS, np.int64).reshape(n_modes, len(module.GUARDS)),
             **{k: int(v) for k, v in ints.items()}, armed=float(module.ARMED), picked=float(module.PICKED),
             tripped=float(module.TRIPPED))
-        known = _TABLES[module.__name__] = (module, tables, (address(module.stage_forces, GUARDS_SIG),
-                                                           address(module.body_forces_into, GUARDS_SIG)))
-    return known[1]
+        no_steps = (np.empty((0, 4)), np.empty((0, 2), np.int64), np.empty((0, 2)), np.empty((0, 2)),
+                    np.empty((0, 3, 4)), np.empty(0, np.int64), np.empty((0, n_p)))
+        known = _PARTS[module.__name__] = _ModuleParts(
+            module, module.SCENE_DIGEST, tables,
+            (address(module.stage_forces, GUARDS_SIG), address(module.body_forces_into, GUARDS_SIG)),
+            EventLog(np.empty(1), np.empty((1, 4), np.int64), np.empty((1, 2)), np.empty((1, 4))), np.zeros((0, 3)),
+            no_steps, np.empty(0, np.int64), np.empty((0, n_p)), {})
+    return known
 
 
-_TABLES: dict = {}
+_PARTS: dict = {}
+
+
+def chain_tables(module) -> compiled.ChainTables:
+    """The compiled decision's tables of a chain module: its modes and the slots of p it reads (the numbers
+    themselves are in each run's p)."""
+    return _parts(module).tables
 
 
 def chain_functions(module) -> tuple[int, int]:
     """The addresses of the module's stage_forces and body_forces_into, as the kernel takes them."""
-    chain_tables(module)
-    return _TABLES[module.__name__][2]
+    return _parts(module).functions
 
 
 def first_room(max_events: int) -> int:
@@ -194,21 +259,18 @@ def samples_room(phases: int, points: int) -> int:
 
 
 def _record(module, t_out: np.ndarray, phases: int, samples: int) -> tuple[Record, kernel.ChainRecord]:
+    """A run's records: its own output rows, counters and chain record, the module's shared parts besides."""
+    parts = _parts(module)
     n_p, width = len(module.P_NAMES), 3 + 3 * module.STAGES
-    out = Outputs(t_out, np.full((t_out.size, 2), np.nan), np.full(t_out.size, -1, np.int64),
-                  np.empty((t_out.size, n_p)))
-    record = Record(out, EventLog(np.empty(1), np.empty((1, 4), np.int64), np.empty((1, 2)), np.empty((1, 4))),
-                    np.zeros((0, 3)), np.zeros(segment.N_COUNTERS, np.int64), _no_step_log(n_p))
+    rows = np.empty((t_out.size, 2))
+    rows.fill(np.nan)   # np.full costs three times as much
+    out = Outputs(t_out, rows, parts.out_mode, parts.out_p)
+    record = Record(out, parts.event_log, parts.mon, np.zeros(segment.N_COUNTERS, np.int64),
+                    StepLog(*parts.no_steps, np.zeros(2, np.int64)))
     chain = kernel.ChainRecord(np.empty((phases, 3), np.int64), np.empty((phases, 2 + n_p)),
                                np.empty((samples, width)), np.empty((phases, 4), np.int64),
                                np.empty((phases, 3 + n_p)), np.empty(5 + 3 * module.STAGES), np.zeros(3, np.int64))
     return record, chain
-
-
-def _no_step_log(n_params: int) -> StepLog:
-    """A StepLog with room for no step: a chain keeps its phases and samples in its own record."""
-    return StepLog(np.empty((0, 4)), np.empty((0, 2), np.int64), np.empty((0, 2)), np.empty((0, 2)),
-                   np.empty((0, 3, 4)), np.empty(0, np.int64), np.empty((0, n_params)), np.zeros(2, np.int64))
 
 
 def run_chain(module, *, t_end: float, v0: float, rtol: float, atol: float, t_out: np.ndarray,
@@ -219,8 +281,8 @@ def run_chain(module, *, t_end: float, v0: float, rtol: float, atol: float, t_ou
     checked by the caller) the scene's values."""
     t_out = np.ascontiguousarray(t_out, dtype=np.float64)
     y0 = np.array([0.0, float(v0)])
-    settings = Settings(int(method), float(t_end), Tolerances(float(rtol), np.full(2, float(atol)), 0.0, np.inf),
-                        int(max_steps))
+    settings = entry.settings(int(method), 2, t_end=float(t_end), rtol=float(rtol), atol=float(atol),
+                              max_steps=int(max_steps))
     args = (entry.functions(method, module), chain_functions(module), chain_tables(module), settings, y0)
     phases = first_room(max_events)
     while True:   # a record too small for the run's phases and samples: again with twice the room
@@ -249,39 +311,28 @@ def run_status(code: int) -> str:
 
 
 def _result(module, code: int, t_stop: float, record: Record, chain: kernel.ChainRecord) -> ChainRun:
-    """The run from its records; phases and events keep views into them (a run's records are its own)."""
-    n_phases, _, n_events = chain.counts.tolist()
-    n_p = len(module.P_NAMES)
-    phase_f, event_f = chain.phase_f, chain.event_f
-    times = phase_f[:n_phases, :2].tolist()
-    phases = [Phase(mode, *times[j], phase_f[j, 2:], chain.samples[s0:s1])
-              for j, (mode, s0, s1) in enumerate(chain.phases[:n_phases].tolist())]
-    times = event_f[:n_events, 0].tolist()
-    events = [ChainEvent(times[e], "start" if guard == compiled.START else module.GUARDS[guard], before,
-                         None if after == compiled.NO_MODE else after, compiled.OUTCOMES[outcome],
-                         (module, event_f[e, 1:3], event_f[e, 3:3 + n_p]))
-              for e, (guard, before, after, outcome) in enumerate(chain.events[:n_events].tolist())]
-    status, message = run_status(code), ""
-    last = events[-1]
+    """The run from its records (a run's records are its own); the message of a run that stopped."""
+    run = ChainRun(module, code, t_stop, record, chain)
+    if code == kernel.FINISHED:
+        return run
+    last = run.events[-1]
     if code in (kernel.UNDECIDED, kernel.INDETERMINATE):
-        message = last.decision.reason
+        run.message = last.decision.reason
     elif code == kernel.SINGULAR:
-        message = (f"{last.guard} reached 0 in mode {module.MODES[last.from_mode]} at t = {t_stop:.9g} s: no contact "
-                   "force keeps the stages together (a Painleve-type inconsistency), not integrated through")
-        last.given = Decision("none", (), None, message)
+        run.message = (f"{last.guard} reached 0 in mode {module.MODES[last.from_mode]} at t = {t_stop:.9g} s: no "
+                       "contact force keeps the stages together (a Painleve-type inconsistency), not integrated "
+                       "through")
+        last.given = Decision("none", (), None, run.message)
     elif code == kernel.INCONSISTENT_START:
-        message = (f"D or the jam factor is <= 0 where mode {module.MODES[phases[-1].mode]} begins at "
-                   f"t = {t_stop:.9g} s: no contact force keeps the stages together")
+        run.message = (f"D or the jam factor is <= 0 where mode {module.MODES[run.phases[-1].mode]} begins at "
+                       f"t = {t_stop:.9g} s: no contact force keeps the stages together")
     elif code == kernel.TOO_MANY_EVENTS:
-        message = f"{len(events)} events"
+        run.message = f"{len(run.events)} events"
     elif code == kernel.CHATTERING:
-        message = f"{kernel.MAX_SAME_TIME} decisions at t = {t_stop:.9g} s"
-    elif code != kernel.FINISHED:
-        message = f"the integrator stopped at t = {t_stop:.9g} s"
-    counters = record.counters
-    return ChainRun(status, message, float(t_stop), phases, events, record.out.t, record.out.y,
-                    int(counters[segment.N_STEPS] + counters[segment.N_REJECTED]), _trip(module, chain.trip),
-                    code=int(code), record=chain)
+        run.message = f"{kernel.MAX_SAME_TIME} decisions at t = {t_stop:.9g} s"
+    else:
+        run.message = f"the integrator stopped at t = {t_stop:.9g} s"
+    return run
 
 
 def _trip(module, trip: np.ndarray) -> dict | None:

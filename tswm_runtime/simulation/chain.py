@@ -104,7 +104,28 @@ class ChainResult:
 
 
 def settings(module: ModuleType, overrides: dict) -> dict:
-    """The chain scene's run settings with ``overrides`` applied, validated, naming a bad one."""
+    """The chain scene's run settings with ``overrides`` applied, validated, naming a bad one; remembered
+    per module and overrides (their types included: True is no valid 1), so that repeated calls are
+    checked once."""
+    try:
+        key = (module.__name__, module.SCENE_DIGEST, tuple((k, type(v), v) for k, v in overrides.items()))
+        known = _SETTINGS.get(key)
+    except TypeError:   # an unhashable value: checked (and refused) below
+        key, known = None, None
+    if known is not None and known[0] is module:
+        return dict(known[1])
+    run = _checked(module, overrides)
+    if key is not None:
+        if len(_SETTINGS) >= 256:
+            _SETTINGS.clear()
+        _SETTINGS[key] = (module, dict(run))
+    return run
+
+
+_SETTINGS: dict = {}
+
+
+def _checked(module: ModuleType, overrides: dict) -> dict:
     run = {**module.RUN, "points": DEFAULT_POINTS, "max_events": DEFAULT_MAX_EVENTS, "voltage": None}
     for key, value in overrides.items():
         _check(key in run, "setting", key, lambda: f"one of {', '.join(run)}")
@@ -134,12 +155,22 @@ def simulate_chain(module: ModuleType, params: dict | None = None, method: int =
     and voltage override the scene's run."""
     values, voltage = chain_values(module, params)
     run = settings(module, {**overrides, **({"voltage": voltage} if voltage is not None else {})})
-    t_out = np.linspace(0.0, run["t_end"], run["points"])
+    t_out = output_times(run["t_end"], run["points"])
     result = run_chain(module, t_end=run["t_end"], v0=run["v0"], rtol=run["rtol"], atol=run["atol"], t_out=t_out,
                        method=method, max_steps=run["max_steps"], max_events=run["max_events"], voltage=run["voltage"],
                        values=values)
     return ChainResult(module.SCENE, result.status, result.message, result.t_stop, _events(module, result), result.t,
                        result.y[:, 0], result.y[:, 1], result.n_steps, result, module, run["voltage"])
+
+
+def output_times(t_end: float, points: int) -> np.ndarray:
+    """np.linspace(0, t_end, points) as linspace computes it (i * (t_end / (points - 1)), the last one
+    t_end), without its checks of general arguments (a tenth of a chain's call with two points)."""
+    t = np.arange(points, dtype=np.float64)
+    if points > 1:
+        t *= t_end / (points - 1)
+        t[-1] = t_end
+    return t
 
 
 def _samples(sliding: list, stages: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -195,22 +226,34 @@ def _stage(module: ModuleType, run: ChainRun, k: int, peaks: dict) -> StageSumma
 
 
 class EventRow(Mapping):
-    """An event as plain data: t, guard, from, to (None: stop), outcome, reason; the reason (the Python
-    decision's words) is evaluated on first access, so a run read for its numbers never evaluates it."""
+    """An event as plain data: t, guard, from, to (None: stop), outcome, reason; each read from the run's
+    event when asked for, so a run read for its numbers never evaluates the reason (the Python decision's
+    words)."""
 
     KEYS = ("t", "guard", "from", "to", "outcome", "reason")
+    __slots__ = ("_module", "_event")
 
     def __init__(self, module: ModuleType, event):
-        def name(mode):
-            return None if mode is None else ("resting" if mode == RESTING else module.MODES[mode])
-        self._event = event
-        self._values = {"t": event.t, "guard": event.guard, "from": name(event.from_mode) if event.guard != "start"
-                        else None, "to": name(event.to_mode), "outcome": event.outcome}
+        self._module, self._event = module, event
+
+    def _mode(self, mode):
+        return None if mode is None else ("resting" if mode == RESTING else self._module.MODES[mode])
 
     def __getitem__(self, key):
+        event = self._event
+        if key == "t":
+            return event.t
+        if key == "guard":
+            return event.guard
+        if key == "from":
+            return self._mode(event.from_mode) if event.guard != "start" else None
+        if key == "to":
+            return self._mode(event.to_mode)
+        if key == "outcome":
+            return event.outcome
         if key == "reason":
-            return self._event.decision.reason
-        return self._values[key]
+            return event.decision.reason
+        raise KeyError(key)
 
     def __iter__(self):
         return iter(self.KEYS)
@@ -219,7 +262,7 @@ class EventRow(Mapping):
         return len(self.KEYS)
 
     def __repr__(self):
-        return f"EventRow({self._values})"
+        return f"EventRow({ {key: self[key] for key in self.KEYS[:-1]} })"
 
 
 def _events(module: ModuleType, run: ChainRun) -> tuple[EventRow, ...]:
