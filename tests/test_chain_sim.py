@@ -90,10 +90,10 @@ def test_a_painleve_case_is_reported_not_integrated(chain_module):
     assert result.events[0]["to"] is None
 
 
-def one_stage(name: str, rho: float) -> str:
-    return (f'name = "{name}"\n[wedge]\nflanks = ["a", "b"]\ngamma = "20 deg"\nm1 = "3 kg"\nm2 = "5 kg"\n'
-            f'[friction]\nlaw = "constant"\nrho = {rho!r}\n[drive]\nlaw = "constant"\nF1 = "10 N"\n'
-            '[load]\nlaw = "constant"\nF2 = "-40 N"\n[modes]\ninclude = ["forward", "backward", "stick"]\n[run]\nt_end = "1 s"\nv1 = "2 m/s"\n')
+# One stage as the one-stage model's scene: rho free, so that both cases run one compiled module.
+ONE_STAGE = ('name = "one-stage"\n[wedge]\nflanks = ["a", "b"]\ngamma = "20 deg"\nm1 = "3 kg"\nm2 = "5 kg"\n'
+             '[friction]\nlaw = "constant"\nrho = { value = 0.1, free = true }\n[drive]\nlaw = "constant"\nF1 = "10 N"\n'
+             '[load]\nlaw = "constant"\nF2 = "-40 N"\n[modes]\ninclude = ["forward", "backward", "stick"]\n[run]\nt_end = "1 s"\nv1 = "2 m/s"\n')
 
 
 @pytest.mark.parametrize("rho, after_rest, single_after", [(0.1, "inverse-tractive", "backward on flank a"),
@@ -103,7 +103,7 @@ def test_one_stage_chain_runs_as_the_one_stage_model(chain_module, scene_module,
     same v1 and x1 at every output point, the same largest S1 and S2 while sliding."""
     import tswm_runtime
 
-    single = tswm_runtime.simulate(scene_module(one_stage(f"one-stage-{after_rest}", rho)), **TIGHT)
+    single = tswm_runtime.simulate(scene_module(ONE_STAGE), {"friction_rho": rho}, **TIGHT)
     chain = simulate_chain(chain_module(wedges(f"one-chain-{after_rest}", (20.0,), (math.tan(rho),), (3.0, 5.0),
                                                (10.0, -40.0), v0=2.0, t_end=1.0)), **TIGHT)
     assert single.status == chain.status == "finished"
