@@ -8,6 +8,7 @@ unchanged; ``module_for_chain(path)`` does the same for a chain scene ([[stage]]
 from __future__ import annotations
 
 import hashlib
+import logging
 import os
 from pathlib import Path
 
@@ -15,6 +16,14 @@ from derivation.codegen import body_is_intact, generator_digest, module_name, wr
 from derivation.model import build_model
 from derivation.scene import load_scene
 from tswm_common.files import write_atomic
+
+LOG = logging.getLogger("tswm.derive")   # WARNING: printed to stderr without logging configuration
+
+
+def _say_deriving(source, target: Path) -> None:
+    """Say, before SymPy starts, that the scene's model is being derived and where it will be kept."""
+    LOG.warning("tswm: deriving the model of %s with SymPy and generating its module into %s, once; later "
+                "runs load it from there", source, target.parent)
 
 
 def cache_dir() -> Path:
@@ -33,6 +42,7 @@ def module_for_scene(path: str | os.PathLike) -> Path:
     target = directory / f"{module_name(scene.name)}.py"
     if target.exists() and body_is_intact(target.read_text()):
         return target
+    _say_deriving(path, target)
     return write_module(build_model(scene), directory, force=True)
 
 
@@ -54,4 +64,5 @@ def module_for_chain_scene(chain) -> Path:
     target = directory / f"{module_name(chain.name)}.py"
     if target.exists() and body_is_intact(target.read_text()):
         return target
+    _say_deriving(f"chain scene '{chain.name}'", target)
     return write_atomic(target, generate_chain_module(chain))

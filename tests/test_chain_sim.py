@@ -2,6 +2,7 @@
 numbers, and Newton per body with Coulomb per stage (tests/chains.py's HandChain)."""
 from __future__ import annotations
 
+import logging
 import math
 
 import numpy as np
@@ -119,15 +120,20 @@ def test_one_stage_chain_runs_as_the_one_stage_model(chain_module, scene_module,
         assert stage.peaks[name].value == pytest.approx(-series[sliding][k], rel=1e-9), name
 
 
-def test_cli_simulates_a_chain_file(tmp_path, capsys, monkeypatch):
-    """tswm simulate CHAIN.toml: per stage regimes, switch times and maxima; exit 0 finished, 1 for a run that
-    stops at a Painleve case, 2 for bad input naming the option or key."""
+def test_cli_simulates_a_chain_file(tmp_path, capsys, caplog, monkeypatch):
+    """tswm simulate CHAIN.toml: says that it derives and compiles the new file's model before it does, then
+    per stage regimes, switch times and maxima; exit 0 finished, 1 for a run that stops at a Painleve case,
+    2 for bad input naming the option or key."""
     from tswm_runtime.cli import main
 
     monkeypatch.setenv("TSWM_CACHE", str(tmp_path / "cache"))
     path = tmp_path / "hold.toml"
     path.write_text(wedges("hold", **HOLD))
-    assert main(["simulate", str(path), "--rtol", "1e-10", "--atol", "1e-12", "-o", str(tmp_path)]) == 0
+    with caplog.at_level(logging.WARNING):
+        assert main(["simulate", str(path), "--rtol", "1e-10", "--atol", "1e-12", "-o", str(tmp_path)]) == 0
+    said = [record.getMessage() for record in caplog.records]
+    assert said[0].startswith("tswm: deriving the model of chain scene 'hold' with SymPy"), said
+    assert said[1].startswith("tswm: compiling the model `hold` into numba's cache: about "), said
     out = capsys.readouterr().out
     assert "status: finished" in out and "stage 2 (wedge, body 1 -> body 2):" in out
     assert "resting" in out and "all stuck: the statics determine the internal forces: X_1 = 0;" in out
@@ -303,7 +309,7 @@ def test_a_run_reads_its_phases_from_its_record_on_first_access(chain_module):
     run = result.run
     assert "phases" not in vars(run)
     assert [phase.mode for phase in run.phases][0] == run.events[0].to_mode
-    assert all(np.shares_memory(event.seen[1], run._chain.event_f) for event in run.events)
+    assert all(np.shares_memory(event.seen[1], run.record.event_f) for event in run.events)
     assert [e["outcome"] for e in result.events] == [e.decision.outcome for e in run.events]
 
 

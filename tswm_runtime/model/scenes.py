@@ -49,11 +49,18 @@ def is_chain(scene: str | Path) -> bool:
 def load_chain_model(scene: str | Path) -> ModuleType:
     """The generated module of a chain scene file, made into the user cache on first use (SymPy), or a
     shipped chain's from generated/."""
-    if _shipped_chain(str(scene)) is not None:
-        return load_module(str(scene))
-    from derivation.model_cache import module_for_chain
+    from tswm_runtime.jit import coldstart
 
-    return load_module(module_for_chain(scene))
+    if _shipped_chain(str(scene)) is not None:
+        spec = str(scene)
+    else:
+        from derivation.model_cache import module_for_chain
+
+        spec = str(module_for_chain(scene))
+    coldstart.announce((), spec)   # numba compiles the module's entry functions on import, if not cached
+    module = load_module(spec)
+    coldstart.done()
+    return module
 
 
 def model_spec(scene: str | Path) -> str:
