@@ -96,16 +96,6 @@ def dask_cluster(tmp_path):
 
 
 @pytest.fixture(scope="module")
-def two_workers(tmp_path_factory):
-    """One cluster with two plain workers for the tests that neither kill nor change it."""
-    made = Cluster(tmp_path_factory.mktemp("two-workers"))
-    made.worker("w1")
-    made.worker("w2")
-    yield made
-    made.close()
-
-
-@pytest.fixture(scope="module")
 def reference():
     """The same sweep in this process, without dask."""
     module = load_module("paper")
@@ -129,9 +119,11 @@ def wait_for_chunks(directory: Path, count: int, process: subprocess.Popen, time
         time.sleep(0.05)
 
 
-def test_cluster_table_equals_local_and_progress_counts_chunks(two_workers, reference, tmp_path, capsys):
+def test_cluster_table_equals_local_and_progress_counts_chunks(dask_cluster, reference, tmp_path, capsys):
+    dask_cluster.worker("w1")
+    dask_cluster.worker("w2")
     out = tmp_path / "out"
-    assert main(argv(out, "--scheduler", two_workers.address)) == 0
+    assert main(argv(out, "--scheduler", dask_cluster.address)) == 0
     captured = capsys.readouterr()
     assert "10/10" in captured.err and "computed 10" in captured.out   # the bar counts the cluster's chunks
     pd.testing.assert_frame_equal(read_table(out / "paper-sweep.parquet"), reference)
@@ -214,15 +206,16 @@ def test_module_file_travels_to_a_worker_that_compiles_it_and_says_so(dask_clust
     pd.testing.assert_frame_equal(read_table(out / "paper-sweep.parquet"), reference)
 
 
-def test_chunk_uses_the_workers_threads(two_workers):
+def test_chunk_uses_the_workers_threads(dask_cluster):
     """A worker given one thread runs its chunk on one numba thread; this process keeps all cores."""
     from distributed import Client
 
+    dask_cluster.worker("w1")
     module = load_module("paper")
     P = grid_cases(module, parse_grid(["F2=-15000:-1000:3"], module))
     from tswm_runtime.simulation.simulate import settings
 
-    with Client(two_workers.address, timeout=30) as client:
+    with Client(dask_cluster.address, timeout=30) as client:
         stamp, table = client.submit(cluster.chunk_task, cluster.package(module), P, settings(module, SETTINGS),
                                      pure=False).result(timeout=120)
     assert stamp["numba threads"] == 1 and len(table) == 3
