@@ -34,6 +34,9 @@ SLOW = ("import time\nfrom tswm_runtime.sweeps import rows\n_real = rows.__dict_
         "rows.case_table = case_table\n")
 NO_TSWM = "import sys\nsys.modules['tswm_runtime'] = None   # import tswm_runtime raises ModuleNotFoundError\n"
 OTHER_VERSION = "from tswm_runtime.common import provenance\nprovenance.TSWM_VERSION = '0.0.0-other'\n"
+# dask's own diagnostics off in the test cluster: the workers' statistical profiler samples every 10 ms
+# (CPU spent while a worker idles through a test), nothing here reads it.
+QUIET = {"DASK_DISTRIBUTED__WORKER__PROFILE__ENABLED": "False"}
 
 
 class Cluster:
@@ -41,7 +44,7 @@ class Cluster:
 
     def __init__(self, directory: Path):
         self.directory, self.processes = directory, []
-        self.env = {**os.environ, "PYTHONPATH": str(ROOT)}
+        self.env = {**os.environ, "PYTHONPATH": str(ROOT), **QUIET}
         info = directory / "scheduler.json"
         self.scheduler = self._start(["scheduler", "--host", "127.0.0.1", "--port", "0", "--no-dashboard",
                                       "--scheduler-file", str(info)], "scheduler")
