@@ -217,9 +217,16 @@ def test_error_over_a_flank_switch_falls_in_proportion_to_rtol(model, method):
     assert all(abs(r.x1[-1] - x_end) / x_end < rtol for r, rtol in zip(runs, rtols))
 
 
-def test_forward_only_scene_stops_at_rest_asking_for_stick(scene_module):
-    model = scene_module(SCENE.replace('name = "closed-form"', 'name = "closed-form-forward"')
-                         .replace('include = ["forward", "backward", "stick"]', 'include = ["forward"]'))
+@pytest.fixture(scope="module")
+def one_sided_forward(scene_module):
+    """The scene on flank a alone, sliding forward only: one module for both undeclared modes."""
+    return scene_module(SCENE.replace('name = "closed-form"', 'name = "closed-form-one-sided-forward"')
+                        .replace('flanks = ["a", "b"]', 'flanks = ["a"]')
+                        .replace('include = ["forward", "backward", "stick"]', 'include = ["forward"]'))
+
+
+def test_forward_only_scene_stops_at_rest_asking_for_stick(one_sided_forward):
+    model = one_sided_forward
     p = params(gamma=math.radians(4), rho=math.radians(8), F0=100.0, V0=CONSTANT_DRIVE,
                F2_before=-3000.0, F2_after=-3000.0)
     t_rest = 0.2 / -mode_of(p, 1, 1, -3000.0).alpha
@@ -230,10 +237,8 @@ def test_forward_only_scene_stops_at_rest_asking_for_stick(scene_module):
     assert [(e.guard, e.to_mode) for e in r.events] == [("v1", None)]
 
 
-def test_one_sided_scene_names_lift_off_when_its_contact_force_vanishes(scene_module):
-    text = SCENE.replace('name = "closed-form"', 'name = "closed-form-one-sided"').replace(
-        'flanks = ["a", "b"]', 'flanks = ["a"]')
-    model = scene_module(text)
+def test_one_sided_scene_names_lift_off_when_its_contact_force_vanishes(one_sided_forward):
+    model = one_sided_forward
     p = params(F2_before=500.0, F2_after=500.0)     # assisting: phi = 0 at v_star below v_inf
     a = mode_of(p, 1, 1, 500.0)
     v_star = p["V0"] * (1 - p["m1"] * 500.0 / (p["m2"] * math.tan(p["gamma"]) * p["F0"]))

@@ -101,19 +101,21 @@ class Problem:
         return self._history(X)
 
     def _peaks(self, X):
-        from tswm_runtime.sweeps.rows import run_cases
+        from tswm_runtime.sweeps import columns
+        from tswm_runtime.sweeps.rows import case_table
 
         k, n = X.shape[0], len(self.measured.cases)
-        table = run_cases(self.module, self.matrix(X), self.run)
-        values = np.array(table[self.measured.quantities].to_numpy(dtype=np.float64)).reshape(k, n, -1)
+        table = case_table(self.module, self.matrix(X), self.run)   # read from Arrow: no DataFrame per evaluation
+        values = np.column_stack([columns.numbers_of(table.column(q)).astype(np.float64)
+                                  for q in self.measured.quantities]).reshape(k, n, -1)
         if self.magnitude:
             for j, q in enumerate(self.measured.quantities):
                 if q in ("S1m", "S2m"):
                     values[:, :, j] = np.abs(values[:, :, j])
-        status = np.array(table["status"], dtype=object).reshape(k, n)
-        names = {c: " ".join(self.module.MODES[int(i)] if i.isdigit() else i for i in c.split())
-                 for c in set(table["modes"])}
-        self.last_modes = np.array([names[c] for c in table["modes"]], dtype=object).reshape(k, n)
+        status = np.array(table.column("status").to_pylist(), dtype=object).reshape(k, n)
+        modes = table.column("modes").to_pylist()
+        names = {c: " ".join(self.module.MODES[int(i)] if i.isdigit() else i for i in c.split()) for c in set(modes)}
+        self.last_modes = np.array([names[c] for c in modes], dtype=object).reshape(k, n)
         bad = (status != "finished")[:, :, None] | ~np.isfinite(values)
         values = np.where(bad, np.nan, values)
         return values, status

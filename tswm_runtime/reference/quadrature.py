@@ -166,6 +166,7 @@ class _Seg:
     w_a: object = None
     w_lo: object = None  # lower end of the w range integrated
     I_lo: object = None  # int_{w_lo}^{w_a} g
+    X_lo: object = None  # int_{w_lo}^{w_a} v g: x1 travelled until the equilibrium (once asked for)
     cache: list = field(default_factory=list)
 
     @property
@@ -281,7 +282,9 @@ class Trajectory:
         P = _Phase(self.wedge, s)
         w = P.invert(t)
         if w is None:  # at the equilibrium (to 10^-FLOOR_DIGITS) from t_a + I_lo on
-            return P.integral(s.w_lo, s.w_a, weight=1) + s.v_lim * (t - s.t_a - s.I_lo)
+            if s.X_lo is None:
+                s.X_lo = P.integral(s.w_lo, s.w_a, weight=1)
+            return s.X_lo + s.v_lim * (t - s.t_a - s.I_lo)
         return P.integral(w, s.w_a, weight=1)
 
     def x_at(self, t):
