@@ -71,6 +71,21 @@ def mov():
     return load_module("mov")
 
 
+def test_the_motor_torque_is_np_interp_of_the_table_in_p(mov):
+    """The shipped mov's motor_torque equals numpy's np.interp of its table times (U / U_n)^2 exactly, at 200001
+    speeds over and beyond the table, at each point and its neighbours and at +-inf (NaN stays NaN), and
+    follows the table in p: other torques in p's slots give other torques."""
+    from tswm_runtime.chains.run import latches
+
+    p = latches(mov, np.zeros(2), voltage=0.9)
+    speed, torque = np.array(mov.MOTOR_SPEED), np.array(mov.MOTOR_TORQUE)
+    v = np.concatenate([np.linspace(-10.0, 330.0, 200001), speed, np.nextafter(speed, -np.inf),
+                        np.nextafter(speed, np.inf), [np.inf, -np.inf]])
+    assert np.array_equal([mov.motor_torque(x, p) for x in v], 0.9**2 * np.interp(v, speed, torque))
+    assert math.isnan(mov.motor_torque(math.nan, p))
+    p[mov.P_MOTOR_TORQUE:mov.P_MOTOR_TORQUE + mov.MOTOR_POINTS] = torque[::-1]
+    assert np.array_equal([mov.motor_torque(x, p) for x in v[:2001]], 0.9**2 * np.interp(v[:2001], speed, torque[::-1]))
+
 def test_values_set_by_name_reach_the_run_with_their_units(mov):
     """mu_1 = 0.08 and force_2 = -5 kN through tswm.simulate: p holds them in SI, the worm's derived Psi_t is
     the closed form tan(lambda + atan(mu / cos alpha_n)) (lambda 4.76 deg, alpha_n 20 deg), and the torque
