@@ -10,16 +10,16 @@ all stages at once by the complementarity logic the derivation uses (tswm_common
 a flank change, breakaway or rest; no mode or several (a Painleve-type case) stop the run. D or the
 jam factor reaching 0 stops it too (no contact force keeps the stages together).
 
-The torque switch and the valve's seat are latches in the parameter vector p (the module's
-P_NAMES; after them the scene's values, what the module's ``prepare`` derives from them and the motor's
-table, which ``latches`` copies in from the module's MOTOR_SPEED and MOTOR_TORQUE; the compiled
-decision reads them through the slots in ``chain_tables``): at their events the seat's contact flips, the
-switch picks up (its delay starts), drops out (below setting - hysteresis) or trips (the motor is cut for
-good); then the mode is decided again with the new forces. A resting chain stays at rest: its forces depend on q0 (springs, the seat) and v0 (a
-motor's table), which rest with it, except when a picked-up switch's delay ends while it rests: the
-motor is cut then and the chain decided again. While it rests, the switch sees body 0's drive torque;
-a switch on a stage's force keeps its state (the split of a resting chain's forces is statically
-undetermined).
+The torque switch and the valve's seat are latches in the parameter vector p (the module's P_NAMES; after
+them the scene's values, what the module's ``prepare`` derives from them and the motor's table, which
+``latches`` copies in from the module's MOTOR_SPEED and MOTOR_TORQUE; the compiled decision reads them
+through the slots in ``chain_tables``): at their events the seat's contact flips, the switch picks up
+(its delay starts), drops out (below setting - hysteresis) or trips (the motor is cut for good); then the
+mode is decided again with the new forces. A resting chain stays at rest: its forces depend on q0
+(springs, the seat) and v0 (a motor's table), which rest with it, except when a picked-up switch's delay
+ends while it rests: the motor is cut then and the chain decided again. While it rests, the switch sees
+body 0's drive torque; a switch on a stage's force keeps its state (the split of a resting chain's forces
+is statically undetermined).
 
 Each event keeps the state and latches its decision saw; its ``decision`` (with the reason in words
 and, at rest, the admissible internal forces) is the Python decision (``decide``) evaluated there on
