@@ -109,7 +109,7 @@ def chain_module(module_once):
     """chain_module(toml_text) -> the chain module of the text's scene: one generated and compiled module per
     chain structure (its source but for the scene's name, values and run: tests/chains.py ``structure``),
     shared by every text of that structure, with the text's own constants (its values as PARAM_DEFAULTS,
-    its run, its name) in place of the first text's."""
+    its motor table, its run, its name) in place of the first text's."""
     from derivation.chain.codegen import generate_chain_module
     from derivation.chain.scene import parse_chain
     from tests.chains import structure, with_constants

@@ -5,9 +5,10 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 import pytest
 
-from tests.chains import DEG, structure, wedges
+from tests.chains import DEG, TIGHT, HandChain, assert_like_hand, structure, wedges
 
 
 def _source(text: str) -> str:
@@ -30,12 +31,60 @@ def test_the_generated_code_depends_on_the_structure_only():
     assert structure(_source(one_flank))[0] != base[0]
 
 
+def _with_motor(name: str, top: float, stall: float) -> str:
+    """One wedge (30 deg, mu 0.1) between body 0, driven by a falling motor table (stall force ``stall`` at
+    rest, 0 at speed ``top``), and body 1 under a 10 N load, from rest."""
+    return wedges(name, (30.0,), (0.1,), (1.0, 1.0), (0.0, -10.0), v0=0.0, t_end=0.2).replace(
+        'force = "0.0 N"\n', f'force = "0.0 N"\nmotor = {{ speed = [0.0, {top!r}], torque = [{stall!r}, 0.0] }}\n', 1)
+
+
+def test_chains_differing_only_in_their_motor_table_share_one_module_and_run_each_its_own(chain_module):
+    """Two chains whose motor tables differ in their values only (2 points each) give one structure digest and
+    one compiled module, and each runs with its own table: the stall force breaks the chain away from rest
+    exactly when it exceeds the load's force through the wedge, 10 N tan(30 deg + atan 0.1) by hand; 1 %
+    above it the chain slides as the hand model (Newton per body, scipy at rtol 1e-12) with that table, 1 %
+    below it the chain rests."""
+    from tswm_runtime.simulation.chain import simulate_chain
+
+    needed = 10.0 * math.tan(30.0 * DEG + math.atan(0.1))
+    tables = {"breaks-away": (50.0, 1.01 * needed), "holds": (80.0, 0.99 * needed)}
+    texts = {name: _with_motor(name, *table) for name, table in tables.items()}
+    (digest, own), (other, other_own) = (structure(_source(text)) for text in texts.values())
+    assert digest == other and own != other_own
+    away, held = (chain_module(text) for text in texts.values())
+    assert away.motor_torque is held.motor_torque
+    top, stall = tables["breaks-away"]
+    hand = HandChain((30.0,), (0.1,), (1.0, 1.0), (0.0, -10.0), motor=((0.0, top), (stall, 0.0), 1.0))
+    moving = simulate_chain(away, **TIGHT)
+    assert_like_hand(moving, hand, 0.0, 0.2)
+    assert [p.regime for p in moving.stages[0].phases] == ["tractive"] and moving.q0[-1] > 0.0
+    resting = simulate_chain(held, **TIGHT)
+    assert resting.status == "finished"
+    assert [p.regime for p in resting.stages[0].phases] == ["resting"]
+    assert np.all(resting.q0 == 0.0)
+
+
 @pytest.fixture(scope="module")
 def mov():
     from tswm_runtime.model.contract import load_module
 
     return load_module("mov")
 
+
+def test_the_motor_torque_is_np_interp_of_the_table_in_p(mov):
+    """The shipped mov's motor_torque equals numpy's np.interp of its table times (U / U_n)^2 exactly, at 200001
+    speeds over and beyond the table, at each point and its neighbours and at +-inf (NaN stays NaN), and
+    follows the table in p: other torques in p's slots give other torques."""
+    from tswm_runtime.chains.run import latches
+
+    p = latches(mov, np.zeros(2), voltage=0.9)
+    speed, torque = np.array(mov.MOTOR_SPEED), np.array(mov.MOTOR_TORQUE)
+    v = np.concatenate([np.linspace(-10.0, 330.0, 200001), speed, np.nextafter(speed, -np.inf),
+                        np.nextafter(speed, np.inf), [np.inf, -np.inf]])
+    assert np.array_equal([mov.motor_torque(x, p) for x in v], 0.9**2 * np.interp(v, speed, torque))
+    assert math.isnan(mov.motor_torque(math.nan, p))
+    p[mov.P_MOTOR_TORQUE:mov.P_MOTOR_TORQUE + mov.MOTOR_POINTS] = torque[::-1]
+    assert np.array_equal([mov.motor_torque(x, p) for x in v[:2001]], 0.9**2 * np.interp(v[:2001], speed, torque[::-1]))
 
 def test_values_set_by_name_reach_the_run_with_their_units(mov):
     """mu_1 = 0.08 and force_2 = -5 kN through tswm.simulate: p holds them in SI, the worm's derived Psi_t is

@@ -313,6 +313,9 @@ def generate_chain_module(chain: ChainScene) -> str:
     seat = valve.seat if valve is not None else None
     first = len(vl.P_NAMES)
     slot = {d["slot"]: first + len(values) + i for i, d in enumerate(derived)}
+    motor = chain.bodies[0].motor
+    points = len(motor.speed) if motor else 0
+    motor_first = first + len(values) + len(derived)     # the motor's table after the derived slots: speeds, torques
     constants = {
         "SCENE": chain.name, "DESCRIPTION": chain.description, "SCENE_DIGEST": chain.digest, "STAGES": n,
         "STATES": STATES, "MODES": tuple(m.name for m in modes), "MODE_DIRECTION": tuple(m.direction for m in modes),
@@ -323,7 +326,8 @@ def generate_chain_module(chain: ChainScene) -> str:
         "PARAM_NAMES": tuple(v["name"] for v in values), "PARAM_UNITS": tuple(v["unit"] for v in values),
         "PARAM_KEYS": tuple(v["key"] for v in values), "PARAM_RANGES": tuple(v["range"] for v in values),
         "DERIVED": tuple(d["name"] for d in derived),
-        "P_NAMES": (*vl.P_NAMES, *(v["name"] for v in values), *(f"derived {d['name']}" for d in derived)),
+        "P_NAMES": (*vl.P_NAMES, *(v["name"] for v in values), *(f"derived {d['name']}" for d in derived),
+                    *(f"motor {name} {i}" for name in ("speed", "torque") for i in range(points))),
         "P_SWITCH": vl.P_SWITCH, "P_PICK": vl.P_PICK, "P_SEATED": vl.P_SEATED, "P_VOLTAGE": vl.P_VOLTAGE,
         "P_VALUES": first, "P_DERIVED": first + len(values),
         "P_GAMMA": slot["D_gamma_1"], "P_RHO": slot["D_rho_1"], "P_LEVER_IN": slot["D_r_in_1"],
@@ -342,7 +346,6 @@ def generate_chain_module(chain: ChainScene) -> str:
     env.filters["docstring"] = _docstring
     env.filters["comment"] = _comment
     jac_reads, jacobians = _jacobians(code, chain, modes)
-    motor = chain.bodies[0].motor
     body = env.get_template("chain_module.py.j2").render(
         chain=chain, n=n, modes=modes, calls=calls, constants={k: inert(v, k) for k, v in constants.items()},
         values=values, defaults=inert(tuple(v["si"] for v in values), "PARAM_DEFAULTS"),
@@ -350,7 +353,8 @@ def generate_chain_module(chain: ChainScene) -> str:
         functions=functions, jac_reads=jac_reads, jacobians=jacobians, motor=motor,
         motor_arrays={name: inert(table, name) for name, table in (
             ("MOTOR_SPEED", motor.speed), ("MOTOR_TORQUE", motor.torque))} if motor else {},
-        motor_voltage=inert(motor.voltage, "voltage") if motor else "", guards=guards,
+        motor_voltage=inert(motor.voltage, "voltage") if motor else "", motor_points=points,
+        motor_slots={"speed": motor_first, "torque": motor_first + points}, guards=guards,
         contact_targets=", ".join(f"g[{k}]" for k in range(n + 2)),
         force_targets=", ".join(f"out[{k}]" for k in range(3 * n)),
         body_targets=", ".join(f"out[{j}]" for j in range(n + 1)),

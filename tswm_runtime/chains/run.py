@@ -10,15 +10,16 @@ all stages at once by the complementarity logic the derivation uses (tswm_common
 a flank change, breakaway or rest; no mode or several (a Painleve-type case) stop the run. D or the
 jam factor reaching 0 stops it too (no contact force keeps the stages together).
 
-The torque switch and the valve's seat are latches in the parameter vector p (the module's
-P_NAMES; after them the scene's values and what the module's ``prepare`` derives from them, which the
-compiled decision reads through the slots in ``chain_tables``): at their events the seat's contact flips, the switch picks up (its delay starts), drops out
-(below setting - hysteresis) or trips (the motor is cut for good); then the mode is decided again with
-the new forces. A resting chain stays at rest: its forces depend on q0 (springs, the seat) and v0 (a
-motor's table), which rest with it, except when a picked-up switch's delay ends while it rests: the
-motor is cut then and the chain decided again. While it rests, the switch sees body 0's drive torque;
-a switch on a stage's force keeps its state (the split of a resting chain's forces is statically
-undetermined).
+The torque switch and the valve's seat are latches in the parameter vector p (the module's P_NAMES; after
+them the scene's values, what the module's ``prepare`` derives from them and the motor's table, which
+``latches`` copies in from the module's MOTOR_SPEED and MOTOR_TORQUE; the compiled decision reads them
+through the slots in ``chain_tables``): at their events the seat's contact flips, the switch picks up
+(its delay starts), drops out (below setting - hysteresis) or trips (the motor is cut for good); then the
+mode is decided again with the new forces. A resting chain stays at rest: its forces depend on q0
+(springs, the seat) and v0 (a motor's table), which rest with it, except when a picked-up switch's delay
+ends while it rests: the motor is cut then and the chain decided again. While it rests, the switch sees
+body 0's drive torque; a switch on a stage's force keeps its state (the split of a resting chain's forces
+is statically undetermined).
 
 Each event keeps the state and latches its decision saw; its ``decision`` (with the reason in words
 and, at rest, the admissible internal forces) is the Python decision (``decide``) evaluated there on
@@ -138,13 +139,17 @@ class ChainRun:
 def latches(module, y: np.ndarray, voltage: float | None = None, values: np.ndarray | None = None) -> np.ndarray:
     """The complete p at the start: the switch armed, the motor's voltage U / U_n (the scene's unless given),
     the scene's values (PARAM_DEFAULTS unless ``values``, one per PARAM_NAMES, in SI), the slots derived
-    from them (the module's ``prepare``), and the seat pressed if the last body starts at or beyond it."""
+    from them (the module's ``prepare``), the motor's table (MOTOR_SPEED, MOTOR_TORQUE) and the seat pressed
+    if the last body starts at or beyond it."""
     prepared = _parts(module).prepared if values is None else {}   # the scene's values: remembered per voltage
     known = prepared.get(voltage)
     if known is None:
         known = np.zeros(len(module.P_NAMES))
         known[module.P_VOLTAGE] = getattr(module, "MOTOR_VOLTAGE", 1.0) if voltage is None else voltage
         known[module.P_VALUES:module.P_DERIVED] = module.PARAM_DEFAULTS if values is None else values
+        if hasattr(module, "MOTOR_POINTS"):
+            known[module.P_MOTOR_SPEED:module.P_MOTOR_SPEED + module.MOTOR_POINTS] = module.MOTOR_SPEED
+            known[module.P_MOTOR_TORQUE:module.P_MOTOR_TORQUE + module.MOTOR_POINTS] = module.MOTOR_TORQUE
         module.prepare(known)
         if len(prepared) >= 64:
             prepared.clear()

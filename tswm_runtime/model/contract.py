@@ -81,7 +81,8 @@ CHAIN_CONSTANTS = {
     "PARAM_RANGES": "per value (lo, hi, lo included, hi included); hi may name another value",
     "DERIVED": "what prepare(p) derives into the slots P_DERIVED..",
     "P_NAMES": "every slot of p: the latches ('switch', 't_pick', 'seated', 'voltage'; the first three set by the "
-               "runtime at its events), the values, the derived slots",
+               "runtime at its events), the values, the derived slots, then a motor's table (MOTOR_SPEED, "
+               "MOTOR_TORQUE: MOTOR_POINTS each from P_MOTOR_SPEED, P_MOTOR_TORQUE, copied in by the runtime)",
     "P_VALUES": "first value slot", "P_DERIVED": "first derived slot", "P_GAMMA": "per stage its slope",
     "P_RHO": "per stage its friction angle", "P_PSI": "per stage Psi_t, Psi_i of forward sliding",
     "P_LEVER_IN": "per stage", "P_LEVER_OUT": "per stage", "P_SPEED": "v_j / v_0 per body",
