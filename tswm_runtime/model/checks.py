@@ -83,16 +83,21 @@ def module_checks(module: ModuleType) -> tuple:
     (``_chain_checks``), worded once per module."""
     if not hasattr(module, "PARAM_RANGES"):
         return getattr(module, "PARAM_CHECKS", ())
-    known = _CHAIN_CHECKS.get(module)
-    if known is None:
-        known = _chain_checks(module)
-        if len(_CHAIN_CHECKS) >= 256:
-            _CHAIN_CHECKS.clear()
-        _CHAIN_CHECKS[module] = known
-    return known
+    return _once_per_module(_CHAIN_CHECKS, module, _chain_checks)
 
 
 _CHAIN_CHECKS: dict = {}
+
+
+def _once_per_module(known: dict, module: ModuleType, build):
+    """``build(module)``, remembered in ``known`` per module (at most 256 modules)."""
+    value = known.get(module)
+    if value is None:
+        value = build(module)
+        if len(known) >= 256:
+            known.clear()
+        known[module] = value
+    return value
 
 
 def _chain_checks(module: ModuleType) -> tuple:
@@ -161,13 +166,7 @@ def row_check(module: ModuleType):
     (``_holds`` on each check cost ~1 us; this a tenth of it). Its text holds only ``r[j]`` (free
     values), ``c[k]`` (the rules' numbers and fixed values) and operators. It may raise
     ArithmeticError (a check that divides by zero); ``row_violation`` words a row that fails."""
-    known = _ROW_CHECKS.get(module)
-    if known is None:
-        known = _compiled_check(module)
-        if len(_ROW_CHECKS) >= 256:
-            _ROW_CHECKS.clear()
-        _ROW_CHECKS[module] = known
-    return known
+    return _once_per_module(_ROW_CHECKS, module, _compiled_check)
 
 
 _ROW_CHECKS: dict = {}
