@@ -276,9 +276,9 @@ def test_a_result_read_for_its_outcome_builds_no_summaries(chain_module, monkeyp
 
 
 def test_the_output_times_are_linspaces():
-    """simulate_chain's output times (built without np.linspace's checks of general arguments) are
-    np.linspace(0, t_end, points), bit for bit."""
-    from tswm_runtime.simulation.chain import output_times
+    """simulate_chain's output times (the runtime's remembered ones) are np.linspace(0, t_end, points),
+    bit for bit."""
+    from tswm_runtime.results.rows import output_times
 
     for t_end in (5.0, 0.1, 1e-9, 3.3, 77.7):
         for points in (1, 2, 3, 7, 1000, 200001):

@@ -39,6 +39,7 @@ from typing import NamedTuple
 import numpy as np
 
 from tswm_common.chain_decision import Candidate, Decision, Statics, decide_numbers
+from tswm_runtime.common.memo import remember
 from tswm_runtime.jit import coldstart
 
 coldstart.announce(("integrate", "chain"))  # before the next imports compile the kernels, if not cached
@@ -151,9 +152,7 @@ def latches(module, y: np.ndarray, voltage: float | None = None, values: np.ndar
             known[module.P_MOTOR_SPEED:module.P_MOTOR_SPEED + module.MOTOR_POINTS] = module.MOTOR_SPEED
             known[module.P_MOTOR_TORQUE:module.P_MOTOR_TORQUE + module.MOTOR_POINTS] = module.MOTOR_TORQUE
         module.prepare(known)
-        if len(prepared) >= 64:
-            prepared.clear()
-        prepared[voltage] = known
+        remember(prepared, voltage, known, 64)
     p = known.copy()
     p[module.P_SEATED] = float(module.HAS_SEAT and p[module.P_SPEED + module.STAGES] * y[0] >= p[module.P_SEAT])
     return p

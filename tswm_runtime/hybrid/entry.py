@@ -25,6 +25,7 @@ from functools import cached_property
 import numpy as np
 from numba import types
 
+from tswm_runtime.common.memo import remember, remembered
 from tswm_runtime.hybrid.addressed import ADDRESSES, model_functions, segment_function
 from tswm_runtime.hybrid.machine import HYBRID_SIG, INVALID_INPUT, integrate_hybrid
 from tswm_runtime.jit import cache_guard
@@ -180,9 +181,7 @@ def functions(method: int, model) -> tuple:
                  address(model.observe, GUARDS_SIG), address(model.impact, GUARDS_SIG),
                  getattr(stiff, "address", stiff),
                  address(run_segment, segment.SEGMENT_SIG), jit_address(run_segment, segment.SEGMENT_SIG))
-        if len(_FUNCTIONS) >= 256:
-            _FUNCTIONS.clear()
-        _FUNCTIONS[key] = known
+        remember(_FUNCTIONS, key, known)
     return known
 
 
@@ -199,15 +198,9 @@ def settings(method: int, n: int, *, t_end, rtol, atol, hmin=0.0, hmax=np.inf, m
     if not isinstance(atol, (float, int)):
         atol = np.array(np.broadcast_to(np.asarray(atol, np.float64), (n,)))
         return Settings(method, float(t_end), Tolerances(float(rtol), atol, float(hmin), float(hmax)), int(max_steps))
-    key = (method, n, t_end, rtol, atol, hmin, hmax, max_steps)
-    known = _SETTINGS.get(key)
-    if known is None:
-        atol = np.full(n, atol, dtype=np.float64)
-        known = Settings(method, float(t_end), Tolerances(float(rtol), atol, float(hmin), float(hmax)), int(max_steps))
-        if len(_SETTINGS) >= 256:
-            _SETTINGS.clear()
-        _SETTINGS[key] = known
-    return known
+    return remembered(_SETTINGS, (method, n, t_end, rtol, atol, hmin, hmax, max_steps), lambda: Settings(
+        method, float(t_end), Tolerances(float(rtol), np.full(n, atol, dtype=np.float64), float(hmin), float(hmax)),
+        int(max_steps)))
 
 
 _SETTINGS: dict = {}
@@ -227,14 +220,8 @@ def run(method: int, model, tables, start: Start, run_settings: Settings, t_out:
 
 def _block_sizes(sizes: Sizes, points: int) -> tuple[int, int]:
     """``block_sizes``, remembered per sizes and points."""
-    key = (sizes, points)
-    known = _BLOCK_SIZES.get(key)
-    if known is None:
-        known = getattr(block_sizes, "py_func", block_sizes)(sizes, points)
-        if len(_BLOCK_SIZES) >= 256:
-            _BLOCK_SIZES.clear()
-        _BLOCK_SIZES[key] = known
-    return known
+    return remembered(_BLOCK_SIZES, (sizes, points),
+                      lambda: getattr(block_sizes, "py_func", block_sizes)(sizes, points))
 
 
 _BLOCK_SIZES: dict = {}

@@ -24,6 +24,7 @@ from types import ModuleType
 import numpy as np
 
 from tswm_common import units
+from tswm_runtime.common.memo import remembered
 from tswm_runtime.model.values import quantities
 
 DEG = math.pi / 180
@@ -83,21 +84,10 @@ def module_checks(module: ModuleType) -> tuple:
     (``_chain_checks``), worded once per module."""
     if not hasattr(module, "PARAM_RANGES"):
         return getattr(module, "PARAM_CHECKS", ())
-    return _once_per_module(_CHAIN_CHECKS, module, _chain_checks)
+    return remembered(_CHAIN_CHECKS, module, lambda: _chain_checks(module))
 
 
 _CHAIN_CHECKS: dict = {}
-
-
-def _once_per_module(known: dict, module: ModuleType, build):
-    """``build(module)``, remembered in ``known`` per module (at most 256 modules)."""
-    value = known.get(module)
-    if value is None:
-        value = build(module)
-        if len(known) >= 256:
-            known.clear()
-        known[module] = value
-    return value
 
 
 def _chain_checks(module: ModuleType) -> tuple:
@@ -166,7 +156,7 @@ def row_check(module: ModuleType):
     (``_holds`` on each check cost ~1 us; this a tenth of it). Its text holds only ``r[j]`` (free
     values), ``c[k]`` (the rules' numbers and fixed values) and operators. It may raise
     ArithmeticError (a check that divides by zero); ``row_violation`` words a row that fails."""
-    return _once_per_module(_ROW_CHECKS, module, _compiled_check)
+    return remembered(_ROW_CHECKS, module, lambda: _compiled_check(module))
 
 
 _ROW_CHECKS: dict = {}

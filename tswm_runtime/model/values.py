@@ -7,6 +7,7 @@ from types import ModuleType
 
 from tswm_common import units
 from tswm_common.text import printable
+from tswm_runtime.common.memo import remembered
 
 
 class ValueInputError(ValueError):
@@ -33,14 +34,10 @@ def si_value(module: ModuleType, name: str, value):
 
 def quantities(module: ModuleType) -> dict:
     """{free parameter: (its SI unit, its quantity or None)}, worked out once per module."""
-    known = _QUANTITIES.get(module)
-    if known is None:
+    def build():
         quantity = {units.si_unit(q): q for q in units.UNITS}
-        known = {name: (si, quantity.get(si)) for name, si in zip(module.PARAM_NAMES, module.PARAM_UNITS)}
-        if len(_QUANTITIES) >= 256:
-            _QUANTITIES.clear()
-        _QUANTITIES[module] = known
-    return known
+        return {name: (si, quantity.get(si)) for name, si in zip(module.PARAM_NAMES, module.PARAM_UNITS)}
+    return remembered(_QUANTITIES, module, build)
 
 
 _QUANTITIES: dict = {}

@@ -16,6 +16,8 @@ from types import ModuleType
 import numpy as np
 
 from tswm_runtime.chains.run import RESTING, ChainRun, run_chain, speed_factor
+from tswm_runtime.common.memo import overrides_key, remember
+from tswm_runtime.results.rows import output_times
 from tswm_runtime.simulation.chain_values import chain_values
 from tswm_runtime.simulation.drive_train import UNITS, drive_train_lines
 from tswm_runtime.simulation.drive_train import answers as drive_train_answers
@@ -108,7 +110,7 @@ def settings(module: ModuleType, overrides: dict) -> dict:
     per module and overrides (their types included: True is no valid 1), so that repeated calls are
     checked once."""
     try:
-        key = (module.__name__, module.SCENE_DIGEST, tuple((k, type(v), v) for k, v in overrides.items()))
+        key = (module.__name__, module.SCENE_DIGEST, overrides_key(overrides))
         known = _SETTINGS.get(key)
     except TypeError:   # an unhashable value: checked (and refused) below
         key, known = None, None
@@ -116,9 +118,7 @@ def settings(module: ModuleType, overrides: dict) -> dict:
         return dict(known[1])
     run = _checked(module, overrides)
     if key is not None:
-        if len(_SETTINGS) >= 256:
-            _SETTINGS.clear()
-        _SETTINGS[key] = (module, dict(run))
+        remember(_SETTINGS, key, (module, dict(run)))
     return run
 
 
@@ -155,22 +155,12 @@ def simulate_chain(module: ModuleType, params: dict | None = None, method: int =
     and voltage override the scene's run."""
     values, voltage = chain_values(module, params)
     run = settings(module, {**overrides, **({"voltage": voltage} if voltage is not None else {})})
-    t_out = output_times(run["t_end"], run["points"])
+    t_out = output_times(run["t_end"], run["points"]).copy()   # the remembered times are read-only
     result = run_chain(module, t_end=run["t_end"], v0=run["v0"], rtol=run["rtol"], atol=run["atol"], t_out=t_out,
                        method=method, max_steps=run["max_steps"], max_events=run["max_events"], voltage=run["voltage"],
                        values=values)
     return ChainResult(module.SCENE, result.status, result.message, result.t_stop, _events(module, result), result.t,
                        result.y[:, 0], result.y[:, 1], result.n_steps, result, module, run["voltage"])
-
-
-def output_times(t_end: float, points: int) -> np.ndarray:
-    """np.linspace(0, t_end, points) as linspace computes it (i * (t_end / (points - 1)), the last one
-    t_end), without its checks of general arguments (a tenth of a chain's call with two points)."""
-    t = np.arange(points, dtype=np.float64)
-    if points > 1:
-        t *= t_end / (points - 1)
-        t[-1] = t_end
-    return t
 
 
 def _samples(sliding: list, stages: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:

@@ -15,6 +15,7 @@ from typing import NamedTuple
 import numpy as np
 
 from tswm_common import units
+from tswm_runtime.common.memo import overrides_key, remember, remembered
 from tswm_runtime.jit import coldstart
 
 coldstart.announce(("integrate",))  # before the next imports compile the kernels, if not cached
@@ -148,17 +149,13 @@ def _free(module: ModuleType) -> tuple:
     """({free parameter: index}, the defaults, per parameter the largest and the smallest nonzero |value|
     its quantity allows (``units.LIMITS``; none: any finite value), the latches (inf), the scene's rules
     (``checks.row_check``)), once per module."""
-    known = _FREE.get(module)
-    if known is None:
+    def build():
         quantity = quantities(module)
         limits = [units.LIMITS.get(quantity[name][1], (None, sys.float_info.max)) for name in module.PARAM_NAMES]
-        known = ({name: j for j, name in enumerate(module.PARAM_NAMES)}, tuple(module.PARAM_DEFAULTS),
-                 [hi for _, hi in limits], [lo or 0.0 for lo, _ in limits],
-                 [math.inf] * len(getattr(module, "LATCH_NAMES", ())), checks.row_check(module))
-        if len(_FREE) >= 256:
-            _FREE.clear()
-        _FREE[module] = known
-    return known
+        return ({name: j for j, name in enumerate(module.PARAM_NAMES)}, tuple(module.PARAM_DEFAULTS),
+                [hi for _, hi in limits], [lo or 0.0 for lo, _ in limits],
+                [math.inf] * len(getattr(module, "LATCH_NAMES", ())), checks.row_check(module))
+    return remembered(_FREE, module, build)
 
 
 _FREE: dict = {}
@@ -200,7 +197,7 @@ def prepared(module: ModuleType, overrides: dict) -> Prepared:
     overrides: validating and building the initial state cost ~8 us a call. Its run dict is shared:
     copy it to change it."""
     try:  # the key tells 1 from True and 1.0, and 0.0 from -0.0 (equal in Python, not here)
-        key = (module, *[(k, type(v), v.hex() if isinstance(v, float) else v) for k, v in overrides.items()])
+        key = (module, *overrides_key(overrides))
         known = _PREPARED_RUNS.get(key)
     except TypeError:  # an unhashable value: validated below, which names it
         key = known = None
@@ -214,9 +211,7 @@ def prepared(module: ModuleType, overrides: dict) -> Prepared:
                                     hmax=run["hmax"], max_steps=run["max_steps"]),
                      modes.tables(module), (module, run["method"], run["rtol"], run["atol"], run["t_end"], run["hmax"]))
     if key is not None:
-        if len(_PREPARED_RUNS) >= 1024:
-            _PREPARED_RUNS.clear()
-        _PREPARED_RUNS[key] = known
+        remember(_PREPARED_RUNS, key, known, 1024)
     return known
 
 
@@ -416,9 +411,7 @@ def _integrate(module: ModuleType, p: np.ndarray, ready: Prepared, interruptible
         head = arrays.ints[:N_HEAD].tolist()   # the counters, then the step log's count
         needed = tuple(head[N_COUNTERS:])
         if needed != known:
-            if len(_STEPS_NEEDED) >= 256:
-                _STEPS_NEEDED.clear()
-            _STEPS_NEEDED[ready.steps_key] = known = needed
+            known = remember(_STEPS_NEEDED, ready.steps_key, needed)
         if t_out.size or (needed[0] <= capacity[0] and needed[1] <= capacity[1]):
             return outcome, arrays, head[:N_COUNTERS], bool(t_out.size)
         capacity, t_out = _plan(run, needed)
