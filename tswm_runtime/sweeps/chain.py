@@ -14,7 +14,6 @@ goes on. The columns are explained in docs/drive-trains.md.
 """
 from __future__ import annotations
 
-import hashlib
 import itertools
 from pathlib import Path
 from types import ModuleType
@@ -91,7 +90,7 @@ def sizing(module: ModuleType, grid: dict[str, list[float]], overrides: dict, *,
     method = overrides.get("method", 0)
     P = np.array(list(itertools.product(*grid.values())), dtype=float).reshape(-1, len(swept))
     bounds = [(a, min(a + chunk_size, P.shape[0])) for a in range(0, P.shape[0], chunk_size)]
-    runtime = _runtime_digest()
+    runtime = chunks.runtime_digest(SOURCES)   # the chain sweep's sources besides the scene sweeps'
     names = columns_of(module, swept)
     keys = [chunks.chunk_key(module, {**run, "method": method}, P[a:b], i, runtime, tuple(names[:len(swept)]))
             for i, (a, b) in enumerate(bounds)]
@@ -112,16 +111,6 @@ def sizing(module: ModuleType, grid: dict[str, list[float]], overrides: dict, *,
             "settings": {**run, "method": method}, "grid": grid, "cases": int(P.shape[0]), "chunk_size": chunk_size,
             "chunks": [chunks.chunk_name(key) for key in keys]})
     return outcome
-
-
-def _runtime_digest() -> str:
-    """The scene sweeps' runtime digest and the chain sweep's own sources: a changed answer never reuses
-    old rows."""
-    h = hashlib.sha256(chunks.runtime_digest().encode())
-    here = Path(__file__).parents[1]   # tswm_runtime/
-    for name in SOURCES:
-        h.update(name.encode() + (here / name).read_bytes())
-    return h.hexdigest()
 
 
 def case_rows(module: ModuleType, run: dict, swept: list[str], values: np.ndarray) -> tuple[np.ndarray, list]:

@@ -46,11 +46,12 @@ def file_digest(path: Path) -> str:
     return hashlib.sha256(path.read_bytes()).hexdigest()
 
 
-def runtime_digest() -> str:
-    """sha256 over the runtime's numerical sources: a changed integrator never reuses old rows."""
+def runtime_digest(extra: tuple[str, ...] = ()) -> str:
+    """sha256 over the runtime's numerical sources and ``extra`` ones (paths under tswm_runtime/, e.g. the
+    chain sweep's): a changed integrator or answer never reuses old rows."""
     h = hashlib.sha256(kernel_digest().encode())
     here = Path(__file__).parents[1]   # tswm_runtime/
-    for name in RUNTIME_SOURCES:
+    for name in (*RUNTIME_SOURCES, *extra):
         h.update(name.encode() + (here / name).read_bytes())
     return h.hexdigest()
 
