@@ -100,8 +100,8 @@ def run_cases(module, P: np.ndarray, *, t_end: float, v0: float, rtol: float, at
     The record starts with the room ``run.run_chain`` gives it; cases that need more run again with twice it."""
     P = np.ascontiguousarray(P, dtype=np.float64)
     t_out = np.ascontiguousarray(t_out, dtype=np.float64)
-    settings = Settings(int(method), float(t_end), Tolerances(float(rtol), np.full(2, float(atol)), 0.0, np.inf),
-                        int(max_steps))
+    settings = entry.settings(int(method), 2, t_end=float(t_end), rtol=float(rtol), atol=float(atol),
+                              max_steps=int(max_steps))
     args = (address(kernel.run_chain_at, kernel.CHAIN_SIG), entry.functions(method, module), chain_functions(module),
             chain_tables(module), settings, np.array([0.0, float(v0)]))
     f, i = np.full((P.shape[0], N_F), np.nan), np.zeros((P.shape[0], N_I), np.int64)
