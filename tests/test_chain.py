@@ -228,6 +228,7 @@ def test_painleve_in_a_worm_and_screw_chain():
     assert decision.outcome == "several" and "D < 0" in decision.reason
 
 
+@pytest.mark.heavy
 @pytest.mark.parametrize("n_st", (1, 2, 3))
 def test_unique_mode_whenever_every_reduced_inertia_is_positive(n_st):
     """Without a negative D the sliding modes never overlap nor leave a gap: exactly one is consistent while

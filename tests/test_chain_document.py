@@ -41,6 +41,7 @@ def msl_document():
     return build_chain_document(load_chain(MSL))
 
 
+@pytest.mark.heavy
 def test_the_document_shows_every_modes_dynamics_and_switching_functions(msl_document):
     sections = _sections(msl_document)
     assert {"Kinetostatics of a stage", "Modes and reduced equation of motion", "Resting chain",

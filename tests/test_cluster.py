@@ -22,6 +22,8 @@ from tswm_runtime.model.contract import load_module
 from tswm_runtime.sweeps import cluster
 from tswm_runtime.sweeps.sweep import grid_cases, parse_grid, read_table, sweep
 
+pytestmark = pytest.mark.heavy   # each test starts a dask cluster: CI runs them after the default set
+
 pytest.importorskip("distributed")
 
 ROOT = Path(__file__).resolve().parents[1]

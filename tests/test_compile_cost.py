@@ -98,6 +98,7 @@ print(sum("shape_context" in name for name in compiled))
 '''
 
 
+@pytest.mark.heavy
 def test_numba_compiles_a_shape_message_for_a_slice_assignment_and_none_for_copy_into(tmp_path):
     """The premise of jit/arrays.py, checked on the installed numba (in a fresh process: numba
     compiles the message once per process)."""

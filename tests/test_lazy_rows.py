@@ -101,6 +101,7 @@ def test_rows_in_the_painleve_approach_follow_its_dense_output_in_sundman_time()
     np.testing.assert_allclose(y[checked, 0], v_ref(t[checked]), rtol=0.0, atol=_row_tolerance(r))
 
 
+@pytest.mark.heavy
 @pytest.mark.parametrize("times", [20, pytest.param(200, marks=pytest.mark.slow)])
 def test_sol_follows_the_quadrature_reference_at_random_times_and_across_the_load_step(times):
     """At random times and beside the load step. Each reference value inverts the 34-digit

@@ -29,6 +29,7 @@ def overflowing(tmp_path_factory):
     return path
 
 
+@pytest.mark.heavy
 def test_a_law_that_overflows_mid_run_ends_not_finite_naming_quantity_and_time(overflowing, capsys):
     result = simulate(str(overflowing))
     assert result.status == "not-finite" and not result.success

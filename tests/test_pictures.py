@@ -160,6 +160,7 @@ def test_two_parameter_misfit_plot_shades_the_confidence_region():
     _titles_fit(fig)
 
 
+@pytest.mark.heavy
 def test_bench_plot_titles_fit_and_its_legend_keeps_off_the_panels():
     from tswm_runtime.bench.cases import CASES
     from tswm_runtime.bench.report import work_precision_figure

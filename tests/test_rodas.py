@@ -63,6 +63,7 @@ def _slope(hs, errors):
     return np.polyfit(np.log(hs), np.log(errors), 1)[0]
 
 
+@pytest.mark.heavy
 def test_rodas4_converges_with_order_4():
     """Global error at t = 1 of fixed steps h = 1/10 .. 1/80 (L = 2, not stiff): slope 4 in log-log
     (3.8 to 4.3; measured 4.11, the ratios 18.0, 17.1, 16.6 falling to 16); a sign error in any d_i or C_ij coefficient drops it to 1 to 3."""

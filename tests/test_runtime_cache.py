@@ -59,6 +59,7 @@ def test_a_stale_kernel_digest_purges_the_kernel_caches_once_and_only_there(tmp_
     assert sorted((ROOT / "tswm_runtime").glob("*/__pycache__/*.nb[ic]")) == checkout
 
 
+@pytest.mark.heavy
 def test_a_module_loaded_by_path_runs_again_from_its_cache(tmp_path):
     """numba rebuilds a cached function's module by name: load_module must register it."""
     shutil.copy(ROOT / "generated" / "paper.py", tmp_path / "paper.py")
@@ -69,6 +70,7 @@ def test_a_module_loaded_by_path_runs_again_from_its_cache(tmp_path):
     assert _python(code, tmp_path).strip() == "finished"
 
 
+@pytest.mark.heavy
 def test_a_cache_directory_that_vanishes_while_compiling_costs_the_cache_not_the_run(tmp_path, monkeypatch, capsys):
     """numba writing its cache index into a __pycache__ that another process just deleted: the run
     goes on compiled in memory (exit 0), with a warning, instead of exiting 2 as if the input were bad."""

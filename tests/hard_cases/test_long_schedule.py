@@ -107,6 +107,7 @@ def _closed_form(t):
     return x, v
 
 
+@pytest.mark.heavy
 def test_a_999_step_drive_in_time_matches_the_closed_form(tmp_path):
     path = tmp_path / "steps.toml"
     path.write_text(schedule_scene("steps-in-time", "drive", "t", "steps", T_AT, F1_STEPS,
@@ -162,6 +163,7 @@ def _swing_reference():
         t, y = sol.t_events[hit][0], sol.y_events[hit][0]
 
 
+@pytest.mark.heavy
 def test_a_999_breakpoint_linear_load_in_x2_passed_both_ways_matches_scipy(tmp_path):
     """The load reads each side of a breakpoint with its own piece, going up and coming back."""
     path = tmp_path / "swing.toml"

@@ -88,6 +88,7 @@ def first_pickup(v0, F1, m1, m2, mu, L):
     return t, v0 + a * t
 
 
+@pytest.mark.heavy
 @pytest.mark.parametrize("rho_deg, e", [(0.0, 0.0), (0.0, 1.0), (8.0, 0.0), (8.0, 0.6)])
 def test_first_pickup_matches_the_impulse_balance(lab, rho_deg, e):
     mu = math.tan(math.radians(rho_deg))

@@ -75,6 +75,7 @@ def approach():
     return tau, a_n * tau, a_n
 
 
+@pytest.mark.heavy
 @pytest.mark.parametrize("k", [1e8, 1e10])
 def test_first_mesh_contact_against_the_one_dimensional_reference(mesh_lab, k):
     """Free flight from mid-gap, then a compliant contact on flank b: its start, duration and

@@ -108,6 +108,7 @@ def case_id(*values):
     return "-".join(words)
 
 
+@pytest.mark.heavy
 @pytest.mark.parametrize("start, friction, masses, F1, F2, s, flank", SLIDES, ids=[case_id(*c) for c in SLIDES])
 def test_a_slide_that_stops_mid_run_goes_on_by_the_contact_conditions(models, start, friction, masses, F1, F2, s,
                                                                      flank):
