@@ -71,6 +71,16 @@ def pytest_configure(config):
             print(f"conftest: compiling into numba's cache failed (exit {job.returncode}):\n{output}", file=sys.stderr)
 
 
+@pytest.hookimpl(tryfirst=True)
+def pytest_collection_modifyitems(config, items):
+    """A test that builds its own chain module (``chain_module``: a SymPy derivation and a compile of
+    4 to 10 s per chain structure) is heavy: CI runs it after the default set. Tryfirst, so that
+    ``-m`` sees the mark."""
+    for item in items:
+        if "chain_module" in getattr(item, "fixturenames", ()):
+            item.add_marker(pytest.mark.heavy)
+
+
 @pytest.fixture(scope="session")
 def module_once(tmp_path_factory):
     """module_once(text, write) -> the module that ``write(folder)`` writes for ``text`` into an

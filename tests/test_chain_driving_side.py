@@ -55,7 +55,6 @@ def test_the_hand_case_is_not_obvious_from_the_torques():
     assert motor_at_start < 0 and motor_at_start / J0 < T1 / (I_RATIO * J1)   # the worm alone slows faster
 
 
-@pytest.mark.heavy
 def test_the_wheel_drives_then_the_worm_as_the_closed_form(chain_module):
     """msl108.toml: stage 1 inverse-tractive on flank b (the wheel's inertia drives the braking worm), then
     tractive on flank a at the closed form's switch time (1.0503 s), and the worm's speed over the whole run

@@ -66,7 +66,6 @@ def decisions(module) -> set:
     return seen
 
 
-@pytest.mark.heavy
 def test_the_compiled_decision_is_the_python_one_over_a_grid(chain_module):
     """Two stages: rest, and every flank combination in each direction (modes 0-7) somewhere on the grid."""
     seen = decisions(chain_module(two_stages("grid-a", 30.0, -30.0))) | decisions(chain_module(two_stages(

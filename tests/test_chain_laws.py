@@ -104,7 +104,6 @@ def _stage_forces(module, mode: int, t: float, y, p: np.ndarray) -> np.ndarray:
     return out
 
 
-@pytest.mark.heavy
 @pytest.mark.parametrize("flow", ["forward", "backward"])
 def test_steady_efficiency_of_each_stage_and_of_the_chain(chain_module, flow):
     """Forward: the worm's torque the product of the hand efficiencies asks for, -LOAD v_3 / (eta v_0), lifts

@@ -49,7 +49,6 @@ THREE = dict(gammas=(30.0, 25.0, 20.0), mus=(0.1, 0.1, 0.1), masses=(1.0, 1.0, 1
              forces=(5.0, 0.0, 0.0, 20.0), spring=1000.0)
 
 
-@pytest.mark.heavy
 def test_three_stages_as_the_hand_model(chain_module):
     module = chain_module(wedges("three-switching", **THREE))
     result = simulate_chain(module, **TIGHT)
@@ -188,7 +187,6 @@ def test_worm_and_stem_nut_as_the_hand_model(chain_module, worm_mu, screw_mu, af
 MOTOR = ((0.0, 1.0, 2.0, 3.0), (30.0, 32.0, 20.0, 0.0), 0.9)
 
 
-@pytest.mark.heavy
 def test_a_motor_table_drives_the_chain_as_the_hand_model(chain_module):
     """A motor on body 0 (its table at 0.9 U_n: torque x 0.81) starts the chain from rest against a spring,
     which stops it at 0.7378 s, where the stall torque no longer breaks it away: it rests. The table's
@@ -224,7 +222,6 @@ def test_a_bad_motor_table_is_named(motor, parts):
         assert part in str(err.value), str(err.value)
 
 
-@pytest.mark.heavy
 def test_the_shipped_motor_settles_where_it_meets_the_load_through_both_stages(chain_module):
     """The shipped mov's motor (its table, derivation/chain/scenes/mov.toml) starts the worm and nut from rest
     against 15 kN and settles where its table's torque equals the load's torque at the worm by handbook

@@ -149,7 +149,6 @@ def scene(name: str, chain: dict, switch: dict | None = None, valve: str = "", t
     return text
 
 
-@pytest.mark.heavy
 def test_the_switch_trips_on_the_stage_force_as_the_hand_model(chain_module):
     """The motor drives the chain against a spring; stage 2's force picks the switch up, the motor is cut
     10 ms later, and the chain coasts to rest: pick-up, trip and rest times, the force at the trip and the
@@ -174,7 +173,6 @@ MOTOR_SWITCH = dict(on=0, setting=70.0, hysteresis=5.0, delay=0.005)
 RISING = dict(SPRING_TRIP, motor=((0.0, 2.0), (60.0, 100.0), 1.0))    # the drive force rises with speed
 
 
-@pytest.mark.heavy
 @pytest.mark.parametrize("chain", [SPRING_TRIP, RISING], ids=["above-at-start", "crossing"])
 def test_the_switch_trips_on_the_motor_torque_as_the_hand_model(chain_module, chain):
     """on = "motor": body 0's drive force (5 N and the table's) is above the 70 N setting at the start with
@@ -279,7 +277,6 @@ PACKING = dict(gammas=(30.0,), mus=(0.1,), masses=(1.0, 1.0), forces=(0.0, 0.0))
 PACKING_KEYS = 'packing = "2 N"\ndp = "1 bar"\npacking_dp = "20 mm^2"\narea = "10 cm^2"\nvalve_factor = 0.01\n'
 
 
-@pytest.mark.heavy
 def test_the_packing_friction_grows_with_the_pressure_as_the_hand_model(chain_module):
     """packing 2 N + packing_dp dp = 20 mm^2 x 1 bar = 2 N, and the disc's 0.01 x 1 bar x 10 cm^2 = 1 N: 5 N
     against the stem's motion (by hand). The module's friction at that dp is 5 N; a wedge coasting from 1 m/s
