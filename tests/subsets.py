@@ -1,8 +1,8 @@
 """A test grid whose default run keeps a part of it: the rest runs with ``pytest -m slow``.
 
 Each kept part is chosen so that it still fails on the defects its grid was written for (the
-test module says which cases those were). CI (``.ci/run``) runs the default set; the slow set
-is run by hand.
+test module says which cases those were). CI (``.ci/run``) runs the default set and the heavy one;
+the slow set is run by hand.
 """
 from __future__ import annotations
 
