@@ -174,12 +174,48 @@ def test_tswm_simulate_prints_the_values_it_set(capsys):
 
 def test_modes_that_differ_in_a_stages_regime_share_their_functions():
     """The shipped mov module: its 8 sliding modes (2 directions x 2 regimes x 2 stages) call one accel, one
-    contact and one stage_forces function, each stage's friction angle signed by its regime (rho_sign_k)."""
+    contact and one stage_forces function, each a sum of coefficients from p times the body forces (no
+    trigonometry per call), one block of coefficients per combination of the stages' friction-angle signs."""
     import re
     from pathlib import Path
 
     source = (Path(__file__).resolve().parents[1] / "generated" / "mov.py").read_text()
-    assert [len(re.findall(rf"^def {name}_\d+\(t, y, p, direction, rho_sign_1, rho_sign_2\):", source, re.M))
-            for name in ("accel", "contact", "stage_forces")] == [1, 1, 1]
-    assert "rho_sign_2*p[D_rho_2]" in source.split("def wedge_numbers(p, rho_sign_1, rho_sign_2):")[1].split("@njit")[0]
-    assert source.count("= wedge_numbers(p, rho_sign_1, rho_sign_2)") == 3   # once in each of the three
+    for name in ("accel", "contact", "stage_forces"):
+        (body,) = re.findall(rf"^def {name}_\d+\(t, y, p, direction, k\):\n(.*?)\n\n", source, re.M | re.S)
+        assert "math." not in body and "body_forces(t, y, p, direction)" in body
+        assert sorted(re.findall(rf"^D_{name}_0_([pm]{{2}})_0 = ", source, re.M)) == ["mm", "mp", "pm", "pp"]
+
+
+def test_the_coefficient_sums_are_the_modes_expressions():
+    """The shipped mov module at its scene's values with the seat pressed, in every sliding mode, at a state off
+    the start: a_0, D, jam, each N_k and every stage force equal the derivation's
+    expressions for that mode (derivation/chain/dynamics.py, evaluated in SymPy from the body forces and p's
+    wedge numbers) to 1e-12 relative."""
+    import sympy as sp
+
+    import generated.mov as m
+    from derivation.chain import dynamics as dyn
+    from derivation.chain.codegen import _jam
+    from tswm_runtime.chains.run import latches
+
+    sym = dyn.symbols(m.STAGES)
+    y = np.array([0.3, 0.0])
+    p = latches(m, y)
+    p[m.P_SEATED] = 1.0
+    numbers = {**{s: p[m.P_GAMMA + k] for k, s in enumerate(sym.gamma)}, **{s: p[m.P_RHO + k] for k, s in enumerate(sym.rho)},
+               **{s: p[m.P_LEVER_IN + k] for k, s in enumerate(sym.lever_in)},
+               **{s: p[m.P_LEVER_OUT + k] for k, s in enumerate(sym.lever_out)},
+               **dict(zip(sym.inertia, (p[m.V_inertia_0], p[m.V_inertia_1], p[m.V_mass_2])))}
+    code = type("Code", (), {"sym": sym})()
+    g, forces = np.empty(len(m.GUARDS)), np.empty(3 * m.STAGES)
+    for mode, (direction, regimes) in enumerate(zip(m.MODE_DIRECTION, m.MODE_REGIMES)):
+        y[1] = 0.1 * direction
+        values = {**numbers, **dict(zip(sym.force, m.body_forces(0.0, y, p, float(direction))))}
+        expected = dyn.sliding(direction, regimes)
+        m.guards(mode, 0.0, y, p, g)
+        m.stage_forces(mode, 0.0, y, p, forces)
+        got = [m.accel(mode, 0.0, y, p), g[0], g[1], *g[2:2 + m.STAGES], *forces]
+        want = [expected.accel, expected.denominator, _jam(code, expected), *expected.normal,
+                *(e for pair in zip(expected.on_input, expected.on_output, expected.normal) for e in pair)]
+        want = [float(sp.sympify(e).subs(values)) for e in want]
+        np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-12 * max(map(abs, want)))

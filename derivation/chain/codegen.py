@@ -47,54 +47,29 @@ def generator_digest() -> str:
 class _Code:
     """Python source of expressions in the chain's symbols: one CSE per function, each value or derived number
     it uses read from its slot of p (``slots``), the body forces from ``body_forces`` where an expression
-    uses them."""
+    uses them; ``derive(name, formula)`` adds a derived slot that ``prepare`` fills (``_layout``)."""
 
-    def __init__(self, stages: int, slots: dict[sp.Symbol, str]):
+    def __init__(self, stages: int, slots: dict[sp.Symbol, str], derive):
         self.sym = dyn.symbols(stages)
         self.slots = slots
+        self.derive = derive
         self.printer = _Printer()
 
     @property
-    def wedge_groups(self) -> tuple:
-        """What every mode's functions read: each stage's slope, friction angle and levers, each body's inertia."""
-        sym = self.sym
-        return sym.gamma, sym.rho, sym.lever_in, sym.lever_out, sym.inertia
+    def runtime(self) -> set[sp.Symbol]:
+        """What a mode's expressions read at run time: the body forces and what they are made of."""
+        return {*self.sym.force, MOTOR, q0, DIRECTION, vl.POWERED, vl.SEATED}
 
-    @property
-    def wedge(self) -> list[sp.Symbol]:
-        return [s for group in self.wedge_groups for s in group]
+    def reads(self, used: set) -> list[str]:
+        """``name = p[SLOT]`` for each value or derived symbol in ``used``, in slot order."""
+        return [f"{s} = p[{self.slots[s]}]" for s in self.slots if s in used]
 
-    @property
-    def rho_signs(self) -> str:
-        return ", ".join(rho.name.replace("rho", "rho_sign") for rho in self.sym.rho)
-
-    def wedge_reader(self) -> dict:
-        """The function that reads ``wedge`` from p, the friction angles signed by the arguments ``rho_sign_k``."""
-        sign = {rho: f"{rho.name.replace('rho', 'rho_sign')}*" for rho in self.sym.rho}
-        return {"name": "wedge_numbers", "args": f"p, {self.rho_signs}", "lines": [],
-                "doc": "(gamma_k, rho_k, r_in_k, r_out_k per stage, M_j per body) from p, each stage's friction "
-                       "angle rho_k times `rho_sign_k` (its regime's sign)",
-                "result": "(" + ",\n            ".join(", ".join(f"{sign.get(s, '')}p[{self.slots[s]}]" for s in group)
-                                                   for group in self.wedge_groups) + ")"}
-
-    def reads(self, used: set, signed: bool = False) -> list[str]:
-        """``name = p[SLOT]`` for each value or derived symbol in ``used``, in slot order; ``signed``: the
-        ``wedge`` numbers in one call of ``wedge_numbers`` with the arguments ``rho_sign_k``."""
-        lines, own = [], [s for s in self.slots if s in used]
-        if signed and used & set(self.wedge):
-            lines.append(f"{', '.join(map(str, self.wedge))} = wedge_numbers(p, {self.rho_signs})")
-            own = [s for s in own if s not in self.wedge]
-        return lines + [f"{s} = p[{self.slots[s]}]" for s in own]
-
-    def body(self, exprs: list[sp.Expr], direction: str = "0.0", signed: bool = False) -> tuple[list[str], list[str]]:
-        """Lines and results; the body forces of a sliding mode in ``direction`` (a number or the argument's
-        name); ``signed``: the friction angles signed by the arguments ``rho_sign_k``."""
-        exprs = [sp.sympify(e) for e in exprs]
-        used = set().union(*(e.free_symbols for e in exprs))
+    def state_lines(self, used: set, direction: str) -> list[str]:
+        """The lines that compute the run-time symbols in ``used``: the body forces of a sliding mode in
+        ``direction`` (a number or the argument's name), q0, the motor's torque, its power, the seat."""
         lines = []
         if used & set(self.sym.force):
             lines.append(f"{', '.join(map(str, self.sym.force))} = body_forces(t, y, p, {direction})")
-        lines += self.reads(used, signed)
         if q0 in used:
             lines.append("q_0 = y[0]")
         if MOTOR in used:
@@ -103,14 +78,54 @@ class _Code:
             lines.append("powered = motor_on(p)")
         if vl.SEATED in used:
             lines.append("seated = p[P_SEATED]")
+        return lines
+
+    def body(self, exprs: list[sp.Expr], direction: str = "0.0") -> tuple[list[str], list[str]]:
+        """Lines and results; the body forces of a sliding mode in ``direction``."""
+        exprs = [sp.sympify(e) for e in exprs]
+        used = set().union(*(e.free_symbols for e in exprs))
+        lines = self.state_lines(used, direction) + self.reads(used)
         replacements, reduced = sp.cse(exprs, symbols=sp.numbered_symbols("c"))
         lines += [f"{s} = {self.printer.doprint(e)}" for s, e in replacements]
         return lines, [self.printer.doprint(e) for e in reduced]
 
     def function(self, name: str, doc: str, exprs: list[sp.Expr], args: str = "t, y, p",
-                 direction: str = "0.0", signed: bool = False) -> dict:
-        lines, results = self.body(exprs, direction, signed)
+                 direction: str = "0.0") -> dict:
+        lines, results = self.body(exprs, direction)
         return {"name": name, "args": args, "doc": doc, "lines": lines, "result": ", ".join(results)}
+
+    def terms(self, expr: sp.Expr) -> dict:
+        """``expr`` as sum of coefficient times run-time symbol (None: the constant term): each coefficient
+        d expr / d symbol free of the run-time symbols (a mode's expressions are affine in the body forces:
+        Newton's laws are linear in them), checked here; a GenerationError names an expression that is not."""
+        expr = sp.sympify(expr)
+        used = sorted(expr.free_symbols & self.runtime, key=str)
+        out = {None: expr.subs({r: 0 for r in used})}
+        for r in used:
+            out[r] = sp.diff(expr, r)
+            if out[r].free_symbols & self.runtime:
+                raise GenerationError(f"a chain mode's expression is not affine in {r}: {expr}")
+        return out
+
+    def blocks(self, name: str, doc: str, exprs: list[sp.Expr], combos: dict[tuple[int, ...], str]) -> dict:
+        """A group's function ``name`` over coefficient blocks: its expressions (the group's first mode's) as
+        sums of coefficients times run-time symbols (``terms``), the coefficients of each friction-angle sign
+        combination (``combos``: signs -> suffix) derived once per run into consecutive slots of p, the
+        first at D_<name>_<suffix> (a derived slot); the function takes that first slot as ``k`` and reads
+        p[k + i]: no trigonometry of the scene's values per call."""
+        signed = {signs: [self.terms(e.subs({rho: s * rho for rho, s in zip(self.sym.rho, signs) if s < 0},
+                                            simultaneous=True)) for e in exprs] for signs in combos}
+        layout = [(i, r) for i in range(len(exprs)) for r in [None, *sorted(self.runtime, key=str)]
+                  if any(r in t[i] and t[i][r] != 0 for t in signed.values())]
+        for signs, suffix in combos.items():
+            shown = ", ".join(f"{'+' if s > 0 else '-'}{rho}" for s, rho in zip(signs, self.sym.rho))
+            for j, (i, r) in enumerate(layout):
+                self.derive(sp.Symbol(f"{name}_{suffix}_{j}", real=True), signed[signs][i].get(r, sp.Integer(0)),
+                            f"{name}_{suffix}_{j}: {name}'s result {i}, its {r or 'constant'} term ({shown})")
+        results = [" + ".join(f"p[k + {j}]" + (f"*{r}" if r is not None else "") for j, (at, r) in enumerate(layout)
+                              if at == i) or "0.0" for i in range(len(exprs))]
+        return {"name": name, "args": "t, y, p, direction, k", "doc": doc,
+                "lines": self.state_lines({r for _, r in layout}, "direction"), "result": ", ".join(results)}
 
 
 def _range(rule, names: dict[str, str]) -> tuple:
@@ -120,10 +135,11 @@ def _range(rule, names: dict[str, str]) -> tuple:
     return (rule.lo, hi, rule.lo_in, rule.hi_in)
 
 
-def _layout(chain: ChainScene) -> tuple[list[dict], list[dict], dict[sp.Symbol, str]]:
+def _layout(chain: ChainScene) -> tuple[list[dict], list[dict], dict[sp.Symbol, str], object]:
     """p after its latches: the scene's values (name, slot, SI value, scene key, unit, range) and what
-    ``prepare`` derives from them (name, slot, formula in the values and earlier derived names), and the
-    slot of each symbol the generated functions read."""
+    ``prepare`` derives from them (name, slot, formula in the values and earlier derived names), the
+    slot of each symbol the generated functions read, and ``derive(target, formula)``, which adds a derived
+    slot (the mode functions' coefficients, ``_Code.blocks``)."""
     n = len(chain.stages)
     sym = dyn.symbols(n)
     printer = _Printer()
@@ -136,10 +152,13 @@ def _layout(chain: ChainScene) -> tuple[list[dict], list[dict], dict[sp.Symbol, 
                        "unit": p.unit, "range": _range(rule, names)})
         slots[sp.Symbol(p.name, real=True)] = slot
 
-    def derive(target: sp.Symbol, expr) -> None:
+    inertia = {sym.inertia[j]: sp.Symbol(body.inertia.name, real=True) for j, body in enumerate(chain.bodies)}
+
+    def derive(target: sp.Symbol, expr, note: str = "") -> None:
         slot = f"D_{target}"
-        expr = sp.sympify(expr)
-        derived.append({"name": str(target), "slot": slot, "formula": printer.doprint(expr)})
+        expr = sp.sympify(expr).subs(inertia)
+        derived.append({"name": str(target), "slot": slot, "formula": printer.doprint(expr), "expr": expr,
+                        "note": note or f"{target} = {printer.doprint(expr)}"})
         for v in values:
             v["read"] = v.get("read", False) or sp.Symbol(v["name"], real=True) in expr.free_symbols
         slots[target] = slot
@@ -163,14 +182,14 @@ def _layout(chain: ChainScene) -> tuple[list[dict], list[dict], dict[sp.Symbol, 
     derive(sp.Symbol("delay", real=True), vl.symbol(chain.switch.delay) if chain.switch else sp.Float(0.0))
     for j, body in enumerate(chain.bodies):
         slots[sym.inertia[j]] = slots[sp.Symbol(body.inertia.name, real=True)]
-    return values, derived, slots
+    return values, derived, slots, derive
 
 
 def _forces(chain: ChainScene, code: _Code, direction: sp.Expr) -> list[sp.Expr]:
     """The generalized force on each body: its force or torque, the motor's while powered, less a spring's
     stiffness times its coordinate q_j = (v_j / v_0) q_0 (q = 0 at the start), and the valve's force on the
     last body moving in ``direction``."""
-    factors = dyn.speed_factors(code.sym)
+    factors = [sp.Symbol(f"c_{j}", real=True) for j in range(len(chain.bodies))]   # derived by prepare
     return [sp.Symbol(b.force.name, real=True) + (vl.drive(MOTOR) if b.motor is not None else 0)
             - (sp.Symbol(b.stiffness.name, real=True) * factors[j] * q0 if b.stiffness is not None else 0) + (vl.valve_force(b.valve, factors[j] * q0, direction) if b.valve is not None else 0)
             for j, b in enumerate(chain.bodies)]
@@ -233,11 +252,11 @@ def _with_rho_signs(code: _Code, exprs: dict, signs: tuple[int, ...]) -> dict:
 
 def _mode_calls(chain: ChainScene, code: _Code, modes: list[dyn.SlidingMode]) -> tuple[list[dict], list[dict]]:
     """The per-mode functions, one set per group of modes that are the first's with some stages' friction
-    angles negated (the other regime of a stage: the sign passed as ``rho_sign_k``) and mirrored (the same
-    regimes on the other flanks in the other direction: the body forces in the direction the caller passes),
-    each checked in SymPy, expression by expression, equal or opposite; per mode the call: the group's
-    functions, its direction and rho signs and which results change sign."""
-    functions, calls, groups = [], [], []     # groups: (first index, its expressions)
+    angles negated (the other regime of a stage) and mirrored (the same regimes on the other flanks in the
+    other direction: the body forces in the direction the caller passes), each checked in SymPy, expression by
+    expression, equal or opposite; per mode the call: the group's functions, its direction, the first slot of
+    its friction-angle signs' coefficients (``_Code.blocks``) and which results change sign."""
+    calls, groups = [], []     # groups: (first index, its expressions)
     for index, mode in enumerate(modes):
         exprs = _mode_exprs(chain, code, mode)
         found = next(((first, rho, signs) for first, base in groups
@@ -246,30 +265,31 @@ def _mode_calls(chain: ChainScene, code: _Code, modes: list[dyn.SlidingMode]) ->
         if found is None:
             groups.append((index, exprs))
             found = (index, (1,) * len(mode.regimes), {name: (1,) * len(e) for name, e in exprs.items()})
-            functions += _group_functions(code, index, modes, exprs)
         first, rho, signs = found
-        args = ", ".join([f"{mode.direction:.1f}", *(f"{s:.1f}" for s in rho)])
-        calls.append({"group": first, "args": args, "accel_sign": "-" if signs["accel"][0] < 0 else "",
+        calls.append({"group": first, "direction": f"{mode.direction:.1f}", "rho": rho,
+                      "suffix": "".join("p" if s > 0 else "m" for s in rho),
+                      "accel_sign": "-" if signs["accel"][0] < 0 else "",
                       "contact_flips": [k for k, sg in enumerate(signs["contact"]) if sg < 0],
                       "force_flips": [k for k, sg in enumerate(signs["stage_forces"]) if sg < 0]})
-    for group, _ in groups:
-        members = [f"{i} ({modes[i].name})" for i, call in enumerate(calls) if call["group"] == group]
-        for f in functions:
-            if f["group"] == group:
-                f["doc"] += "; modes " + ", ".join(members) + " (their body forces in `direction`, each stage's " \
-                            "friction angle times `rho_sign_k`)"
+    functions = []
+    for group, exprs in groups:
+        members = [i for i, call in enumerate(calls) if call["group"] == group]
+        combos = {calls[i]["rho"]: calls[i]["suffix"] for i in members}
+        functions += _group_functions(code, group, modes, exprs, combos,
+                                      "; modes " + ", ".join(f"{i} ({modes[i].name})" for i in members))
     return functions, calls
 
 
-def _group_functions(code: _Code, index: int, modes: list[dyn.SlidingMode], exprs: dict) -> list[dict]:
-    args = ", ".join(["t, y, p, direction", *(f"rho_sign_{k + 1}" for k in range(len(modes[index].regimes)))])
+def _group_functions(code: _Code, index: int, modes: list[dyn.SlidingMode], exprs: dict, combos: dict,
+                     members: str) -> list[dict]:
     docs = {"accel": "a_0",
             "contact": "(D, jam, N_1, ..., N_N, measured): the denominator, the stages' jam factors' product and each "
                        "stage's normal force; the mode holds while each is >= 0 (D, jam > 0); what the torque switch "
                        "measures",
             "stage_forces": "per stage (on its input body, on its output body, normal force)"}
-    return [{**code.function(f"{name}_{index}", f"{docs[name]} in mode {index}: {modes[index].name}", e, args=args,
-                             direction="direction", signed=True), "group": index} for name, e in exprs.items()]
+    return [code.blocks(f"{name}_{index}", f"{docs[name]} in mode {index}: {modes[index].name}{members} (their body "
+                        "forces in `direction`, the coefficients of their stages' friction-angle signs from slot k: "
+                        f"D_{name}_{index}_<p or m per stage>_0)", e, combos) for name, e in exprs.items()]
 
 
 def _jacobian(code: _Code, chain: ChainScene, mode: dyn.SlidingMode) -> tuple[sp.Expr, sp.Expr]:
@@ -297,14 +317,14 @@ def generate_chain_module(chain: ChainScene) -> str:
     modelled flanks, which bodies have springs, motor, valve, seat, switch); the scene's values are the
     defaults of p's slots."""
     n = len(chain.stages)
-    values, derived, slots = _layout(chain)
-    code = _Code(n, slots)
+    values, derived, slots, derive = _layout(chain)
+    code = _Code(n, slots, derive)
     reachable = dyn.reachable(tuple(s.flanks for s in chain.stages))
     modes = [dyn.sliding(direction, regimes) for direction, regimes in reachable]
     functions = [code.function("body_forces", "(F_0, ..., F_N): each body's force or torque (the motor's while "
                                "powered), a spring's part -stiffness q_j with q_j = (v_j/v_0) q_0, the valve's force "
                                "on the last body moving in `direction` (0: at rest, without its friction)",
-                               _forces(chain, code, DIRECTION), args="t, y, p, direction"), code.wedge_reader()]
+                               _forces(chain, code, DIRECTION), args="t, y, p, direction")]
     shared, calls = _mode_calls(chain, code, modes)
     functions += shared
     guards = ("D", "jam", *(f"N_{k + 1}" for k in range(n)), "v0", *SWITCHED_GUARDS)
@@ -349,7 +369,8 @@ def generate_chain_module(chain: ChainScene) -> str:
     body = env.get_template("chain_module.py.j2").render(
         chain=chain, n=n, modes=modes, calls=calls, constants={k: inert(v, k) for k, v in constants.items()},
         values=values, defaults=inert(tuple(v["si"] for v in values), "PARAM_DEFAULTS"),
-        derived=derived, prepare_reads=[f"{v['name']} = p[{v['slot']}]" for v in values if v["read"]],
+        derived=derived, prepare_lines=[*(f"{v['name']} = p[{v['slot']}]" for v in values if v["read"]),
+                                        *_prepare_lines(derived, code.printer)],
         functions=functions, jac_reads=jac_reads, jacobians=jacobians, motor=motor,
         motor_arrays={name: inert(table, name) for name, table in (
             ("MOTOR_SPEED", motor.speed), ("MOTOR_TORQUE", motor.torque))} if motor else {},
@@ -374,6 +395,16 @@ def generate_chain_module(chain: ChainScene) -> str:
     except SyntaxError as error:
         raise GenerationError(f"{chain.source}: the generated chain module does not compile ({error})") from None
     return source
+
+
+def _prepare_lines(derived: list[dict], printer: _Printer) -> list[str]:
+    """``name = formula`` for each derived slot in order; the mode functions' coefficients (after the wedge
+    numbers they are made of) through one CSE, their shared subexpressions first."""
+    plain = [d for d in derived if not d["name"].startswith(("accel_", "contact_", "stage_forces_"))]
+    blocks = derived[len(plain):]
+    replacements, reduced = sp.cse([d["expr"] for d in blocks], symbols=sp.numbered_symbols("shared_"))
+    return ([f"{d['name']} = {d['formula']}" for d in plain] + [f"{s} = {printer.doprint(e)}" for s, e in replacements]
+            + [f"{d['name']} = {printer.doprint(e)}" for d, e in zip(blocks, reduced)])
 
 
 def _psi(sym: dyn.Symbols, k: int, flank: str) -> sp.Expr:

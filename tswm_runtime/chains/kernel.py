@@ -20,6 +20,7 @@ from tswm_runtime.integration import segment
 from tswm_runtime.jit import cache_guard
 from tswm_runtime.jit.addresses import guards_at
 from tswm_runtime.jit.arrays import copy_into
+from tswm_runtime.jit.borrow import borrowed
 from tswm_runtime.jit.cache_guard import njit
 from tswm_runtime.jit.signatures import MATRIX, VECTOR
 from tswm_runtime.jit.structures import INTS, RECORD, SETTINGS, EventSettings, Segment, State
@@ -111,21 +112,18 @@ def _slide(fns, run_segment, settings, c, mode, t, y, p, record, i, h, scratch):
             return status, t, k, i, h
 
 
-@cache_guard.compile_cached(CHAIN_SIG, error_model="numpy", nogil=True)
-def run_chain_at(functions, chain_addresses, c, settings, y0, p, record, rec, max_events):
-    """The chain's run from (0, y0) under p (its latches written; its derived slots filled by the module's
-    prepare) to settings.t_end: phases, events and their
-    decisions, the trip, into rec; output rows into record.out.y (q0, v0; a row at an event time keeps the
-    later phase's value, rows after a stop NaN). Returns (status, t_stop)."""
+@njit(error_model="numpy")
+def _run(functions, chain_addresses, c, settings, y, p, record, rec, max_events, w, scratch):
+    """``run_chain_at`` from the state y (written in place), with its work arrays w and scratch; every array
+    borrowed: handing them on to the segments, the decisions and the record costs no reference counting."""
+    c, settings, y, p, record, rec, w, scratch = borrowed((c, settings, y, p, record, rec, w, scratch))
     fns, run_segment = model_functions(functions), segment_function(functions)
     chain_fns = ChainFunctions(guards_at(chain_addresses[0]), guards_at(chain_addresses[1]))
     out, counters = record.out, record.counters
     stages, n_guards = c.stages, c.guard_direction.shape[1]
-    w = chain_work(n_guards, stages, c.direction.size, p.size)
-    scratch = segment.segment_work(2, n_guards, 0, 0)
     rec.counts[0], rec.counts[1], rec.counts[2] = 0, 0, 0
     rec.trip[0] = np.nan
-    t, t_end, y = 0.0, settings.t_end, y0.copy()
+    t, t_end = 0.0, settings.t_end
     outcome, mode = settle(fns, chain_fns, c, t, y, p, RESTING, START, w, rec.trip)
     _event(rec, t, START, RESTING, mode, outcome, y, p)
     status, same, h = FINISHED, 0, 0.0
@@ -196,6 +194,19 @@ def run_chain_at(functions, chain_addresses, c, settings, y0, p, record, rec, ma
             break
         mode = new
     return status, t
+
+
+@cache_guard.compile_cached(CHAIN_SIG, error_model="numpy", nogil=True)
+def run_chain_at(functions, chain_addresses, c, settings, y0, p, record, rec, max_events):
+    """The chain's run from (0, y0) under p (its latches written; its derived slots filled by the module's
+    prepare) to settings.t_end: phases, events and their
+    decisions, the trip, into rec; output rows into record.out.y (q0, v0; a row at an event time keeps the
+    later phase's value, rows after a stop NaN). Returns (status, t_stop). Its work arrays are made here
+    and kept alive for ``_run``, which borrows them (``borrow``) with its arguments."""
+    n_guards = c.guard_direction.shape[1]
+    w = chain_work(n_guards, c.stages, c.direction.size, p.size)
+    scratch = segment.segment_work(2, n_guards, 0, 0)
+    return _run(functions, chain_addresses, c, settings, y0.copy(), p, record, rec, max_events, w, scratch)
 
 
 @njit(cache=True, error_model="numpy", no_cpython_wrapper=False)

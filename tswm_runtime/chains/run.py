@@ -48,6 +48,7 @@ from tswm_runtime.chains import rules as compiled  # noqa: E402
 from tswm_runtime.chains import kernel  # noqa: E402
 from tswm_runtime.hybrid import entry  # noqa: E402
 from tswm_runtime.integration import segment  # noqa: E402
+from tswm_runtime.jit.cache_guard import entry_point  # noqa: E402
 from tswm_runtime.jit.signatures import GUARDS_SIG, address  # noqa: E402
 from tswm_runtime.jit.structures import EventLog, Outputs, Record, StepLog  # noqa: E402
 
@@ -293,7 +294,7 @@ def run_chain(module, *, t_end: float, v0: float, rtol: float, atol: float, t_ou
         p = latches(module, y0, voltage, values)
         start = p.copy()
         record, chain = _record(module, t_out, phases, samples_room(phases, t_out.size))
-        code, t_stop = kernel.run_chain_at(*args, p, record, chain, max_events)
+        code, t_stop = entry_point(kernel.run_chain_at)(*args, p, record, chain, int(max_events))   # typed as built
         if code != kernel.RECORD_FULL:
             break
         phases *= 2

@@ -178,3 +178,24 @@ def compile_cached(signature, **options):
         dispatcher.disable_compile()
         return dispatcher
     return decorate
+
+
+def entry_point(kernel):
+    """The compiled code of a kernel that ``compile_cached`` compiled for exactly one signature.
+    Calling it skips the dispatcher, which types every argument on every call to pick the
+    overload (about 40 us for the mode machine's arguments when they still held functions, about
+    10 us for a chain run's 30-odd record arrays); that is safe only for a caller that builds every
+    argument with the signature's exact types (``entry.integrate``, ``simulate``, ``chains.run``).
+    The dispatcher itself if there is no single one (or the function, while numba's jit is off)."""
+    entry = _ENTRY_POINTS.get(id(kernel))
+    if entry is None:
+        try:
+            (signature,) = kernel.signatures
+            entry = kernel.overloads[signature].entry_point
+        except (AttributeError, KeyError, ValueError):
+            entry = kernel
+        _ENTRY_POINTS[id(kernel)] = entry
+    return entry
+
+
+_ENTRY_POINTS: dict = {}

@@ -28,6 +28,7 @@ from tswm_runtime.model import checks, modes  # noqa: E402
 from tswm_runtime.model.scenes import load_model  # noqa: E402
 from tswm_runtime.model.values import ValueInputError, quantities, si_value  # noqa: E402
 from tswm_runtime.hybrid.machine import INCONSISTENT, NOT_FINITE  # noqa: E402
+from tswm_runtime.jit.cache_guard import entry_point  # noqa: E402
 from tswm_runtime.jit.structures import ModeTables, Settings, Start  # noqa: E402
 from tswm_runtime.results.result import Result, RunRecord, first_non_finite  # noqa: E402
 from tswm_runtime.results.rows import MAX_LOGGED_STEPS, Rows, output_times, state_names  # noqa: E402
@@ -339,32 +340,12 @@ def method_step(method: str) -> None:
 
 
 _PREPARED: set = set()  # methods whose step is compiled or loaded in this process
-_ENTRY_POINTS: dict = {}
-
-
-def _entry_point(kernel):
-    """The compiled code of a kernel that ``compile_cached`` compiled for exactly one signature.
-    Calling it skips the dispatcher, which types every argument on every call to pick the
-    overload (about 40 us for the mode machine's arguments when they still held functions);
-    that is safe only because ``entry.integrate`` and ``simulate`` build every argument with
-    the signature's exact types. The dispatcher itself if there is no single one."""
-    entry = _ENTRY_POINTS.get(id(kernel))
-    if entry is None:
-        try:
-            (signature,) = kernel.signatures
-            entry = kernel.overloads[signature].entry_point
-        except (AttributeError, KeyError, ValueError):
-            entry = kernel
-        _ENTRY_POINTS[id(kernel)] = entry
-    return entry
-
-
 def _direct(kernel, args: tuple, counters: np.ndarray):
-    return _entry_point(kernel)(*args)
+    return entry_point(kernel)(*args)
 
 
 def _direct_in_a_thread(kernel, args: tuple, counters: np.ndarray):
-    return _in_a_thread(_entry_point(kernel), args, counters)
+    return _in_a_thread(entry_point(kernel), args, counters)
 
 
 def _first_non_finite(module: ModuleType, t: np.ndarray, values: dict, maxima: list[float]):
