@@ -136,8 +136,8 @@ class _Helper(CPUDispatcher):
 
     Unless told otherwise (``njit(refcounted=True)``), a helper is compiled without numba's reference
     counting (NRT): its arrays are its callers' (borrowed, ``borrow``), and counting them, at
-    every argument, tuple member and call, was over a third of the code numba typed, lowered and
-    LLVM optimized (docs/first-run.md). ``add_overload`` holds such a helper to what makes that
+    every argument, tuple member and variable's end, was a third of the LLVM IR numba printed for
+    the segment kernel (docs/first-run.md). ``add_overload`` holds such a helper to what makes that
     safe: it returns no array (its caller would release one it never counted) and takes none
     from a compiled function (one it could never release).
     """
@@ -188,8 +188,9 @@ def njit(*, cache=False, refcounted=False, **options):
     code in the kernel that calls it, once) and is not cached on its own: it lives in its
     kernels' cache. ``cache=True`` is for a function that is entered by address (a method's
     step): compiled in full on its own and cached. ``refcounted=True`` for a helper that makes
-    arrays (np.empty, a copy, an array expression) or returns any: compiled with numba's reference
-    counting (``_Helper``; without it numba refuses to compile an allocation). The function itself
+    arrays (np.empty, a copy, an array expression), returns any, or calls a numba.njit function
+    that makes them (which compiles with its first caller's setting): compiled with numba's
+    reference counting (``_Helper``; without it numba refuses to compile an allocation). The function itself
     while numba's jit is off, as numba.njit does."""
     def decorate(py_func):
         if numba.config.DISABLE_JIT:   # an interpreted run (startup.warmup)
