@@ -284,6 +284,7 @@ def test_fit_announces_the_compile_on_a_cold_cache(monkeypatch, caplog, tmp_path
     assert not numba.config.DISABLE_JIT
 
 
+@pytest.mark.heavy
 def test_a_cold_fit_with_interpret_runs_interpreted_and_says_so(tmp_path):
     """TSWM_COLD_START=interpret on an empty numba cache: the fit says it runs interpreted, compiles
     nothing, and still recovers m2 from a peak made at 250 kg (the sweep's, compiled, in this process)."""

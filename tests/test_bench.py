@@ -21,6 +21,7 @@ def test_dop853_matches_the_quadrature_reference_on_the_run_up():
     assert e["err"] <= 1e-7 and e["err_t"] == 0.0
 
 
+@pytest.mark.heavy
 @pytest.mark.parametrize("method", available_methods())
 @pytest.mark.parametrize("case", [RUNUP, FLANK, STICK, SCHEDULE], ids=lambda c: c.name)
 def test_each_peer_agrees_with_the_reference_at_its_tolerance(method, case):

@@ -108,6 +108,7 @@ def random_chain(n_st: int) -> ChainValues:
                        tuple(rng.uniform(0.01, 50.0, n_st + 1)), tuple(rng.uniform(-500, 500, n_st + 1)), (BOTH,) * n_st)
 
 
+@pytest.mark.heavy
 @pytest.mark.parametrize("n_st", (1, 2, 3))
 def test_every_mode_agrees_with_newton_written_by_hand(n_st):
     chains = [random_chain(n_st) for _ in range(4)]

@@ -78,6 +78,7 @@ def test_the_msl4000_band_and_audit_agree_with_the_hand_efficiencies(msl_documen
 HOSTILE = '\\input{/etc/passwd} $x^2$ 100% & #1 _a ~ {} \\\\ \\end{document}'
 
 
+@pytest.mark.heavy
 def test_scene_text_reaches_latex_escaped():
     """A description full of LaTeX's specials is printed as text, never run; the name is limited to
     [a-z0-9-] by the scene reader."""

@@ -88,6 +88,7 @@ def test_the_derived_switching_function_holds_no_friction_angle_of_its_own_stage
         assert two.rho[1] not in phi[1].free_symbols and two.rho[0] in phi[1].free_symbols
 
 
+@pytest.mark.heavy
 def test_tswm_simulate_and_derive_print_the_example(tmp_path, capsys, monkeypatch):
     """The CLI says "1 stage" (not "1 stages"), the regimes and the closed form's switch time."""
     from tswm_runtime.cli import main

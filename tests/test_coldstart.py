@@ -53,6 +53,7 @@ def test_an_empty_cache_is_cold_and_checking_it_compiles_nothing(tmp_path):
     assert json.loads(out.stdout) == [["integrate", "batch"], True, False]
 
 
+@pytest.mark.heavy
 def test_a_kernel_compiled_on_import_survives_the_first_stale_cache_check(tmp_path):
     """The first compile into an empty cache writes the kernel marker and purges the kernel
     caches without it; a kernel compiled eagerly before that purge (``segment.no_jacobian``,

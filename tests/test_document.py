@@ -56,6 +56,7 @@ def test_markdown_has_every_step(paper_doc):
     assert "| (6) | differs | yes |" in md
 
 
+@pytest.mark.heavy
 @pytest.mark.skipif(not shutil.which("pdflatex") and not NEED_TEX, reason="no TeX engine here")
 @pytest.mark.parametrize("name", shipped_scenes())
 def test_latex_compiles_to_pdf(tmp_path, name):

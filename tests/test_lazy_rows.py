@@ -82,6 +82,7 @@ def _row_tolerance(r):
     return 10 * r.settings["rtol"] * np.max(np.abs(r.v1))
 
 
+@pytest.mark.heavy
 def test_rows_in_the_painleve_approach_follow_its_dense_output_in_sundman_time():
     """Rows inside the approach from the step log's dense output in sigma, against the reference;
     outside it bit for bit the rows written during the run. (Those written during the run in the

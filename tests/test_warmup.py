@@ -53,6 +53,7 @@ print(json.dumps(out))
 """
 
 
+@pytest.mark.heavy
 @pytest.mark.parametrize("runs", [pytest.param(KEPT, id="kept"),
                                   pytest.param([run for run in RUNS if run not in KEPT], id="rest",
                                                marks=pytest.mark.slow)])

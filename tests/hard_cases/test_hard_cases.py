@@ -134,6 +134,7 @@ def test_breakaway_with_the_non_lipschitz_friction_law(method):
     np.testing.assert_allclose(r.v1[1:], v_ref, rtol=1e-6 if method == "dopri5" else 1e-4)
 
 
+@pytest.mark.heavy
 def test_stiff_light_worm_both_methods_agree(scene_module):
     """m1 = 0.05 kg makes the run-up stiff (lambda ~ 1700 /s near V0): DOPRI5 would step at
     its stability limit on the equilibrium tail (~500 steps a second at any rtol); the tail

@@ -183,6 +183,7 @@ def march_pickup(v1, v3, m1, m2, m3, mu, e, steps=400_000):
     return v1, v3, P
 
 
+@pytest.mark.heavy
 @pytest.mark.parametrize("rho_deg", [20.0, 4.0])
 def test_a_heavy_stem_stops_or_reverses_the_wedge_inside_the_impulse(lab, rho_deg):
     """e = 1, stem 50x the wheel: the rebound drives the wheel back through v1 = 0. A self-locking
