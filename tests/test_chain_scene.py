@@ -148,6 +148,23 @@ CLEARANCE_BAD = [
 ]
 
 
+def test_a_second_clearance_in_a_chain_is_refused_naming_it():
+    """One clearance per chain: a second is refused naming its key and value (checked before the refusal of
+    the first as not supported yet); the second's values are checked first."""
+    text = VALVE.replace("mu = 0.05", 'mu = 0.05\nclearance = "0.2 mm"\nrestitution = 0.3')
+    two = text.replace("mu = 0.15", 'mu = 0.15\nclearance = "0.1 mm"\nrestitution = 0.5')
+    with pytest.raises(SceneError) as err:
+        parse_chain(two, "v.toml")
+    assert 'stage[2].clearance = "0.1 mm"' in str(err.value), str(err.value)
+    assert "one clearance per chain is supported, and stage[1] has one" in str(err.value)
+    with pytest.raises(SceneError) as err:
+        parse_chain(two.replace('clearance = "0.1 mm"', 'clearance = "-0.1 mm"'), "v.toml")
+    assert "stage[2].clearance = -0.1 mm" in str(err.value) and "must be >= 0 m" in str(err.value)
+    with pytest.raises(SceneError) as err:
+        parse_chain(text, "v.toml")
+    assert "stage[1].clearance" in str(err.value) and "not supported yet" in str(err.value)
+
+
 @pytest.mark.parametrize("stage, run, parts", CLEARANCE_BAD, ids=[s[:24] + r for s, r, _ in CLEARANCE_BAD])
 def test_a_stage_clearance_is_checked_and_refused(stage, run, parts):
     text = VALVE.replace("mu = 0.15", f"mu = 0.15\n{stage}") + f"[run]\n{run}\n"

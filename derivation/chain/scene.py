@@ -305,7 +305,9 @@ class _ChainReader(_Reader):
 
     def clearances(self, stages: list[dict], run: dict) -> None:
         """stage[k].clearance (>= 0) with stage[k].restitution (e in [0, 1]) and the start gap run.gap_k in
-        [0, clearance], checked; then refused: the chain's kernel integrates rigid chains only (one coordinate)."""
+        [0, clearance], checked, at most one stage with a clearance per chain; then refused: the chain's
+        kernel integrates rigid chains only (one coordinate)."""
+        first = None
         for k, table in enumerate(stages, 1):
             path, gap = f"stage[{k}]", f"gap_{k}"
             if "clearance" not in table:
@@ -315,9 +317,14 @@ class _ChainReader(_Reader):
                 continue
             given = self.plain(table, path, STAGE_CLEARANCE)
             self.number(run, gap, "run", GAP, free_ok=False, siblings=given)
-            self.fail(f"{path}.clearance", "a clearance (backlash) in a chain's stage is not supported yet: the chain "
-                      "moves as one rigid body; give the stage no clearance, or model the stage alone as a one-stage "
-                      "scene with wedge.clearance", _toml(table["clearance"]))
+            if first is not None:
+                self.fail(f"{path}.clearance", f"one clearance per chain is supported, and stage[{first}] has one: "
+                          f"give stage {k} none", _toml(table["clearance"]))
+            first = k
+        if first is not None:
+            self.fail(f"stage[{first}].clearance", "a clearance (backlash) in a chain's stage is not supported yet: "
+                      "the chain moves as one rigid body; give the stage no clearance, or model the stage alone as "
+                      "a one-stage scene with wedge.clearance", _toml(stages[first - 1]["clearance"]))
 
     def chain_run(self, doc: dict, stages: int) -> ChainRun:
         table = self.table(doc, "run", required=False) or {}
