@@ -20,6 +20,7 @@ import jinja2
 import sympy as sp
 
 from derivation import mechanics as mech
+from derivation.chain import clearance as cl
 from derivation.chain import dynamics as dyn
 from derivation.chain import stages as st
 from derivation.chain import valve as vl
@@ -31,7 +32,10 @@ MOTOR = sp.Symbol("motor", real=True)     # the motor's torque (or force) on bod
 DIRECTION = sp.Symbol("direction", real=True)   # the sign of v_0 in a sliding mode, 0 at rest
 STATES = ("q0", "v0")
 SWITCHED_GUARDS = ("seat", "switch", "delay")   # the seat's contact, the switch picking up or dropping out, its delay
-GENERATOR_SOURCES = ("chain/codegen.py", "chain/dynamics.py", "chain/stages.py", "chain/scene.py",
+# With a clearance: the gap closing on flank a, on flank b, the output group's speed reaching 0.
+CLEARANCE_GUARDS = ("gap_a", "gap_b", "v_out")
+CLEARANCE_LATCHES = ("contact", "direction_in", "direction_out")   # then rho_sign per stage
+GENERATOR_SOURCES = ("chain/codegen.py", "chain/clearance.py", "chain/dynamics.py", "chain/stages.py", "chain/scene.py",
                      "chain/valve.py", "templates/chain_module.py.j2")
 
 
@@ -49,9 +53,10 @@ class _Code:
     it uses read from its slot of p (``slots``), the body forces from ``body_forces`` where an expression
     uses them."""
 
-    def __init__(self, stages: int, slots: dict[sp.Symbol, str]):
+    def __init__(self, stages: int, slots: dict[sp.Symbol, str], states: dict[sp.Symbol, str] | None = None):
         self.sym = dyn.symbols(stages)
         self.slots = slots
+        self.states = states or {}      # with a clearance: the output group's coordinate and both groups' speeds
         self.printer = _Printer()
 
     @property
@@ -97,6 +102,7 @@ class _Code:
         lines += self.reads(used, signed)
         if q0 in used:
             lines.append("q_0 = y[0]")
+        lines += [f"{s} = {at}" for s, at in self.states.items() if s in used]
         if MOTOR in used:
             lines.append("motor = motor_torque(y[1], p)")
         if vl.POWERED in used:
@@ -129,7 +135,8 @@ def _layout(chain: ChainScene) -> tuple[list[dict], list[dict], dict[sp.Symbol, 
     printer = _Printer()
     values, derived, slots = [], [], {}
     pairs = chain.value_rules()
-    names = {p.key.rsplit(".", 1)[-1]: p.name for p, _ in pairs if p.key.startswith("switch.")}
+    names = {p.key.rsplit(".", 1)[-1]: p.name for p, _ in pairs
+             if p.key.startswith("switch.") or p.key.endswith(".clearance")}
     for p, rule in pairs:
         slot = f"V_{p.name}"
         values.append({"name": p.name, "slot": slot, "si": p.value, "value": inert(p.value, p.name), "key": p.key,
@@ -166,13 +173,24 @@ def _layout(chain: ChainScene) -> tuple[list[dict], list[dict], dict[sp.Symbol, 
     return values, derived, slots
 
 
+def _coordinates(chain: ChainScene, code: _Code) -> list[sp.Expr]:
+    """Each body's coordinate (q = 0 at the start): q_j = (v_j / v_0) q_0; with a clearance in stage k, the bodies
+    from k on form their own rigid group (``clearance.groups``) and q_j = (v_j / v_k) q_k."""
+    if chain.clearance is None:
+        return [factor * q0 for factor in dyn.speed_factors(code.sym)]
+    k = chain.clearance.stage
+    grouping = cl.groups(len(chain.stages), (k,))
+    coordinate = (q0, sp.Symbol(f"q_{k}", real=True))
+    return [grouping.factors[j] * coordinate[grouping.of_body[j]] for j in range(len(chain.bodies))]
+
+
 def _forces(chain: ChainScene, code: _Code, direction: sp.Expr) -> list[sp.Expr]:
     """The generalized force on each body: its force or torque, the motor's while powered, less a spring's
-    stiffness times its coordinate q_j = (v_j / v_0) q_0 (q = 0 at the start), and the valve's force on the
-    last body moving in ``direction``."""
-    factors = dyn.speed_factors(code.sym)
+    stiffness times its coordinate q_j (``_coordinates``), and the valve's force on the last body moving in
+    ``direction``."""
+    q = _coordinates(chain, code)
     return [sp.Symbol(b.force.name, real=True) + (vl.drive(MOTOR) if b.motor is not None else 0)
-            - (sp.Symbol(b.stiffness.name, real=True) * factors[j] * q0 if b.stiffness is not None else 0) + (vl.valve_force(b.valve, factors[j] * q0, direction) if b.valve is not None else 0)
+            - (sp.Symbol(b.stiffness.name, real=True) * q[j] if b.stiffness is not None else 0) + (vl.valve_force(b.valve, q[j], direction) if b.valve is not None else 0)
             for j, b in enumerate(chain.bodies)]
 
 
@@ -272,24 +290,33 @@ def _group_functions(code: _Code, index: int, modes: list[dyn.SlidingMode], expr
                              direction="direction", signed=True), "group": index} for name, e in exprs.items()]
 
 
-def _jacobian(code: _Code, chain: ChainScene, mode: dyn.SlidingMode) -> tuple[sp.Expr, sp.Expr]:
-    """(d a_0 / d q_0, d a_0 / d v_0) in a mode: the springs' and the motor's share (the forces are the only
-    state dependence; the motor's torque changes with v_0 by its table's slope, ``motor_slope``)."""
-    accel = mode.accel.subs(dict(zip(code.sym.force, _forces(chain, code, mode.direction))))
-    return sp.diff(accel, q0), sp.diff(accel, MOTOR)
+def _by_state(code: _Code, chain: ChainScene, accel: sp.Expr, direction: sp.Expr) -> tuple[sp.Expr, ...]:
+    """(d a / d q_0, d a / d motor) of an acceleration in the body forces, the valve's in ``direction``, and with a
+    clearance in stage k d a / d q_k: the springs' and the motor's share (the forces are the only state dependence;
+    the motor's torque changes with v_0 by its table's slope, ``motor_slope``)."""
+    accel = accel.subs(dict(zip(code.sym.force, _forces(chain, code, direction))))
+    by = (q0, MOTOR) + ((sp.Symbol(f"q_{chain.clearance.stage}", real=True),) if chain.clearance else ())
+    return tuple(sp.diff(accel, x) for x in by)
+
+
+def _jacobian(code: _Code, chain: ChainScene, mode: dyn.SlidingMode) -> tuple[sp.Expr, ...]:
+    """d a_0 by q_0 and by the motor's torque (and by q_k with a clearance) in a mode (``_by_state``)."""
+    return _by_state(code, chain, mode.accel, mode.direction)
 
 
 def _jacobians(code: _Code, chain: ChainScene, modes: list[dyn.SlidingMode]) -> tuple[list[str], list[tuple]]:
     """The reads of p the Jacobian needs and (the modes, d a_0 / d q_0, d a_0 / d v_0) for each distinct pair
     of the modes' Jacobian entries (a mode and its mirror image have the same), in the order of their first
     mode."""
-    found: dict[tuple[str, str], list[int]] = {}
+    found: dict[tuple[str, ...], list[int]] = {}
     used: set = set()
     for index, mode in enumerate(modes):
-        pair = _jacobian(code, chain, mode)
-        used |= pair[0].free_symbols | pair[1].free_symbols
-        found.setdefault(tuple(code.printer.doprint(e) for e in pair), []).append(index)
-    return code.reads(used), [(indices, by_q, by_motor) for (by_q, by_motor), indices in found.items()]
+        entries = _jacobian(code, chain, mode)
+        used |= set().union(*(e.free_symbols for e in entries))
+        found.setdefault(tuple(code.printer.doprint(e) for e in entries), []).append(index)
+    reads = code.reads(used)
+    reads += [f"{s} = {at}" for s, at in code.states.items() if s in used]
+    return reads, [(indices, *entries) for entries, indices in found.items()]
 
 
 def generate_chain_module(chain: ChainScene) -> str:
@@ -298,7 +325,9 @@ def generate_chain_module(chain: ChainScene) -> str:
     defaults of p's slots."""
     n = len(chain.stages)
     values, derived, slots = _layout(chain)
-    code = _Code(n, slots)
+    k = chain.clearance.stage if chain.clearance else 0
+    code = _Code(n, slots, {sp.Symbol(f"q_{k}", real=True): "y[2]", sp.Symbol("v_0", real=True): "y[1]",
+                            sp.Symbol(f"v_{k}", real=True): "y[3]"} if k else None)
     reachable = dyn.reachable(tuple(s.flanks for s in chain.stages))
     modes = [dyn.sliding(direction, regimes) for direction, regimes in reachable]
     functions = [code.function("body_forces", "(F_0, ..., F_N): each body's force or torque (the motor's while "
@@ -307,8 +336,13 @@ def generate_chain_module(chain: ChainScene) -> str:
                                _forces(chain, code, DIRECTION), args="t, y, p, direction"), code.wedge_reader()]
     shared, calls = _mode_calls(chain, code, modes)
     functions += shared
-    guards = ("D", "jam", *(f"N_{k + 1}" for k in range(n)), "v0", *SWITCHED_GUARDS)
-    directions = [tuple([-1] * (n + 2) + [-mode.direction] + [-1] * len(SWITCHED_GUARDS)) for mode in modes]
+    gaps = CLEARANCE_GUARDS if k else ()
+    guards = ("D", "jam", *(f"N_{i + 1}" for i in range(n)), "v0", *gaps, *SWITCHED_GUARDS)
+    directions = [tuple([-1] * (n + 2) + [-mode.direction] + [-1] * (len(gaps) + len(SWITCHED_GUARDS)))
+                  for mode in modes]
+    if k:
+        functions += _open_functions(chain, code)
+        directions.append(tuple([-1] * len(guards)))
     switch, valve = chain.switch, chain.bodies[-1].valve
     seat = valve.seat if valve is not None else None
     first = len(vl.P_NAMES)
@@ -316,6 +350,7 @@ def generate_chain_module(chain: ChainScene) -> str:
     motor = chain.bodies[0].motor
     points = len(motor.speed) if motor else 0
     motor_first = first + len(values) + len(derived)     # the motor's table after the derived slots: speeds, torques
+    open_first = motor_first + 2 * points                # with a clearance, its latches after the motor's table
     constants = {
         "SCENE": chain.name, "DESCRIPTION": chain.description, "SCENE_DIGEST": chain.digest, "STAGES": n,
         "STATES": STATES, "MODES": tuple(m.name for m in modes), "MODE_DIRECTION": tuple(m.direction for m in modes),
@@ -337,6 +372,14 @@ def generate_chain_module(chain: ChainScene) -> str:
         "ARMED": vl.ARMED, "PICKED": vl.PICKED, "TRIPPED": vl.TRIPPED,
         "SWITCH_ON": -1 if switch is None else switch.stage, "HAS_SEAT": seat is not None,
     }
+    if k:
+        constants.update({
+            "STATES": ("q0", "v0", f"q{k}", f"v{k}"), "CLEARANCE_STAGE": k, "OPEN": len(modes),
+            "MODES": (*constants["MODES"], f"open: stage {k}"), "MODE_DIRECTION": (*constants["MODE_DIRECTION"], 0),
+            "MODE_REGIMES": (*constants["MODE_REGIMES"], ()), "MODE_FLANKS": (*constants["MODE_FLANKS"], ()),
+            "P_NAMES": (*constants["P_NAMES"], *CLEARANCE_LATCHES, *(f"rho_sign {i + 1}" for i in range(n))),
+            "P_CONTACT": open_first, "P_DIRECTION_IN": open_first + 1, "P_DIRECTION_OUT": open_first + 2,
+            "P_RHO_SIGN": open_first + 3, "IMPACT_FRAME": IMPACT_FRAME})
     for i, v in enumerate(values):
         v["index"] = first + i
     for d in derived:
@@ -346,7 +389,7 @@ def generate_chain_module(chain: ChainScene) -> str:
     env.filters["docstring"] = _docstring
     env.filters["comment"] = _comment
     jac_reads, jacobians = _jacobians(code, chain, modes)
-    body = env.get_template("chain_module.py.j2").render(
+    body = env.get_template("chain_module.py.j2").render(clearance=_open_template(chain, slots) if k else None,
         chain=chain, n=n, modes=modes, calls=calls, constants={k: inert(v, k) for k, v in constants.items()},
         values=values, defaults=inert(tuple(v["si"] for v in values), "PARAM_DEFAULTS"),
         derived=derived, prepare_reads=[f"{v['name']} = p[{v['slot']}]" for v in values if v["read"]],
@@ -358,6 +401,7 @@ def generate_chain_module(chain: ChainScene) -> str:
         contact_targets=", ".join(f"g[{k}]" for k in range(n + 2)),
         force_targets=", ".join(f"out[{k}]" for k in range(3 * n)),
         body_targets=", ".join(f"out[{j}]" for j in range(n + 1)),
+        impact_targets=", ".join(f"out[{j}]" for j in range(len(IMPACT_FRAME))),
         setting=f"p[V_{switch.setting.name}]" if switch else "math.inf",
         hysteresis=f"p[V_{switch.hysteresis.name}]" if switch else "0.0",
         seat=f"p[V_{seat.name}]" if seat is not None else "math.nan")
@@ -374,6 +418,69 @@ def generate_chain_module(chain: ChainScene) -> str:
     except SyntaxError as error:
         raise GenerationError(f"{chain.source}: the generated chain module does not compile ({error})") from None
     return source
+
+
+OPEN_ARGS = "t, y, p, direction_in, direction_out"
+IMPACT_FRAME = ("nu", "s", "W_nn", "W_nt", "W_tt", "mu", "e", "dv_in_dPn", "dv_in_dPt", "dv_out_dPn", "dv_out_dPt")
+
+
+def _open_functions(chain: ChainScene, code: _Code) -> list[dict]:
+    """The open phase of the stage with the clearance (``clearance.open_phase``, ``open_impact``): the groups'
+    accelerations, (jam, the closed stages' normal forces, the gap, what the switch measures), the stage forces,
+    the Jacobian and the impact's frame on each flank; each closed stage's friction angle signed by its
+    ``rho_sign_i``, the valve's friction in the output group's direction."""
+    n, k = len(chain.stages), chain.clearance.stage
+    phase = cl.open_phase(n, k)
+    closed = sorted(phase.normal)
+    args = ", ".join([OPEN_ARGS, *(f"rho_sign_{i + 1}" for i in range(n))])
+    sym = code.sym
+    per_stage = []
+    for i in range(1, n + 1):
+        if i in phase.normal:
+            w = phase.stage_force[i]
+            per_stage += [sym.lever_in[i - 1] * -cl.signed_psi(i) * w, sym.lever_out[i - 1] * w, phase.normal[i]]
+        else:
+            per_stage += [sp.Integer(0)] * 3
+    switch = chain.switch
+    if switch is None:
+        measured = sp.Integer(0)
+    elif switch.stage == 0:
+        measured = sp.Symbol(chain.bodies[0].force.name, real=True) + (MOTOR if chain.bodies[0].motor else 0)
+    else:
+        measured = per_stage[3 * (switch.stage - 1) + 1]
+    restitution = sp.Symbol(chain.clearance.restitution.name, real=True)
+    out = sp.Symbol("direction_out", real=True)
+
+    def function(name: str, doc: str, exprs: list) -> dict:
+        return code.function(name, doc + f" while stage {k} is open", exprs, args=args, direction="direction_out",
+                             signed=True)
+    functions = [
+        function("open_accel", "(a_0, a_k): the input and output groups' accelerations", list(phase.accel)),
+        function("open_contact", "(jam, the closed stages' normal forces, the gap, what the torque switch measures)",
+                 [phase.jam, *(phase.normal[i] for i in closed), phase.gap, measured]),
+        function("open_stage_forces", "per stage (on its input body, on its output body, normal force; 0 for the "
+                 "open stage)", per_stage),
+        function("open_jacobian", "(d a_0, d a_k) by q_0, by the motor's torque and by q_k",
+                 [e for a in phase.accel for e in _by_state(code, chain, a, out)])]
+    for flank in ("a", "b"):
+        im = cl.open_impact(n, k, flank)
+        frame = [im.nu, im.slip, im.W[0, 0], im.W[0, 1], im.W[1, 1], im.mu, restitution, *im.jump_in, *im.jump_out]
+        functions.append(function(f"open_impact_{flank}", "the collision's frame on flank " + flank + " (IMPACT_FRAME)",
+                                  frame))
+    return functions
+
+
+def _open_template(chain: ChainScene, slots: dict[sp.Symbol, str]) -> dict:
+    """What the template's open phase needs: the stage, the open functions' arguments from p's latches (the open
+    stage's friction unsigned: its impact's Coulomb coefficient), the closed stages and the slots it reads."""
+    n, c = len(chain.stages), chain.clearance
+    k = c.stage
+    signs = ", ".join("1.0" if i == k else f"p[P_RHO_SIGN + {i - 1}]" for i in range(1, n + 1))
+    closed = [i for i in range(1, n + 1) if i != k]
+    return {"stage": k, "args": f"t, y, p, p[P_DIRECTION_IN], p[P_DIRECTION_OUT], {signs}",
+            "contact_targets": ", ".join(["g[1]", *(f"g[{1 + i}]" for i in closed), "gap"]),
+            "c_k": slots[sp.Symbol(f"c_{k}", real=True)], "c_last": slots[sp.Symbol(f"c_{n}", real=True)],
+            "clearance": slots[sp.Symbol(c.clearance.name, real=True)]}
 
 
 def _psi(sym: dyn.Symbols, k: int, flank: str) -> sp.Expr:

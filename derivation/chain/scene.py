@@ -103,6 +103,16 @@ class Motor:
 
 
 @dataclass(frozen=True)
+class Clearance:
+    """Stage ``stage``'s clearance along its flanks' normal (backlash), its restitution e and the normal gap from
+    flank a at the start (run.gap_k, in [0, clearance])."""
+    stage: int
+    clearance: Param
+    restitution: Param
+    gap: Param
+
+
+@dataclass(frozen=True)
 class ChainRun:
     """The run: t_end [s], body 0's speed at t = 0 (rad/s rotating, m/s translating; q = 0 there),
     tolerances and the step budget."""
@@ -123,6 +133,7 @@ class ChainScene:
     digest: str
     run: ChainRun = ChainRun(1.0, 0.0, 1e-6, 1e-9, 100000)
     switch: Switch | None = None
+    clearance: Clearance | None = None
 
     def values(self) -> ChainValues:
         """The equivalent wedges' numbers (slope, friction angle, levers) and the bodies', in SI."""
@@ -145,6 +156,9 @@ class ChainScene:
         if self.switch is not None:
             rules = switch_rules(self.switch.quantity)
             out += [(getattr(self.switch, key), rule) for key, rule in rules.items()]
+        if self.clearance is not None:
+            c = self.clearance
+            out += [(c.clearance, CLEARANCE), (c.restitution, IMPACT["restitution"]), (c.gap, GAP)]
         return out
 
 
