@@ -317,10 +317,9 @@ class _ChainReader(_Reader):
         voltage = self.number(table, "voltage", path, VOLTAGE, free_ok=False)[0]
         return Motor(*numbers, voltage)
 
-    def clearances(self, stages: list[dict], run: dict) -> None:
-        """stage[k].clearance (>= 0) with stage[k].restitution (e in [0, 1]) and the start gap run.gap_k in
-        [0, clearance], checked, at most one stage with a clearance per chain; then refused: the chain's
-        kernel integrates rigid chains only (one coordinate)."""
+    def clearances(self, stages: list[dict], run: dict) -> Clearance | None:
+        """stage[k].clearance (> 0) with stage[k].restitution (e in [0, 1]) and the start gap run.gap_k in
+        [0, clearance], at most one stage with a clearance per chain."""
         first = None
         for k, table in enumerate(stages, 1):
             path, gap = f"stage[{k}]", f"gap_{k}"
@@ -330,15 +329,17 @@ class _ChainReader(_Reader):
                         self.fail(f"{where}.{key}", f"needs a clearance in stage {k}: give stage[{k}].clearance")
                 continue
             given = self.plain(table, path, STAGE_CLEARANCE)
-            self.number(run, gap, "run", GAP, free_ok=False, siblings=given)
+            start = self.number(run, gap, "run", GAP, free_ok=False, siblings=given)[0]
             if first is not None:
                 self.fail(f"{path}.clearance", f"one clearance per chain is supported, and stage[{first}] has one: "
                           f"give stage {k} none", _toml(table["clearance"]))
+            if given["clearance"].value == 0.0:
+                self.fail(f"{path}.clearance", "must be > 0 in a chain (0: give the stage no clearance)",
+                          _toml(table["clearance"]))
+            own = _suffixed(given, k)
             first = k
-        if first is not None:
-            self.fail(f"stage[{first}].clearance", "a clearance (backlash) in a chain's stage is not supported yet: "
-                      "the chain moves as one rigid body; give the stage no clearance, or model the stage alone as "
-                      "a one-stage scene with wedge.clearance", _toml(stages[first - 1]["clearance"]))
+            clearance = Clearance(k, own["clearance"], own["restitution"], Param(gap, start, "m", False, f"run.{gap}"))
+        return clearance if first is not None else None
 
     def chain_run(self, doc: dict, stages: int) -> ChainRun:
         table = self.table(doc, "run", required=False) or {}
@@ -364,6 +365,6 @@ class _ChainReader(_Reader):
         motions = [kinds[0].motion_in, *(kind.motion_out for kind in kinds)]
         bodies = tuple(self.body(t, j, m, j == len(stages)) for j, (t, m) in enumerate(zip(tables, motions)))
         run = self.chain_run(doc, len(stages))
-        self.clearances(stage_tables, self.table(doc, "run", required=False) or {})
+        clearance = self.clearances(stage_tables, self.table(doc, "run", required=False) or {})
         return ChainScene(name, description, stages, bodies, self.source, digest, run,
-                          self.switch(doc, stages, motions))
+                          self.switch(doc, stages, motions), clearance)

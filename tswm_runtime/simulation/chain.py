@@ -200,14 +200,26 @@ def plot(result: ChainResult, module: ModuleType, path) -> object:
                        stages, result.trip["t"] if result.trip else None)
 
 
-def _regime(module: ModuleType, mode: int, k: int) -> tuple[str, str]:
-    return ("resting", "") if mode == RESTING else (module.MODE_REGIMES[mode][k], module.MODE_FLANKS[mode][k])
+def _regime(module: ModuleType, phase, k: int) -> tuple[str, str]:
+    """Stage k's (0-based) regime and flank in a phase: resting, open (the stage with the clearance while its
+    flanks are apart; the other stages' regimes then are the phase's latches), or the mode's."""
+    mode = phase.mode
+    if mode == RESTING:
+        return "resting", ""
+    if mode == getattr(module, "OPEN", None):
+        if k + 1 == module.CLEARANCE_STAGE:
+            return "open", ""
+        p = phase.latches
+        sign = p[module.P_RHO_SIGN + k]
+        direction = p[module.P_DIRECTION_IN if k + 1 < module.CLEARANCE_STAGE else module.P_DIRECTION_OUT]
+        return ("tractive" if sign > 0 else "inverse-tractive"), ("a" if sign * direction > 0 else "b")
+    return module.MODE_REGIMES[mode][k], module.MODE_FLANKS[mode][k]
 
 
 def _stage(module: ModuleType, run: ChainRun, k: int, peaks: dict) -> StageSummary:
     phases: list[StagePhase] = []
     for phase in run.phases:
-        regime, flank = _regime(module, phase.mode, k)
+        regime, flank = _regime(module, phase, k)
         if phases and (phases[-1].regime, phases[-1].flank) == (regime, flank):
             phases[-1] = StagePhase(regime, flank, phases[-1].t_start, phase.t_end)
         else:
@@ -259,6 +271,20 @@ def _events(module: ModuleType, run: ChainRun) -> tuple[EventRow, ...]:
     return tuple(EventRow(module, e) for e in run.events)
 
 
+def impact_lines(run: ChainRun, module: ModuleType) -> list[str]:
+    """The impacts of the stage with a clearance: time, flank, normal speed of approach and of rebound at the
+    flank, kinetic energy lost, and whether the stage closed; nothing for a rigid chain."""
+    k = getattr(module, "CLEARANCE_STAGE", 0)
+    if not k:
+        return []
+    lines = [f"  stage {k} impacts ({len(run.impacts)}):"]
+    for row in run.impacts:
+        lines.append(f"    t = {row['t']:.9g} s on flank {row['flank']}: normal speed {row['nu before']:.6g} -> "
+                     f"{row['nu after']:.6g} (SI), energy lost {row['energy lost']:.6g} J, "
+                     + ("closed" if row["closed"] else "rebounds"))
+    return lines
+
+
 def summary(result: ChainResult, module: ModuleType) -> list[str]:
     """The run at a glance, as printed by ``tswm simulate``: status, per stage its regimes, switch
     times and force maxima, the events with the decisions' outcomes."""
@@ -273,6 +299,7 @@ def summary(result: ChainResult, module: ModuleType) -> list[str]:
             shown = "- (never slid)" if peak is None else f"{abs(peak.value):.6g} {unit} at t = {peak.t:.6g} s" + (
                 f" (the force is {peak.value:.6g} {unit})" if peak.value < 0 else "")
             lines.append(f"    max |{name} force| while sliding: {shown}")
+    lines += impact_lines(result.run, module)
     lines += drive_train_lines(result.answers, module)
     lines.append(f"  decisions ({len(result.events)}):")
     for e in result.events:
