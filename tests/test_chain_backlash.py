@@ -201,3 +201,12 @@ def test_the_scene_keeps_the_clearance(tmp_path):
     c = chain.clearance
     assert (c.stage, c.clearance.value, c.restitution.value, c.gap.value) == (2, 1e-3, 0.5, 0.5e-3)
     assert c.gap.key == "run.gap_2" and c.clearance.key == "stage[2].clearance"
+
+
+def test_a_group_left_at_rest_while_open_stops_the_run_with_its_status(chain_module):
+    """Bodies 0 and 1 unforced and at rest while stage 2 is open: their own rest (stick) is not decided yet, so the
+    run stops at once with status group-at-rest and says why, instead of guessing."""
+    module = chain_module(_scene("gap-rest", mu=0.1, f0=0.0))
+    result = simulate_chain(module, points=5)
+    assert result.status == "group-at-rest" and result.t_stop == 0.0
+    assert "comes to rest at t = 0 s while stage 2's flanks are apart" in result.message

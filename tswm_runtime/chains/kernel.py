@@ -15,8 +15,8 @@ from numba import types
 
 from tswm_runtime.chains.backlash import strike
 from tswm_runtime.hybrid.addressed import ADDRESSES, model_functions, segment_function
-from tswm_runtime.chains.rules import GROUP_AT_REST as GROUP_REST
-from tswm_runtime.chains.rules import (NO_MODE, NONE, RESTING, SEVERAL, START, ChainFunctions, ChainTables,
+from tswm_runtime.chains.rules import (NO_MODE, NONE, RESTING, RESTING_GROUP, SEVERAL, START, ChainFunctions,
+                                             ChainTables,
                                              chain_work, decide, settle)
 from tswm_runtime.integration import segment
 from tswm_runtime.jit import cache_guard
@@ -48,7 +48,7 @@ INT_MATRIX = types.int64[:, ::1]
 CHAIN_RECORD = types.NamedTuple((INT_MATRIX, MATRIX, MATRIX, INT_MATRIX, MATRIX, VECTOR, INTS, MATRIX), ChainRecord)
 CHAIN_TABLES = types.NamedTuple((INTS, INT_MATRIX, *(types.int64,) * 10, types.float64, types.float64,
                                  types.float64, INTS, *(types.int64,) * 6), ChainTables)
-#: run_chain_at(functions, chain functions (stage_forces, body_forces_into), tables, settings, y, p, record,
+#: run_chain_at(functions, chain functions (stage_forces, body_forces_into, impact), tables, settings, y, p, record,
 #: chain record, max_events) -> (status, t_stop)
 CHAIN_SIG = types.Tuple((types.int64, types.float64))(ADDRESSES, types.UniTuple(types.int64, 3), CHAIN_TABLES,
                                                        SETTINGS, VECTOR, VECTOR, RECORD, CHAIN_RECORD, types.int64)
@@ -139,7 +139,7 @@ def run_chain_at(functions, chain_addresses, c, settings, y0, p, record, rec, ma
             status = RECORD_FULL
             break
         if mode == NO_MODE:
-            status = INDETERMINATE if outcome == SEVERAL else GROUP_AT_REST if outcome == GROUP_REST else UNDECIDED
+            status = INDETERMINATE if outcome == SEVERAL else GROUP_AT_REST if outcome == RESTING_GROUP else UNDECIDED
             break
         if mode == RESTING:
             t_cut = p[c.p_pick] + p[c.p_delay] if p[c.p_switch] == c.picked else np.inf
@@ -208,7 +208,8 @@ def run_chain_at(functions, chain_addresses, c, settings, y0, p, record, rec, ma
                 _event(rec, t, k, mode, NO_MODE, NONE, y, p)
                 status = IMPACT_JAMMED
                 break
-            h = flight / 4.0 if flight < np.inf else 0.0   # the gap's guard sees the rebound's flight end
+            if p[c.p_contact] == 0.0:   # a rebound: its first step short enough for the gap's guard to see it end
+                h = flight / 4.0 if flight < np.inf else 0.0
         outcome, new = settle(fns, chain_fns, c, t, y, p, mode, k, w, rec.trip)
         _event(rec, t, k, mode, new, outcome, y, p)
         if same >= MAX_SAME_TIME:

@@ -25,7 +25,7 @@ from tswm_runtime.jit.cache_guard import njit
 RESTING = -1          # the resting chain (no mode of the module)
 NO_MODE = -2          # no mode: the run stops
 START, CHECK = -1, -3  # the "guards" of the start and of the switch's check on entering a mode
-UNIQUE, CRITICAL, NONE, SEVERAL, GROUP_AT_REST = 0, 1, 2, 3, 4
+UNIQUE, CRITICAL, NONE, SEVERAL, RESTING_GROUP = 0, 1, 2, 3, 4
 OUTCOMES = ("unique", "critical", "none", "several", "group at rest")
 SET_ROWS = 64         # rows of an interval set's work array (a merged set holds a few)
 FRAME = 11            # an impact's frame: the module's IMPACT_FRAME
@@ -252,7 +252,7 @@ def _open_candidate(fns, c, t, y, p, w, combo):
 def open_phase(fns, c, t, y, p, w):
     """The open phase's latches at (t, y): each group's direction (its speed's sign; at rest, the way it leaves
     rest), each closed stage's regime, such that ``_open_candidate`` holds; (UNIQUE, OPEN) when one does (or
-    several that agree in both accelerations), (NONE, NO_MODE) when none, (GROUP_AT_REST, NO_MODE) when a group
+    several that agree in both accelerations), (NONE, NO_MODE) when none, (RESTING_GROUP, NO_MODE) when a group
     that is not free would have to stay at rest (its own rest decision: not supported yet), (SEVERAL, NO_MODE)."""
     found, first, a_in, a_out, agree = 0, -1, 0.0, 0.0, True
     still = False
@@ -274,7 +274,7 @@ def open_phase(fns, c, t, y, p, w):
                 agree = agree and abs(w.f[1] - a_in) <= SAME * big and abs(w.f[3] - a_out) <= SAME * big
             found += 1
     if found == 0:
-        return (GROUP_AT_REST if still else NONE), NO_MODE
+        return (RESTING_GROUP if still else NONE), NO_MODE
     if found > 1 and not agree:
         return SEVERAL, NO_MODE
     _open_candidate(fns, c, t, y, p, w, first)

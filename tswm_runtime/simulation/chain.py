@@ -102,7 +102,8 @@ class ChainResult:
         return {"scene": self.scene, "status": self.status, "message": self.message, "t_stop": self.t_stop,
                 "stages": [asdict(s) for s in self.stages], "events": [dict(e) for e in self.events],
                 "n_steps": self.n_steps,
-                "answers": self.answers}
+                "answers": self.answers,
+                **({"impacts": self.run.impacts} if getattr(self.module, "CLEARANCE_STAGE", 0) else {})}
 
 
 def settings(module: ModuleType, overrides: dict) -> dict:
