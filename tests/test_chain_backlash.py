@@ -210,3 +210,17 @@ def test_a_group_left_at_rest_while_open_stops_the_run_with_its_status(chain_mod
     result = simulate_chain(module, points=5)
     assert result.status == "group-at-rest" and result.t_stop == 0.0
     assert "comes to rest at t = 0 s while stage 2's flanks are apart" in result.message
+
+
+def test_the_figure_shows_the_gap_of_the_hand_kinematics(chain_module, tmp_path):
+    """The stage's gap at the output rows is g0 + q2 cos(g2) - tan(g1) q0 sin(g2) (the coordinates of the run's
+    rows), inside [0, clearance] within the tolerances; the figure is written with it."""
+    from tswm_runtime.simulation.chain import gaps, plot
+
+    module = chain_module(_scene("gap-plot"))
+    result = simulate_chain(module, points=21)
+    y = result.run.y
+    hand = 0.5e-3 + y[:, 2] * math.cos(G2) - math.tan(G1) * y[:, 0] * math.sin(G2)
+    assert gaps(module, result) == pytest.approx(hand, rel=1e-12, abs=1e-15)
+    assert (hand >= -1e-9).all() and (hand <= 1e-3 + 1e-9).all()
+    assert plot(result, module, tmp_path / "gap.png").stat().st_size > 0

@@ -197,8 +197,26 @@ def plot(result: ChainResult, module: ModuleType, path) -> object:
     t, q0, v0, forces = result.samples
     stages = [(f"stage {k + 1} ({module.STAGE_KINDS[k]})", UNITS[module.BODY_MOTIONS[k]],
                UNITS[module.BODY_MOTIONS[k + 1]]) for k in range(module.STAGES)]
-    return plot_stages(path, f"{module.SCENE}: {result.status}", t, speed_factor(module, result.p) * q0, v0, forces,
-                       stages, result.trip["t"] if result.trip else None)
+    travel, gap = speed_factor(module, result.p) * q0, None
+    k = getattr(module, "CLEARANCE_STAGE", 0)
+    if k:   # the last body moves with body k, not with q0: its travel and the gap from the output rows
+        rows = result.run.t
+        last = result.p[module.P_SPEED + module.STAGES] / result.p[module.P_SPEED + k] * result.run.y[:, 2]
+        travel, gap = np.interp(t, rows, last), (k - 1, rows, gaps(module, result))
+    return plot_stages(path, f"{module.SCENE}: {result.status}", t, travel, v0, forces, stages,
+                       result.trip["t"] if result.trip else None, gap)
+
+
+def gaps(module: ModuleType, result: ChainResult) -> np.ndarray:
+    """The normal gap of the stage with a clearance at the output rows (NaN after a stop): the module's open-phase
+    guard gap_a, which depends on the coordinates and the scene's values only."""
+    g, index, p = np.empty(len(module.GUARDS)), module.GUARDS.index("gap_a"), result.p.copy()
+    out = np.full(result.run.t.size, np.nan)
+    for i, (t, y) in enumerate(zip(result.run.t.tolist(), result.run.y)):
+        if np.isfinite(y).all():
+            module.guards(module.OPEN, t, np.ascontiguousarray(y), p, g)
+            out[i] = g[index]
+    return out
 
 
 def _regime(module: ModuleType, phase, k: int) -> tuple[str, str]:
