@@ -5,6 +5,7 @@ formatter of the shape-mismatch message into the kernel (``jit/arrays.py``: it d
 integration kernels' compile); the kernels copy with ``arrays.copy_into`` and ``copy_rows``.
 """
 import ast
+import gc
 import subprocess
 import sys
 from pathlib import Path
@@ -12,6 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from numba import njit
+from numba.core.runtime import _nrt_python, rtsys
 
 from tswm_runtime.jit import cache_guard
 from tswm_runtime.jit.arrays import copy_into, copy_rows
@@ -76,7 +78,9 @@ def test_copy_into_and_copy_rows_copy_views_element_by_element():
 
 _PROBE = '''
 import numpy as np
+import pytest
 from numba import njit
+from numba.core.runtime import _nrt_python, rtsys
 from numba.core import event
 from tswm_runtime.jit.arrays import copy_into
 compiled = []
@@ -107,3 +111,88 @@ def test_numba_compiles_a_shape_message_for_a_slice_assignment_and_none_for_copy
                           env={"PYTHONPATH": str(RUNTIME.parent), "PATH": "", "NUMBA_CACHE_DIR": str(tmp_path)})
     assert done.returncode == 0, done.stderr
     assert done.stdout.split() == ["0", "1"]
+
+
+# The kernels' helpers are compiled without numba's reference counting unless they make arrays
+# (``cache_guard.njit(refcounted=True)``): counting was over a third of the code numba typed, lowered
+# and LLVM optimized. What makes that safe is checked when a helper compiles, and by the count of
+# numba's allocations after real runs.
+
+@cache_guard.njit(error_model="numpy")
+def _uncounted_identity(a):
+    return a
+
+
+@cache_guard.njit(error_model="numpy", refcounted=True)
+def _counted_identity(a):
+    return a
+
+
+@njit
+def _fresh(n):
+    """A new array; compiled with reference counting when called from Python first (a numba.njit
+    function called first from a helper without it inherits that, and then cannot allocate)."""
+    return np.zeros(n)
+
+
+@cache_guard.njit(error_model="numpy")
+def _uncounted_sum_of_fresh(n):
+    return _fresh(n).sum()
+
+
+@njit
+def _through(helper, a):
+    return helper(a)
+
+
+def test_a_helper_without_reference_counting_returns_no_array():
+    a = np.arange(3.0)
+    with pytest.raises(Exception, match="_uncounted_identity returns array.*refcounted=True"):
+        _through(_uncounted_identity, a)
+    assert _through(_counted_identity, a).tolist() == [0.0, 1.0, 2.0]
+
+
+def test_a_helper_without_reference_counting_takes_no_array_from_compiled_code():
+    _fresh(3)
+    with pytest.raises(Exception, match=r"_uncounted_sum_of_fresh takes array\(float64, 1d, C\) from .*refcounted=True"):
+        _through(_uncounted_sum_of_fresh, 3)
+
+
+def _unreleased(run) -> tuple[int, int]:
+    """(allocations, meminfos) that ``run()`` left unreleased in numba's runtime, its results freed."""
+    _nrt_python.memsys_enable_stats()   # numba counts from here on (NUMBA_NRT_STATS does it at start)
+    gc.collect()
+    before = rtsys.get_allocation_stats()
+    run()
+    gc.collect()
+    after = rtsys.get_allocation_stats()
+    return (after.alloc - after.free) - (before.alloc - before.free), \
+        (after.mi_alloc - after.mi_free) - (before.mi_alloc - before.mi_free)
+
+
+def test_the_count_sees_an_array_left_unreleased(monkeypatch):
+    """The instrument of the test below: an uncounted helper that drops an array it was given
+    (the check switched off) leaves one allocation behind per call."""
+    monkeypatch.setattr(cache_guard, "_check_uncounted", lambda *args: None)
+
+    @cache_guard.njit(error_model="numpy")
+    def leaky(n):
+        return _fresh(n).sum()
+
+    _fresh(2)
+    _through(leaky, 2)
+    assert _unreleased(lambda: [_through(leaky, 2) for _ in range(3)]) == (3, 3)
+
+
+@pytest.mark.parametrize("scene", ["paper", "backlash", "lost-motion", "stiff-drive"])
+def test_runs_leave_no_array_of_numba_unreleased(scene):
+    """Every method's run of a scene with impacts, a pickup or a stiff drive, a sweep's batch and
+    a chain's run free every array numba made (after a first run: memos keep theirs)."""
+    from tswm_runtime.simulation.simulate import simulate
+
+    def runs():
+        for method in ("dopri5", "rosenbrock23", "rodas4", "auto"):
+            result = simulate(scene, method=method, points=50)
+            result.S1, result.sol(result.t[-1])
+    runs()
+    assert _unreleased(runs) == (0, 0)

@@ -23,7 +23,7 @@ IMPACT_COLUMNS = ("t", "flank", "nu before", "nu after", "energy lost", "closed"
                   "vk after")
 
 
-@njit(error_model="numpy")
+@njit(error_model="numpy", refcounted=True)  # impact.collide (numba.njit: counted as its caller) allocates
 def strike(fns, chain_fns, c, flank, t, y, p, tol, w, row):
     """The impact on ``flank`` (+1 a, -1 b) at (t, y): y's groups' speeds after it, the contact latch (``flank``: the
     stage closed, 0: it rebounds open); row = IMPACT_COLUMNS. Returns (False when the impulse cannot stop the

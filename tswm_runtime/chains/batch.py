@@ -44,7 +44,7 @@ BATCH_SIG = types.none(types.int64, ADDRESSES, types.UniTuple(types.int64, 3), k
                        MATRIX, VECTOR, ROOM, ANSWERING, types.int64, ANSWERS)
 
 
-@njit(error_model="numpy")
+@njit(refcounted=True, error_model="numpy")
 def _records(t_out, n_p, stages, room):
     """A case's Record (the output rows at t_out; no event log or step log: the chain keeps its own)
     and its ChainRecord with room for ``room.phases`` phases and ``room.samples`` samples."""

@@ -101,7 +101,7 @@ def _consistent(guards, mode, t, y, p, g):
     return g[0] > 0.0 and g[1] > 0.0
 
 
-@njit(error_model="numpy")
+@njit(refcounted=True, error_model="numpy")
 def _slide(fns, run_segment, settings, c, mode, t, y, p, record, i, h, scratch):
     """Integrate in ``mode`` from (t, y), first trying step h (<= 0: chosen), to its first event or the
     end, handing over to the Painleve approach where D heads for 0 and on in t after it; returns
@@ -230,7 +230,7 @@ def run_chain_at(functions, chain_addresses, c, settings, y0, p, record, rec, ma
     return _run(functions, chain_addresses, c, settings, y0.copy(), p, record, rec, max_events, w, scratch)
 
 
-@njit(cache=True, error_model="numpy", no_cpython_wrapper=False)
+@njit(cache=True, error_model="numpy", no_cpython_wrapper=False, refcounted=True)  # chain_work allocates
 def decide_at(functions, chain_addresses, c, t, y, p, current):
     """The compiled decision (``rules.decide``) called from Python: (outcome, mode) at (t, y) under p."""
     fns = model_functions(functions)

@@ -50,7 +50,7 @@ ChainWork = namedtuple("ChainWork", "g f force set_a set_b cone modes accel befo
 ChainFunctions = namedtuple("ChainFunctions", "stage_forces body_forces impact")
 
 
-@njit(error_model="numpy")
+@njit(refcounted=True, error_model="numpy")
 def chain_work(n_guards, n_stages, n_modes, n_params, n_states):
     return ChainWork(np.empty(n_guards), np.empty(n_states), np.empty(n_stages + 1), np.empty((SET_ROWS, 2)),
                      np.empty((SET_ROWS, 2)), np.empty((2, 2)), np.empty(n_modes, np.int64), np.empty(n_modes),

@@ -64,7 +64,7 @@ BATCH_SIG = types.none(
 )
 
 
-@njit(error_model="numpy")
+@njit(error_model="numpy", refcounted=True)
 def _case_record(t_end, width, n_params, max_events, n_obs):
     """A case's Record: one output point (the state at t_end), an event log of max_events, the
     maxima of n_obs observables, the counters, no step log."""
@@ -74,7 +74,7 @@ def _case_record(t_end, width, n_params, max_events, n_obs):
     return Record(out, log, np.zeros((n_obs, 3)), np.zeros(segment.N_COUNTERS, np.int64), no_steps(width, n_params))
 
 
-@njit(error_model="numpy")
+@njit(error_model="numpy", refcounted=True)
 def _write_floats(row, t_stop, n_ev, n, record, case):
     """t_stop, the maxima of S1 and S2, and x1, v1 at t_stop into ``row`` (out_f[c])."""
     out, log, mon = record.out, record.log, record.mon

@@ -61,7 +61,7 @@ def block_sizes(sizes, points):
     return floats, N_COUNTERS + 2 + 2 * n_steps + n_seg + INDEX_WIDTH * n_ev + points
 
 
-@njit(error_model="numpy")
+@njit(error_model="numpy", refcounted=True)
 def record_views(floats, ints, t_out, sizes):
     """(summary, Record) as views of the blocks ``floats`` and ``ints`` (``block_sizes``); the
     Outputs at the times ``t_out``. Compiled in ``integrate_at``, run as Python by ``RunArrays``."""

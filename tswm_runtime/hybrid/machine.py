@@ -271,7 +271,7 @@ def _select(mode, kind, rhs, guards, t, y, p, tol, tables, g, y_tmp, f):
     return _outcome(m, need)
 
 
-@njit(error_model="numpy")
+@njit(error_model="numpy", refcounted=True)  # impact.collide (numba.njit: counted as its caller) allocates
 def _collide(impact, flank, rhs, guards, t, y, p, tol, tables, g, y_tmp, f, frame, jump):
     """(next mode, status, need) after the gap closes on ``flank``: the impulse (``impact``
     module) changes v1 and gap_rate; the flanks stay together where the rebound is within the
@@ -325,7 +325,7 @@ def _moving_on(flank, rhs, guards, t, y, p, tol, tables, g, y_tmp, f):
     return _outcome(*_sliding(1 if v > 0.0 else -1, flank, rhs, guards, t, y, p, tol, tables, g, y_tmp, f))
 
 
-@njit(error_model="numpy")
+@njit(error_model="numpy", refcounted=True)  # impact.pickup (numba.njit: counted as its caller) allocates
 def _pickup(impact, k, rhs, guards, t, y, p, tol, tables, g, y_tmp, f, frame, jump):
     """(next mode, status, need) after body 2 reaches the stem (guard ``k``): the impulse through
     the wedge (``impact`` module) changes v1 and v3; where the rebound is within the tolerances
@@ -553,7 +553,7 @@ def _log(log, n_ev, t, k, mode_from, mode_to, breakpoint, y, quad, jump):
 MachineWork = namedtuple("MachineWork", "g y_tmp f frame jump obs segment")
 
 
-@njit(error_model="numpy")
+@njit(error_model="numpy", refcounted=True)
 def _work(n, n_guards, n_quad, n_obs):
     """The machine's work arrays for n states, n_guards guards, n_quad integrals, n_obs observables."""
     return MachineWork(np.empty(n_guards), np.empty(n), np.empty(n), np.empty(IMPACT_FRAME), np.empty(JUMP_WIDTH),
@@ -706,7 +706,7 @@ def _first_mode(fns, tables, start, y, p, tol, w):
     return mode, status, need
 
 
-@njit(error_model="numpy")
+@njit(error_model="numpy", refcounted=True)
 def _segment(tables, mode, p, k_d, singular):
     """The Segment of ``mode``: its guards' directions; D's guard ``k_d`` as the one to hand over
     to the Painleve approach at (``singular``, and where D can end the mode), else none."""

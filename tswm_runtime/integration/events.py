@@ -251,7 +251,7 @@ def _sign_changes(G, j, directions, gtol, sgn, cand, ignore):
     return found
 
 
-@njit(error_model="numpy")
+@njit(error_model="numpy", refcounted=True)
 def _drop_noise(guards, mode, p, t, y, g, atol, rtol, cand, y_tmp, g_tmp):
     """Unmark candidates whose value g[k] at (t, y) lies within the guard's noise band
     (module docstring); their sign stays the pre-crossing one. True if any is left."""

@@ -64,7 +64,7 @@ def too_steep(d_start, d_end):
 Sundman = namedtuple("Sundman", "z z_new z_tmp err K K_row y f g g_new obs atol")
 
 
-@njit(error_model="numpy")
+@njit(error_model="numpy", refcounted=True)
 def _work(n, n_quad, n_guards, n_obs):
     """The Sundman work arrays for n states, n_quad integrals, n_guards guards, n_obs observables."""
     m = 1 + n + n_quad
@@ -116,7 +116,7 @@ def _retake(fns, seg, h, z_out, w):
     return _step(fns, seg, w.z, h, z_out, w.g_new, w)
 
 
-@njit(error_model="numpy")
+@njit(error_model="numpy", refcounted=True)
 def _root(fns, seg, h, z_out, w, which, target, tol, far):
     """sigma in (0, h] where component ``which`` of the step re-taken from w.z (D for which < 0)
     reaches ``target``, by Illinois; z_out holds the state on the far side of it (far) or on
@@ -227,7 +227,7 @@ def _observe_max(fns, seg, mon, w):
             mon[k, 0], mon[k, 1], mon[k, 2] = abs(w.obs[k]), w.obs[k], z[0]
 
 
-@njit(error_model="numpy")
+@njit(error_model="numpy", refcounted=True)
 def approach(fns, settings, seg, state, record, i):
     """Follow the mode from ``state`` in Sundman time; see the module docstring.
 

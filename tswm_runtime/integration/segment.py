@@ -484,7 +484,7 @@ SegmentWork = namedtuple("SegmentWork", "work f_a y_a y_b f_b err y_ev y_tmp y_p
                                         "rate_a rate_b obs win")
 
 
-@njit(error_model="numpy")
+@njit(refcounted=True, error_model="numpy")
 def segment_work(n, m, n_quad, n_obs):
     """Scratch arrays for ``run``: n states, m guards, n_quad integrals, n_obs monitored observables."""
     return SegmentWork(
@@ -627,7 +627,7 @@ def _stable_rest(fns, seg, tol, t, y, quad, s, counters):
     return steady.at_stable_rest(s.f_b, work.J, work.dfdt, tol, y, quad)
 
 
-@njit(error_model="numpy")
+@njit(refcounted=True, error_model="numpy")
 def _hold(fns, seg, t_end, t, state, record, i, s):
     """Hold the state at its equilibrium (one Newton step onto it) up to the next guard crossing
     or t_end, its observables in the maxima (the rows carry the held state, so must the maxima).

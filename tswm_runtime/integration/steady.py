@@ -42,7 +42,7 @@ def at_stable_rest(f, J, dfdt, tol, y, quad):
     return held
 
 
-@njit(error_model="numpy")
+@njit(error_model="numpy", refcounted=True)
 def hold(guards, mode, t, y, p, t_end, g_now, ev, g_tmp):
     """(time, guard) up to which the held state lasts: the earliest guard sign change in
     (t, t_end] with y fixed (guard -1: none, the time is t_end). The time is the far end

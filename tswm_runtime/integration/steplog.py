@@ -32,7 +32,7 @@ T_STEP, HELD, SUNDMAN = 0, 1, 2  # the kinds of step
 BISECTIONS = 200  # a bound; bisection on theta stops when the bracket no longer shrinks
 
 
-@njit(error_model="numpy")
+@njit(error_model="numpy", refcounted=True)
 def no_steps(width, n_params):
     """A StepLog of no rows (it only counts): for runs whose rows are written as they go."""
     return StepLog(np.empty((0, 4)), np.empty((0, 2), np.int64), np.empty((0, width)), np.empty((0, width)),

@@ -21,11 +21,12 @@ from numba.core import caching, compiler
 from numba.core.cpu import CPUContext
 from numba.core.runtime import rtsys
 from numba.core.registry import CPUDispatcher
+from numba.core.typing import templates as typing_templates
 
 from tswm_common.files import write_atomic
 from tswm_runtime.jit.linking import HelperCompiler
 
-KERNEL_SOURCES = ("jit/borrow.py", "jit/structures.py", "integration/control.py",
+KERNEL_SOURCES = ("jit/cache_guard.py", "jit/borrow.py", "jit/structures.py", "integration/control.py",
                   "integration/dopri5.py", "integration/rosenbrock.py", "integration/events.py", "integration/segment.py",
                   "integration/single.py", "integration/painleve.py", "integration/steplog.py", "integration/steady.py",
                   "hybrid/machine.py", "hybrid/segments.py", "hybrid/addressed.py", "hybrid/impact.py", "hybrid/batch.py",
@@ -132,7 +133,19 @@ class _Helper(CPUDispatcher):
     otherwise, it builds no CPython or C wrapper (``no_cpython_wrapper``, ``no_cfunc_wrapper``:
     a sixth of the cold compile): such a helper is callable from compiled code only, and
     calling it from Python raises TypeError (numba would crash).
+
+    Unless told otherwise (``njit(refcounted=True)``), a helper is compiled without numba's reference
+    counting (NRT): its arrays are its callers' (borrowed, ``borrow``), and counting them, at
+    every argument, tuple member and variable's end, was a third of the LLVM IR numba printed for
+    the segment kernel (docs/first-run.md). ``add_overload`` holds such a helper to what makes that
+    safe: it returns no array (its caller would release one it never counted) and takes none
+    from a compiled function (one it could never release).
     """
+
+    def add_overload(self, cres):
+        if not self.targetoptions["_nrt"] and hasattr(cres.type_annotation, "calltypes"):   # not: loaded from the cache
+            _check_uncounted(self.py_func.__qualname__, cres.signature.return_type, cres.type_annotation)
+        super().add_overload(cres)
 
     def get_call_template(self, args, kws):
         return super().get_call_template(tuple(map(types.unliteral, args)),
@@ -145,21 +158,47 @@ class _Helper(CPUDispatcher):
         return super().__call__(*args, **kws)
 
 
-def njit(*, cache=False, **options):
+def _holds_arrays(typ) -> bool:
+    if isinstance(typ, types.BaseTuple):
+        return any(_holds_arrays(member) for member in typ.types)
+    return isinstance(typ, types.ArrayCompatible) or (isinstance(typ, types.Optional) and _holds_arrays(typ.type))
+
+
+def _check_uncounted(name, return_type, annotation) -> None:
+    """TypeError unless a helper compiled without reference counting returns no array and
+    receives none from a compiled function (numba's own, or another helper)."""
+    why = f"returns {return_type}" if _holds_arrays(return_type) else None
+    for expr, call in annotation.calltypes.items():
+        callee = annotation.typemap[expr.func.name] if getattr(expr, "op", None) == "call" else None
+        template = getattr(callee, "template", None) or next(iter(getattr(callee, "templates", ())), None)
+        compiled = isinstance(callee, types.Dispatcher) or (
+            isinstance(template, type) and issubclass(template, (typing_templates._OverloadFunctionTemplate,
+                                                                 typing_templates._OverloadMethodTemplate)))
+        if why is None and compiled and _holds_arrays(call.return_type):
+            why = f"takes {call.return_type} from {callee} (line {expr.loc.line})"
+    if why is not None:
+        raise TypeError(f"{name} {why}: a helper that handles arrays it owns needs numba's reference counting, "
+                        "cache_guard.njit(refcounted=True)")
+
+
+def njit(*, cache=False, refcounted=False, **options):
     """``numba.njit(**options)`` with the dispatcher above, for the kernels' helpers; ``options``
     may turn the wrappers back on (no_cfunc_wrapper=False for a first-class function). A helper
     is code for its callers to link (``linking.HelperLibrary``: optimized and compiled to machine
     code in the kernel that calls it, once) and is not cached on its own: it lives in its
     kernels' cache. ``cache=True`` is for a function that is entered by address (a method's
-    step): compiled in full on its own and cached. The function itself while numba's jit is off,
-    as numba.njit does."""
+    step): compiled in full on its own and cached. ``refcounted=True`` for a helper that makes
+    arrays (np.empty, a copy, an array expression), returns any, or calls a numba.njit function
+    that makes them (which compiles with its first caller's setting): compiled with numba's
+    reference counting (``_Helper``; without it numba refuses to compile an allocation). The function itself
+    while numba's jit is off, as numba.njit does."""
     def decorate(py_func):
         if numba.config.DISABLE_JIT:   # an interpreted run (startup.warmup)
             return py_func
         dispatcher = _Helper(py_func=py_func, locals={},
                              pipeline_class=compiler.Compiler if cache else HelperCompiler,
                              targetoptions={"nopython": True, "boundscheck": None, "no_cpython_wrapper": True,
-                                            "no_cfunc_wrapper": True, **options})
+                                            "no_cfunc_wrapper": True, "_nrt": refcounted, **options})
         if cache:
             dispatcher.enable_caching()
         return dispatcher
