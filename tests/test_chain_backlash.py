@@ -23,11 +23,11 @@ M = (1.0, 2.0, 3.0)
 
 
 def _scene(name, *, mu=0.0, e=0.5, clearance="1 mm", gap="0.5 mm", f0=10.0, f2=-2.0, stiffness=0.0, v0=0.0,
-           t_end=0.3):
+           t_end=0.3, valve=""):
     return (f'name = "{name}"\n[[stage]]\nkind = "wedge"\ngamma = "30 deg"\nmu = {mu!r}\n'
             f'[[stage]]\nkind = "wedge"\ngamma = "40 deg"\nmu = {mu!r}\nclearance = "{clearance}"\nrestitution = {e!r}\n'
             f'[[body]]\nmass = "1 kg"\nforce = "{f0!r} N"\n[[body]]\nmass = "2 kg"\nforce = "0 N"\n'
-            f'[[body]]\nmass = "3 kg"\nforce = "{f2!r} N"\nstiffness = "{stiffness!r} N/m"\n'
+            f'[[body]]\nmass = "3 kg"\nforce = "{f2!r} N"\nstiffness = "{stiffness!r} N/m"\n{valve}'
             f'[run]\nt_end = {t_end!r}\nv0 = {v0!r}\ngap_2 = "{gap}"\nrtol = 1e-10\natol = 1e-12\n')
 
 
@@ -224,3 +224,19 @@ def test_the_figure_shows_the_gap_of_the_hand_kinematics(chain_module, tmp_path)
     assert gaps(module, result) == pytest.approx(hand, rel=1e-12, abs=1e-15)
     assert (hand >= -1e-9).all() and (hand <= 1e-3 + 1e-9).all()
     assert plot(result, module, tmp_path / "gap.png").stat().st_size > 0
+
+
+def test_the_last_body_held_by_its_valve_friction_waits_for_the_flanks(chain_module):
+    """The stem at rest, its load (2 N) within its packing's friction (5 N), while the driven group closes the gap:
+    it stays (a2 = 0), so the gap closes at sqrt(2 g0 / (tan(g1) a0 sin(g2))) with group 0's a0 through stage 1's
+    FTF; the impact takes it along (its friction finite, the impulse not)."""
+    module = chain_module(_scene("gap-held", mu=0.1, e=0.3, valve='packing = "5 N"\n'))
+    result = simulate_chain(module, points=5)
+    assert result.status != "group-at-rest", result.message
+    a0, _, _ = _open_accels(0.1, 10.0, 0.0)
+    first = result.run.impacts[0]
+    assert first["vk before"] == 0.0
+    assert first["t"] == pytest.approx(math.sqrt(2 * 0.5e-3 / (math.tan(G1) * a0 * math.sin(G2))), rel=1e-9)
+    v0_after, v2_after, *_ = _hand_impact(0.1, 0.3, first["v0 before"], 0.0)
+    assert first["v0 after"] == pytest.approx(v0_after, rel=1e-10) and first["vk after"] == pytest.approx(v2_after,
+                                                                                                     rel=1e-10)

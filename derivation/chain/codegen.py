@@ -34,7 +34,7 @@ STATES = ("q0", "v0")
 SWITCHED_GUARDS = ("seat", "switch", "delay")   # the seat's contact, the switch picking up or dropping out, its delay
 # With a clearance: the gap closing on flank a, on flank b, the output group's speed reaching 0.
 CLEARANCE_GUARDS = ("gap_a", "gap_b", "v_out")
-CLEARANCE_LATCHES = ("contact", "direction_in", "direction_out")   # then rho_sign per stage
+CLEARANCE_LATCHES = ("contact", "direction_in", "direction_out", "held_out")   # then rho_sign per stage
 GENERATOR_SOURCES = ("chain/codegen.py", "chain/clearance.py", "chain/dynamics.py", "chain/stages.py", "chain/scene.py",
                      "chain/valve.py", "templates/chain_module.py.j2")
 
@@ -411,7 +411,7 @@ def generate_chain_module(chain: ChainScene) -> str:
             "MODE_REGIMES": (*constants["MODE_REGIMES"], ()), "MODE_FLANKS": (*constants["MODE_FLANKS"], ()),
             "P_NAMES": (*constants["P_NAMES"], *CLEARANCE_LATCHES, *(f"rho_sign {i + 1}" for i in range(n))),
             "P_CONTACT": open_first, "P_DIRECTION_IN": open_first + 1, "P_DIRECTION_OUT": open_first + 2,
-            "P_RHO_SIGN": open_first + 3, "IMPACT_FRAME": IMPACT_FRAME})
+            "P_HELD_OUT": open_first + 3, "P_RHO_SIGN": open_first + 4, "IMPACT_FRAME": IMPACT_FRAME})
     for i, v in enumerate(values):
         v["index"] = first + i
     for d in derived:

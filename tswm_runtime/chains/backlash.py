@@ -46,7 +46,7 @@ def strike(fns, chain_fns, c, flank, t, y, p, tol, w, row):
     closes = nu <= tol.atol[3] + tol.rtol * abs(nu_before)
     if not closes:
         p[c.p_contact] = 0.0
-        outcome_open, _ = open_phase(fns, c, t, y, p, w)
+        outcome_open, _ = open_phase(fns, chain_fns, c, t, y, p, w)
         if outcome_open == UNIQUE:
             fns.rhs(c.open_mode, t, y, p, w.f)
             toward = -separating(chain_fns, c, flank, t, y, p, w)

@@ -176,7 +176,7 @@ def decide(fns, chain_fns, c, t, y, p, current, w):
     else the modes loading the flank in contact, rest with that stage pushing on it, and when neither holds the
     stage opening (``opening``)."""
     if c.open_mode >= 0 and p[c.p_contact] == 0.0:
-        return open_phase(fns, c, t, y, p, w)
+        return open_phase(fns, chain_fns, c, t, y, p, w)
     v = y[1]
     stages = c.stages
     n = 0
@@ -230,7 +230,7 @@ def _open_candidate(fns, c, t, y, p, w, combo):
     its speed's guard stays 0, never an event)."""
     for g in range(2):
         v = y[1] if g == 0 else y[3]
-        if _free(c, p, g):
+        if _free(c, p, g) or (g == 1 and p[c.p_direction + 2] > 0.0):
             p[c.p_direction + g] = 0.0
         else:
             p[c.p_direction + g] = (1.0 if v > 0.0 else -1.0) if v != 0.0 else (-1.0 if combo >> g & 1 else 1.0)
@@ -243,17 +243,26 @@ def _open_candidate(fns, c, t, y, p, w, combo):
     fns.rhs(c.open_mode, t, y, p, w.f)
     for g in range(2):
         v, a = (y[1], w.f[1]) if g == 0 else (y[3], w.f[3])
-        if v == 0.0 and not _free(c, p, g):
+        if v == 0.0 and not _free(c, p, g) and not (g == 1 and p[c.p_direction + 2] > 0.0):
             ok = ok and p[c.p_direction + g] * a > 0.0
     return ok
 
 
 @njit(error_model="numpy")
-def open_phase(fns, c, t, y, p, w):
-    """The open phase's latches at (t, y): each group's direction (its speed's sign; at rest, the way it leaves
-    rest), each closed stage's regime, such that ``_open_candidate`` holds; (UNIQUE, OPEN) when one does (or
-    several that agree in both accelerations), (NONE, NO_MODE) when none, (RESTING_GROUP, NO_MODE) when a group
-    that is not free would have to stay at rest (its own rest decision: not supported yet), (SEVERAL, NO_MODE)."""
+def _held(chain_fns, c, t, y, p, w):
+    """Whether the output group, at rest while the stage is open, is the last body alone and its valve friction
+    holds it: its force without the friction within the friction's magnitude (those forces stay while it rests:
+    they depend on its coordinate only)."""
+    if y[3] != 0.0 or c.open_stage != c.stages or p[c.p_slack] == 0.0:
+        return False
+    chain_fns.body_forces(0, t, y, p, w.force)
+    return abs(w.force[c.stages]) <= p[c.p_slack]
+
+
+@njit(error_model="numpy")
+def _open_candidates(fns, c, t, y, p, w):
+    """(how many of the open phase's candidates hold, the first, whether they agree in both accelerations, whether
+    a group that is not free is at rest)."""
     found, first, a_in, a_out, agree = 0, -1, 0.0, 0.0, True
     still = False
     for combo in range(1 << (2 + c.stages)):
@@ -273,6 +282,21 @@ def open_phase(fns, c, t, y, p, w):
                 big = max(1.0, abs(a_in), abs(a_out))
                 agree = agree and abs(w.f[1] - a_in) <= SAME * big and abs(w.f[3] - a_out) <= SAME * big
             found += 1
+    return found, first, agree, still
+
+
+@njit(error_model="numpy")
+def open_phase(fns, chain_fns, c, t, y, p, w):
+    """The open phase's latches at (t, y): each group's direction (its speed's sign; at rest, the way it leaves
+    rest), each closed stage's regime, such that ``_open_candidate`` holds; (UNIQUE, OPEN) when one does (or
+    several that agree in both accelerations), (NONE, NO_MODE) when none, (RESTING_GROUP, NO_MODE) when a group
+    that is not free would have to stay at rest (its own rest decision: not supported yet, but for the last body
+    alone held by its valve friction, ``_held``: latch held_out), (SEVERAL, NO_MODE)."""
+    p[c.p_direction + 2] = 0.0
+    found, first, agree, still = _open_candidates(fns, c, t, y, p, w)
+    if found == 0 and _held(chain_fns, c, t, y, p, w):
+        p[c.p_direction + 2] = 1.0   # the last body stays where it is: the input group alone moves
+        found, first, agree, still = _open_candidates(fns, c, t, y, p, w)
     if found == 0:
         return (RESTING_GROUP if still else NONE), NO_MODE
     if found > 1 and not agree:
@@ -297,7 +321,7 @@ def opening(fns, chain_fns, c, t, y, p, w):
     is consistent and its gap's acceleration parts the flanks; else (NONE, NO_MODE) with the contact kept."""
     flank = p[c.p_contact]
     p[c.p_contact] = 0.0
-    outcome, mode = open_phase(fns, c, t, y, p, w)
+    outcome, mode = open_phase(fns, chain_fns, c, t, y, p, w)
     if outcome == UNIQUE:
         fns.rhs(c.open_mode, t, y, p, w.f)
         if separating(chain_fns, c, int(flank), t, y, p, w) > 0.0:
