@@ -325,15 +325,14 @@ def run_chain(module, *, t_end: float, v0: float, rtol: float, atol: float, t_ou
     events; ``voltage`` (U / U_n) replaces the scene's motor voltage, ``values`` (one per PARAM_NAMES, SI,
     checked by the caller) the scene's values."""
     t_out = np.ascontiguousarray(t_out, dtype=np.float64)
-    p = latches(module, np.zeros(2), voltage, values)
-    y0 = start_state(module, float(v0), p)
+    start = latches(module, np.zeros(2), voltage, values)   # the latches at q0 = 0 (y0's)
+    y0 = start_state(module, float(v0), start)
     settings = entry.settings(int(method), y0.size, t_end=float(t_end), rtol=float(rtol), atol=float(atol),
                               max_steps=int(max_steps))
     args = (entry.functions(method, module), chain_functions(module), chain_tables(module), settings, y0)
     phases = first_room(max_events)
     while True:   # a record too small for the run's phases and samples: again with twice the room
-        p = latches(module, y0, voltage, values)
-        start = p.copy()
+        p = start.copy()
         record, chain = _record(module, t_out, phases, samples_room(phases, t_out.size))
         code, t_stop = entry_point(kernel.run_chain_at)(*args, p, record, chain, int(max_events))   # typed as built
         if code != kernel.RECORD_FULL:
