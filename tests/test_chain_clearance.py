@@ -5,6 +5,7 @@ r3 of stage 2) -> body 2 (lever r4 of stage 2). Stage 2 open: bodies 0 and 1 mov
 stage 1 sliding on flank a forward (its resultant Q leans by rho from the normal: -Q sin(g + rho) on
 x1, Q cos(g + rho) on x2), body 2 alone under F2. Stage 2's gap g = x2 cos(g2) - x1 sin(g2).
 """
+import itertools
 import math
 
 import numpy as np
@@ -212,3 +213,38 @@ def test_two_open_stages_leave_a_middle_group_moving_alone():
     _equal(chain.accel[1].subs(psi), a1, at)
     assert sp.simplify(chain.gap_rate[1] - (r2 * v1 * sp.cos(g1) - r1 * v0 * sp.sin(g1))) == 0
     assert sp.simplify(chain.gap_rate[3] - (r6 * v3 * sp.cos(g3) - r5 * k * v1 * sp.sin(g3))) == 0
+
+
+@pytest.mark.parametrize("stages, open_stage", [(2, 2), (2, 1), (3, 2)])
+def test_open_phase_in_signed_friction_angles_is_every_regime_and_direction(stages, open_stage):
+    """open_phase's one set of expressions (rho_i standing for rho_sign_i rho_i) equals open_chain with each closed
+    stage's FTF (sliding_psi) and normal force (normal_force) of its regime and its group's direction, for every
+    regime of the closed stages and both directions of each group, at random numbers."""
+    phase, chain = cl.open_phase(stages, open_stage), cl.open_chain(stages, (open_stage,))
+    sym = dyn.symbols(stages)
+    rng = np.random.default_rng(7)
+    closed = sorted(phase.normal)
+    for regimes in itertools.product(dyn.REGIMES, repeat=stages):
+        for directions in itertools.product((1, -1), repeat=2):
+            at = {s: rng.uniform(0.1, 0.5) for s in (*sym.gamma, *sym.rho)}
+            at.update({s: rng.uniform(0.01, 1.0) for s in (*sym.lever_in, *sym.lever_out, *sym.inertia)})
+            at.update({s: rng.uniform(-3.0, 3.0) for s in sym.force})
+            sign = {i: 1 if regimes[i - 1] == dyn.TRACTIVE else -1 for i in range(1, stages + 1)}
+            own = {**{cl.rho_sign(i): s for i, s in sign.items()},
+                   cl.DIRECTION_IN: directions[0], cl.DIRECTION_OUT: directions[1]}
+            signed = {sym.rho[i - 1]: s * sym.rho[i - 1] for i, s in sign.items()}
+
+            def direction(i):
+                return directions[chain.groups.of_body[i]]
+            psi = {chain.psi[i - 1]: cl.sliding_psi(i, regimes[i - 1], direction(i)) for i in closed}
+
+            def hand(e):
+                return float(e.subs(psi).subs(at))
+
+            def phased(e):
+                return float(e.subs(signed, simultaneous=True).subs(own).subs(at))
+            for g in range(2):
+                assert phased(phase.accel[g]) == pytest.approx(hand(chain.accel[g]), rel=1e-10, abs=1e-12)
+            for i in closed:
+                ref = hand(cl.normal_force(chain, i, regimes[i - 1], direction(i)))
+                assert phased(phase.normal[i]) == pytest.approx(ref, rel=1e-10, abs=1e-12)

@@ -74,7 +74,8 @@ def run(phases, status="finished", thrust=100.0, p=P):
     trip = np.array([1.0, 0.1, 0.0, 3.0, 0.0, 0.0, 0.0, 0.0, thrust, 0.0, 0.0])
     record = ChainRecord(np.array([(ph.mode, a, b) for ph, a, b in zip(phases, bounds, bounds[1:])], np.int64),
                          np.array(rows), np.array(samples, dtype=float).reshape(-1, 9), np.zeros((1, 4), np.int64),
-                         np.zeros((1, 3 + p.size)), trip, np.array([len(phases), len(samples), 0], np.int64))
+                         np.zeros((1, 3 + p.size)), trip, np.array([len(phases), len(samples), 0, 0], np.int64),
+                         np.zeros((1, 10)))
     return SimpleNamespace(phases=phases, status=status, code={"finished": 0, "max-steps": MAX_STEPS}[status],
                            t_stop=5.0, n_steps=0, events=[], p=p, record=record)
 

@@ -142,14 +142,27 @@ CLEARANCE_BAD = [
     ("restitution = 0.5", "", ["stage[2].restitution", "needs a clearance in stage 2"]),
     ("", 'gap_3 = "0.05 mm"', ["run.gap_3", "unknown key", "gap_1, gap_2"]),
     ('clearance = { value = "0.1 mm", free = true }\nrestitution = 0.5', "", ["stage[2].clearance", "free parameters"]),
-    # a valid clearance is refused, never ignored: the chain's kernel integrates rigid chains only
-    ('clearance = "0.1 mm"\nrestitution = 0.5', 'gap_2 = "0.05 mm"',
-     ['stage[2].clearance = "0.1 mm"', "not supported yet", "one rigid body", "one-stage scene with wedge.clearance"]),
+    ('clearance = "0 mm"\nrestitution = 0.5', "", ['stage[2].clearance = "0 mm"', "must be > 0 in a chain"]),
 ]
 
 
+def test_a_second_clearance_in_a_chain_is_refused_naming_it():
+    """One clearance per chain: a second is refused naming its key and value; its values are checked first; one
+    clearance is kept."""
+    text = VALVE.replace("mu = 0.05", 'mu = 0.05\nclearance = "0.2 mm"\nrestitution = 0.3')
+    two = text.replace("mu = 0.15", 'mu = 0.15\nclearance = "0.1 mm"\nrestitution = 0.5')
+    with pytest.raises(SceneError) as err:
+        parse_chain(two, "v.toml")
+    assert 'stage[2].clearance = "0.1 mm"' in str(err.value), str(err.value)
+    assert "one clearance per chain is supported, and stage[1] has one" in str(err.value)
+    with pytest.raises(SceneError) as err:
+        parse_chain(two.replace('clearance = "0.1 mm"', 'clearance = "-0.1 mm"'), "v.toml")
+    assert "stage[2].clearance = -0.1 mm" in str(err.value) and "must be >= 0 m" in str(err.value)
+    assert parse_chain(text, "v.toml").clearance.stage == 1
+
+
 @pytest.mark.parametrize("stage, run, parts", CLEARANCE_BAD, ids=[s[:24] + r for s, r, _ in CLEARANCE_BAD])
-def test_a_stage_clearance_is_checked_and_refused(stage, run, parts):
+def test_a_bad_stage_clearance_is_refused_naming_key_and_value(stage, run, parts):
     text = VALVE.replace("mu = 0.15", f"mu = 0.15\n{stage}") + f"[run]\n{run}\n"
     with pytest.raises(SceneError) as err:
         parse_chain(text, "v.toml")
@@ -159,13 +172,18 @@ def test_a_stage_clearance_is_checked_and_refused(stage, run, parts):
         assert part in message, message
 
 
-def test_cli_refuses_a_stage_clearance_with_exit_2(tmp_path, capsys):
+def test_cli_refuses_a_bad_stage_clearance_with_exit_2(tmp_path, capsys):
     from tswm_runtime.cli import main
 
     path = tmp_path / "gap.toml"
     path.write_text(VALVE.replace("mu = 0.15", 'mu = 0.15\nclearance = "-0.1 mm"\nrestitution = 0'))
     assert main(["simulate", str(path)]) == 2
     assert "stage[2].clearance = -0.1 mm (= -0.0001 m): must be >= 0 m" in capsys.readouterr().err
-    path.write_text(VALVE.replace("mu = 0.15", 'mu = 0.15\nclearance = "0.1 mm"\nrestitution = 0'))
+    path.write_text(VALVE.replace("mu = 0.05", 'mu = 0.05\nclearance = "0.1 mm"\nrestitution = 0').replace(
+        "mu = 0.15", 'mu = 0.15\nclearance = "0.1 mm"\nrestitution = 0'))
     assert main(["simulate", str(path)]) == 2
-    assert "stage[2].clearance" in capsys.readouterr().err
+    assert "stage[2].clearance = \"0.1 mm\": one clearance per chain is supported" in capsys.readouterr().err
+    path.write_text(VALVE.replace("mu = 0.15", 'mu = 0.15\nclearance = "0.1 mm"\nrestitution = 0') +
+                    '[run]\ngap_2 = "0.2 mm"\n')
+    assert main(["simulate", str(path)]) == 2
+    assert "run.gap_2 = 0.2 mm" in capsys.readouterr().err

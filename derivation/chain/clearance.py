@@ -176,3 +176,99 @@ def impact(stages: int, open_stages: tuple[int, ...], stage: int, flank: str) ->
     jump_in = frame.jump_v1.subs(at) / (sym.lever_in[k] * grouping.factors[k])
     jump_out = frame.jump_v2.subs(at) / (sym.lever_out[k] * grouping.factors[stage])
     return Impact(stage, flank, m1, m2, frame.W.subs(at), (sp.together(jump_in), sp.together(jump_out)))
+
+
+DIRECTION_IN, DIRECTION_OUT = sp.symbols("direction_in direction_out", real=True)   # the groups' signs of speed
+
+
+def rho_sign(stage: int) -> sp.Symbol:
+    """Stage ``stage``'s (1-based) regime as a sign: +1 tractive, -1 inverse-tractive (its friction angle's sign
+    in its FTF: the inverse-tractive FTF is the tractive one with -rho)."""
+    return sp.Symbol(f"rho_sign_{stage}", real=True)
+
+
+@dataclass(frozen=True)
+class OpenPhase:
+    """Stage ``stage`` open in a chain of ``stages`` stages, each closed stage i sliding in the regime whose sign is
+    rho_sign_i with its group moving in direction_in (the group before the open stage) or direction_out (after
+    it). Every friction angle rho_i here stands for rho_sign_i rho_i (each stage's FTF is flank a forward's with
+    that angle), so one set of expressions serves every regime and direction; each is checked against
+    ``normal_force`` and ``sliding_psi`` per regime and direction in tests/test_chain_clearance.py."""
+
+    stages: int
+    stage: int
+    accel: tuple[sp.Expr, sp.Expr]     # the input and output groups' accelerations (of bodies 0 and ``stage``)
+    normal: dict[int, sp.Expr]         # each closed stage's normal force N_i: the switching function of its opening
+    jam: sp.Expr                       # the closed stages' jam factors' product cos(gamma_i + rho_i): > 0
+    stage_force: dict[int, sp.Expr]    # each closed stage's force on its output body x2 (W_i = R2_i)
+    gap: sp.Expr                       # the open stage's normal gap from the coordinates (q_0, q_stage), g = gap_0 at 0
+    gap_rate: sp.Expr
+    gap_accel: sp.Expr
+
+
+def signed_psi(stage: int) -> sp.Expr:
+    """Flank a forward's FTF of stage ``stage``: with rho_i standing for rho_sign_i rho_i, every regime's."""
+    return mech.sliding("a", 1).psi.subs(_wedge(stage))
+
+
+@lru_cache(maxsize=None)
+def open_phase(stages: int, stage: int) -> OpenPhase:
+    """The open phase of a chain with one open stage, from ``open_chain``: each closed stage's Psi_i the FTF of
+    flank a forward with rho_i for rho_sign_i rho_i, its normal force the stage force over dR2/dN of flank f =
+    rho_sign_i direction (mechanics' mirror rule: f times flank a forward's with f s rho = rho_sign_i rho)."""
+    chain = open_chain(stages, (stage,))
+    grouping = chain.groups
+    at_psi = {chain.psi[i - 1]: signed_psi(i) for i in chain.stage_force}
+    a_in, a_out = (sp.together(a.subs(at_psi)) for a in chain.accel)
+    forward = mech.sliding("a", 1)
+    normal, force, jam = {}, {}, sp.Integer(1)
+    for i, w in chain.stage_force.items():
+        direction = DIRECTION_IN if grouping.of_body[i] == 0 else DIRECTION_OUT
+        force[i] = sp.together(w.subs(at_psi))
+        per_n = sp.diff(forward.R2, mech.N).subs(_wedge(i))
+        normal[i] = sp.together(force[i] / (rho_sign(i) * direction * per_n))
+        jam *= forward.jam_factor.subs(_wedge(i))
+    q_in, q_out = sp.Symbol("q_0", real=True), sp.Symbol(f"q_{stage}", real=True)
+    speeds = {grouping.speed(0): q_in, grouping.speed(1): q_out}
+    rate = chain.gap_rate[stage]
+    gap = sp.Symbol(f"gap_{stage}", real=True) + rate.subs(speeds, simultaneous=True)
+    gap_accel = sp.together(chain.gap_accel[stage].subs(at_psi))
+    return OpenPhase(stages, stage, (a_in, a_out), normal, jam, force, gap, rate, gap_accel)
+
+
+@dataclass(frozen=True)
+class OpenImpact:
+    """The open stage's flanks meet on ``flank``: the relative velocity in the flank's frame, (nu, s) = (f g', slip),
+    the inverse mass W with the groups' effective masses (their closed stages tied by their FTFs in the regimes
+    rho_sign_i, as in ``OpenPhase``), the friction coefficient tan(rho_k) and each group's speed change per unit
+    impulse (P_n, P_t) on the output side."""
+
+    flank: str
+    nu: sp.Expr
+    slip: sp.Expr
+    W: sp.Matrix
+    mu: sp.Expr
+    jump_in: tuple[sp.Expr, sp.Expr]     # d v_in / d P_n, d v_in / d P_t
+    jump_out: tuple[sp.Expr, sp.Expr]    # d v_out / d P_n, d v_out / d P_t
+
+
+@lru_cache(maxsize=None)
+def open_impact(stages: int, stage: int, flank: str) -> OpenImpact:
+    """``impact`` of the one open stage with each closed stage's Psi_i flank a forward's (rho_i for rho_sign_i rho_i),
+    and the frame's speeds from ``mechanics.free_flight`` at the stage's x1 and x2."""
+    chain = open_chain(stages, (stage,))
+    grouping = chain.groups
+    sym = dyn.symbols(stages)
+    im = impact(stages, (stage,), stage, flank)
+    at_psi = {chain.psi[i - 1]: signed_psi(i) for i in chain.stage_force}
+    v1, v2 = _stage_motion(sym, grouping, stage - 1, "v")
+    flight = mech.free_flight()
+    speeds = {mech.v1: v1, mech.v2: v2, mech.gamma: sym.gamma[stage - 1]}
+    f = mech.FLANK_SIGN[flank]
+    nu = f * flight.normal_speed.subs(speeds, simultaneous=True)
+    slip = flight.slip.subs(speeds, simultaneous=True)
+
+    def per_impulse(jump: sp.Expr) -> tuple[sp.Expr, sp.Expr]:
+        return tuple(sp.together(sp.diff(jump, p).subs(at_psi)) for p in (mech.Pn, mech.Pt))
+    return OpenImpact(flank, nu, slip, im.W.subs(at_psi).applyfunc(sp.together), sp.tan(sym.rho[stage - 1]),
+                      per_impulse(im.jumps[0]), per_impulse(im.jumps[1]))

@@ -20,6 +20,7 @@ import jinja2
 import sympy as sp
 
 from derivation import mechanics as mech
+from derivation.chain import clearance as cl
 from derivation.chain import dynamics as dyn
 from derivation.chain import stages as st
 from derivation.chain import valve as vl
@@ -31,7 +32,10 @@ MOTOR = sp.Symbol("motor", real=True)     # the motor's torque (or force) on bod
 DIRECTION = sp.Symbol("direction", real=True)   # the sign of v_0 in a sliding mode, 0 at rest
 STATES = ("q0", "v0")
 SWITCHED_GUARDS = ("seat", "switch", "delay")   # the seat's contact, the switch picking up or dropping out, its delay
-GENERATOR_SOURCES = ("chain/codegen.py", "chain/dynamics.py", "chain/stages.py", "chain/scene.py",
+# With a clearance: the gap closing on flank a, on flank b, the output group's speed reaching 0.
+CLEARANCE_GUARDS = ("gap_a", "gap_b", "v_out")
+CLEARANCE_LATCHES = ("contact", "direction_in", "direction_out", "held_out")   # then rho_sign per stage
+GENERATOR_SOURCES = ("chain/codegen.py", "chain/clearance.py", "chain/dynamics.py", "chain/stages.py", "chain/scene.py",
                      "chain/valve.py", "templates/chain_module.py.j2")
 
 
@@ -49,16 +53,18 @@ class _Code:
     it uses read from its slot of p (``slots``), the body forces from ``body_forces`` where an expression
     uses them; ``derive(name, formula)`` adds a derived slot that ``prepare`` fills (``_layout``)."""
 
-    def __init__(self, stages: int, slots: dict[sp.Symbol, str], derive):
+    def __init__(self, stages: int, slots: dict[sp.Symbol, str], derive, states: dict[sp.Symbol, str] | None = None):
         self.sym = dyn.symbols(stages)
         self.slots = slots
         self.derive = derive
+        self.states = states or {}      # with a clearance: the output group's coordinate and both groups' speeds
         self.printer = _Printer()
 
     @property
     def runtime(self) -> set[sp.Symbol]:
-        """What a mode's expressions read at run time: the body forces and what they are made of."""
-        return {*self.sym.force, MOTOR, q0, DIRECTION, vl.POWERED, vl.SEATED}
+        """What a mode's expressions read at run time: the body forces and what they are made of (with a
+        clearance also the states ``states``)."""
+        return {*self.sym.force, MOTOR, q0, DIRECTION, vl.POWERED, vl.SEATED, *self.states}
 
     def reads(self, used: set) -> list[str]:
         """``name = p[SLOT]`` for each value or derived symbol in ``used``, in slot order."""
@@ -72,6 +78,7 @@ class _Code:
             lines.append(f"{', '.join(map(str, self.sym.force))} = body_forces(t, y, p, {direction})")
         if q0 in used:
             lines.append("q_0 = y[0]")
+        lines += [f"{s} = {at}" for s, at in self.states.items() if s in used]
         if MOTOR in used:
             lines.append("motor = motor_torque(y[1], p)")
         if vl.POWERED in used:
@@ -107,25 +114,31 @@ class _Code:
                 raise GenerationError(f"a chain mode's expression is not affine in {r}: {expr}")
         return out
 
-    def blocks(self, name: str, doc: str, exprs: list[sp.Expr], combos: dict[tuple[int, ...], str]) -> dict:
-        """A group's function ``name`` over coefficient blocks: its expressions (the group's first mode's) as
-        sums of coefficients times run-time symbols (``terms``), the coefficients of each friction-angle sign
-        combination (``combos``: signs -> suffix) derived once per run into consecutive slots of p, the
-        first at D_<name>_<suffix> (a derived slot); the function takes that first slot as ``k`` and reads
-        p[k + i]: no trigonometry of the scene's values per call."""
-        signed = {signs: [self.terms(e.subs({rho: s * rho for rho, s in zip(self.sym.rho, signs) if s < 0},
-                                            simultaneous=True)) for e in exprs] for signs in combos}
+    def blocks(self, name: str, doc: str, exprs: list[sp.Expr], variants: dict[str, tuple[str, dict]]) -> dict:
+        """A function ``name`` over coefficient blocks: its expressions as sums of coefficients times run-time
+        symbols (``terms``), one block per variant (``variants``: suffix -> (what it stands for, the substitution
+        that makes it: friction angles' and other signs)), its coefficients derived once per run into consecutive
+        slots of p, the first at D_<name>_<suffix>_0 (a derived slot); the function takes a block's first slot as
+        ``k`` and reads p[k + i]: no trigonometry of the scene's values per call."""
+        signed = {suffix: [self.terms(e.subs(at, simultaneous=True)) for e in exprs]
+                  for suffix, (_, at) in variants.items()}
         layout = [(i, r) for i in range(len(exprs)) for r in [None, *sorted(self.runtime, key=str)]
                   if any(r in t[i] and t[i][r] != 0 for t in signed.values())]
-        for signs, suffix in combos.items():
-            shown = ", ".join(f"{'+' if s > 0 else '-'}{rho}" for s, rho in zip(signs, self.sym.rho))
+        for suffix, (shown, _) in variants.items():
             for j, (i, r) in enumerate(layout):
-                self.derive(sp.Symbol(f"{name}_{suffix}_{j}", real=True), signed[signs][i].get(r, sp.Integer(0)),
+                self.derive(sp.Symbol(f"{name}_{suffix}_{j}", real=True), signed[suffix][i].get(r, sp.Integer(0)),
                             f"{name}_{suffix}_{j}: {name}'s result {i}, its {r or 'constant'} term ({shown})")
         results = [" + ".join(f"p[k + {j}]" + (f"*{r}" if r is not None else "") for j, (at, r) in enumerate(layout)
                               if at == i) or "0.0" for i in range(len(exprs))]
-        return {"name": name, "args": "t, y, p, direction, k", "doc": doc,
+        return {"name": name, "args": "t, y, p, direction, k", "doc": doc, "stride": len(layout),
                 "lines": self.state_lines({r for _, r in layout}, "direction"), "result": ", ".join(results)}
+
+    def rho_variants(self, combos: dict[tuple[int, ...], str]) -> dict[str, tuple[str, dict]]:
+        """``blocks``' variants of friction-angle sign combinations (``combos``: signs -> suffix): rho_k -> -rho_k
+        where a sign is negative."""
+        return {suffix: (", ".join(f"{'+' if s > 0 else '-'}{rho}" for s, rho in zip(signs, self.sym.rho)),
+                         {rho: s * rho for rho, s in zip(self.sym.rho, signs) if s < 0})
+                for signs, suffix in combos.items()}
 
 
 def _range(rule, names: dict[str, str]) -> tuple:
@@ -145,7 +158,8 @@ def _layout(chain: ChainScene) -> tuple[list[dict], list[dict], dict[sp.Symbol, 
     printer = _Printer()
     values, derived, slots = [], [], {}
     pairs = chain.value_rules()
-    names = {p.key.rsplit(".", 1)[-1]: p.name for p, _ in pairs if p.key.startswith("switch.")}
+    names = {p.key.rsplit(".", 1)[-1]: p.name for p, _ in pairs
+             if p.key.startswith("switch.") or p.key.endswith(".clearance")}
     for p, rule in pairs:
         slot = f"V_{p.name}"
         values.append({"name": p.name, "slot": slot, "si": p.value, "value": inert(p.value, p.name), "key": p.key,
@@ -185,13 +199,26 @@ def _layout(chain: ChainScene) -> tuple[list[dict], list[dict], dict[sp.Symbol, 
     return values, derived, slots, derive
 
 
+def _coordinates(chain: ChainScene) -> list[sp.Expr]:
+    """Each body's coordinate (q = 0 at the start): q_j = c_j q_0 with c_j = v_j / v_0 (derived by ``prepare``);
+    with a clearance in stage k, the bodies from k on form their own rigid group (``clearance.groups``) and
+    q_j = (c_j / c_k) q_k."""
+    c = [sp.Symbol(f"c_{j}", real=True) for j in range(len(chain.bodies))]
+    if chain.clearance is None:
+        return [c_j * q0 for c_j in c]
+    k = chain.clearance.stage
+    of_body = cl.groups(len(chain.stages), (k,)).of_body
+    return [c[j] * q0 if of_body[j] == 0 else c[j] / c[k] * sp.Symbol(f"q_{k}", real=True)
+            for j in range(len(chain.bodies))]
+
+
 def _forces(chain: ChainScene, code: _Code, direction: sp.Expr) -> list[sp.Expr]:
     """The generalized force on each body: its force or torque, the motor's while powered, less a spring's
-    stiffness times its coordinate q_j = (v_j / v_0) q_0 (q = 0 at the start), and the valve's force on the
-    last body moving in ``direction``."""
-    factors = [sp.Symbol(f"c_{j}", real=True) for j in range(len(chain.bodies))]   # derived by prepare
+    stiffness times its coordinate q_j (``_coordinates``), and the valve's force on the last body moving in
+    ``direction``."""
+    q = _coordinates(chain)
     return [sp.Symbol(b.force.name, real=True) + (vl.drive(MOTOR) if b.motor is not None else 0)
-            - (sp.Symbol(b.stiffness.name, real=True) * factors[j] * q0 if b.stiffness is not None else 0) + (vl.valve_force(b.valve, factors[j] * q0, direction) if b.valve is not None else 0)
+            - (sp.Symbol(b.stiffness.name, real=True) * q[j] if b.stiffness is not None else 0) + (vl.valve_force(b.valve, q[j], direction) if b.valve is not None else 0)
             for j, b in enumerate(chain.bodies)]
 
 
@@ -289,27 +316,37 @@ def _group_functions(code: _Code, index: int, modes: list[dyn.SlidingMode], expr
             "stage_forces": "per stage (on its input body, on its output body, normal force)"}
     return [code.blocks(f"{name}_{index}", f"{docs[name]} in mode {index}: {modes[index].name}{members} (their body "
                         "forces in `direction`, the coefficients of their stages' friction-angle signs from slot k: "
-                        f"D_{name}_{index}_<p or m per stage>_0)", e, combos) for name, e in exprs.items()]
+                        f"D_{name}_{index}_<p or m per stage>_0)", e, code.rho_variants(combos))
+            for name, e in exprs.items()]
 
 
-def _jacobian(code: _Code, chain: ChainScene, mode: dyn.SlidingMode) -> tuple[sp.Expr, sp.Expr]:
-    """(d a_0 / d q_0, d a_0 / d v_0) in a mode: the springs' and the motor's share (the forces are the only
-    state dependence; the motor's torque changes with v_0 by its table's slope, ``motor_slope``)."""
-    accel = mode.accel.subs(dict(zip(code.sym.force, _forces(chain, code, mode.direction))))
-    return sp.diff(accel, q0), sp.diff(accel, MOTOR)
+def _by_state(code: _Code, chain: ChainScene, accel: sp.Expr, direction: sp.Expr) -> tuple[sp.Expr, ...]:
+    """(d a / d q_0, d a / d motor) of an acceleration in the body forces, the valve's in ``direction``, and with a
+    clearance in stage k d a / d q_k: the springs' and the motor's share (the forces are the only state dependence;
+    the motor's torque changes with v_0 by its table's slope, ``motor_slope``)."""
+    accel = accel.subs(dict(zip(code.sym.force, _forces(chain, code, direction))))
+    by = (q0, MOTOR) + ((sp.Symbol(f"q_{chain.clearance.stage}", real=True),) if chain.clearance else ())
+    return tuple(sp.diff(accel, x) for x in by)
+
+
+def _jacobian(code: _Code, chain: ChainScene, mode: dyn.SlidingMode) -> tuple[sp.Expr, ...]:
+    """d a_0 by q_0 and by the motor's torque (and by q_k with a clearance) in a mode (``_by_state``)."""
+    return _by_state(code, chain, mode.accel, mode.direction)
 
 
 def _jacobians(code: _Code, chain: ChainScene, modes: list[dyn.SlidingMode]) -> tuple[list[str], list[tuple]]:
     """The reads of p the Jacobian needs and (the modes, d a_0 / d q_0, d a_0 / d v_0) for each distinct pair
     of the modes' Jacobian entries (a mode and its mirror image have the same), in the order of their first
     mode."""
-    found: dict[tuple[str, str], list[int]] = {}
+    found: dict[tuple[str, ...], list[int]] = {}
     used: set = set()
     for index, mode in enumerate(modes):
-        pair = _jacobian(code, chain, mode)
-        used |= pair[0].free_symbols | pair[1].free_symbols
-        found.setdefault(tuple(code.printer.doprint(e) for e in pair), []).append(index)
-    return code.reads(used), [(indices, by_q, by_motor) for (by_q, by_motor), indices in found.items()]
+        entries = _jacobian(code, chain, mode)
+        used |= set().union(*(e.free_symbols for e in entries))
+        found.setdefault(tuple(code.printer.doprint(e) for e in entries), []).append(index)
+    reads = code.reads(used)
+    reads += [f"{s} = {at}" for s, at in code.states.items() if s in used]
+    return reads, [(indices, *entries) for entries, indices in found.items()]
 
 
 def generate_chain_module(chain: ChainScene) -> str:
@@ -318,7 +355,9 @@ def generate_chain_module(chain: ChainScene) -> str:
     defaults of p's slots."""
     n = len(chain.stages)
     values, derived, slots, derive = _layout(chain)
-    code = _Code(n, slots, derive)
+    k = chain.clearance.stage if chain.clearance else 0
+    code = _Code(n, slots, derive, {sp.Symbol(f"q_{k}", real=True): "y[2]", sp.Symbol("v_0", real=True): "y[1]",
+                                    sp.Symbol(f"v_{k}", real=True): "y[3]"} if k else None)
     reachable = dyn.reachable(tuple(s.flanks for s in chain.stages))
     modes = [dyn.sliding(direction, regimes) for direction, regimes in reachable]
     functions = [code.function("body_forces", "(F_0, ..., F_N): each body's force or torque (the motor's while "
@@ -327,8 +366,15 @@ def generate_chain_module(chain: ChainScene) -> str:
                                _forces(chain, code, DIRECTION), args="t, y, p, direction")]
     shared, calls = _mode_calls(chain, code, modes)
     functions += shared
-    guards = ("D", "jam", *(f"N_{k + 1}" for k in range(n)), "v0", *SWITCHED_GUARDS)
-    directions = [tuple([-1] * (n + 2) + [-mode.direction] + [-1] * len(SWITCHED_GUARDS)) for mode in modes]
+    gaps = CLEARANCE_GUARDS if k else ()
+    guards = ("D", "jam", *(f"N_{i + 1}" for i in range(n)), "v0", *gaps, *SWITCHED_GUARDS)
+    directions = [tuple([-1] * (n + 2) + [-mode.direction] + [-1] * (len(gaps) + len(SWITCHED_GUARDS)))
+                  for mode in modes]
+    open_calls, open_block = {}, ""
+    if k:
+        opened, open_calls, open_block = _open_functions(chain, code)
+        functions += opened
+        directions.append(tuple([-1] * len(guards)))
     switch, valve = chain.switch, chain.bodies[-1].valve
     seat = valve.seat if valve is not None else None
     first = len(vl.P_NAMES)
@@ -336,6 +382,7 @@ def generate_chain_module(chain: ChainScene) -> str:
     motor = chain.bodies[0].motor
     points = len(motor.speed) if motor else 0
     motor_first = first + len(values) + len(derived)     # the motor's table after the derived slots: speeds, torques
+    open_first = motor_first + 2 * points                # with a clearance, its latches after the motor's table
     constants = {
         "SCENE": chain.name, "DESCRIPTION": chain.description, "SCENE_DIGEST": chain.digest, "STAGES": n,
         "STATES": STATES, "MODES": tuple(m.name for m in modes), "MODE_DIRECTION": tuple(m.direction for m in modes),
@@ -357,6 +404,14 @@ def generate_chain_module(chain: ChainScene) -> str:
         "ARMED": vl.ARMED, "PICKED": vl.PICKED, "TRIPPED": vl.TRIPPED,
         "SWITCH_ON": -1 if switch is None else switch.stage, "HAS_SEAT": seat is not None,
     }
+    if k:
+        constants.update({
+            "STATES": ("q0", "v0", f"q{k}", f"v{k}"), "CLEARANCE_STAGE": k, "OPEN": len(modes),
+            "MODES": (*constants["MODES"], f"open: stage {k}"), "MODE_DIRECTION": (*constants["MODE_DIRECTION"], 0),
+            "MODE_REGIMES": (*constants["MODE_REGIMES"], ()), "MODE_FLANKS": (*constants["MODE_FLANKS"], ()),
+            "P_NAMES": (*constants["P_NAMES"], *CLEARANCE_LATCHES, *(f"rho_sign {i + 1}" for i in range(n))),
+            "P_CONTACT": open_first, "P_DIRECTION_IN": open_first + 1, "P_DIRECTION_OUT": open_first + 2,
+            "P_HELD_OUT": open_first + 3, "P_RHO_SIGN": open_first + 4, "IMPACT_FRAME": IMPACT_FRAME})
     for i, v in enumerate(values):
         v["index"] = first + i
     for d in derived:
@@ -367,6 +422,7 @@ def generate_chain_module(chain: ChainScene) -> str:
     env.filters["comment"] = _comment
     jac_reads, jacobians = _jacobians(code, chain, modes)
     body = env.get_template("chain_module.py.j2").render(
+        clearance=_open_template(chain, slots, open_calls, open_block) if k else None,
         chain=chain, n=n, modes=modes, calls=calls, constants={k: inert(v, k) for k, v in constants.items()},
         values=values, defaults=inert(tuple(v["si"] for v in values), "PARAM_DEFAULTS"),
         derived=derived, prepare_lines=[*(f"{v['name']} = p[{v['slot']}]" for v in values if v["read"]),
@@ -379,6 +435,7 @@ def generate_chain_module(chain: ChainScene) -> str:
         contact_targets=", ".join(f"g[{k}]" for k in range(n + 2)),
         force_targets=", ".join(f"out[{k}]" for k in range(3 * n)),
         body_targets=", ".join(f"out[{j}]" for j in range(n + 1)),
+        impact_targets=", ".join(f"out[{j}]" for j in range(len(IMPACT_FRAME))),
         setting=f"p[V_{switch.setting.name}]" if switch else "math.inf",
         hysteresis=f"p[V_{switch.hysteresis.name}]" if switch else "0.0",
         seat=f"p[V_{seat.name}]" if seat is not None else "math.nan")
@@ -400,11 +457,104 @@ def generate_chain_module(chain: ChainScene) -> str:
 def _prepare_lines(derived: list[dict], printer: _Printer) -> list[str]:
     """``name = formula`` for each derived slot in order; the mode functions' coefficients (after the wedge
     numbers they are made of) through one CSE, their shared subexpressions first."""
-    plain = [d for d in derived if not d["name"].startswith(("accel_", "contact_", "stage_forces_"))]
+    plain = [d for d in derived if not d["name"].startswith(("accel_", "contact_", "stage_forces_", "open_"))]
     blocks = derived[len(plain):]
     replacements, reduced = sp.cse([d["expr"] for d in blocks], symbols=sp.numbered_symbols("shared_"))
     return ([f"{d['name']} = {d['formula']}" for d in plain] + [f"{s} = {printer.doprint(e)}" for s, e in replacements]
             + [f"{d['name']} = {printer.doprint(e)}" for d, e in zip(blocks, reduced)])
+
+
+IMPACT_FRAME = ("nu", "s", "W_nn", "W_nt", "W_tt", "mu", "e", "dv_in_dPn", "dv_in_dPt", "dv_out_dPn", "dv_out_dPt")
+
+
+def _open_signs(n: int, k: int, exprs: list[sp.Expr]) -> list[sp.Symbol]:
+    """The signs the open phase's expressions depend on while stage k is open, in ``open_block``'s bit order: each
+    closed stage's regime rho_sign_i (its friction angle rho_i there stands for rho_sign_i rho_i), then the groups'
+    directions direction_in, direction_out where an expression has them (a group holding a closed stage); k's own
+    friction enters only the impact, unsigned."""
+    used = set().union(*(e.free_symbols for e in exprs))
+    return ([cl.rho_sign(i) for i in range(1, n + 1) if i != k]
+            + [d for d in (cl.DIRECTION_IN, cl.DIRECTION_OUT) if d in used])
+
+
+def _open_variants(code: _Code, signs: list[sp.Symbol]) -> dict[str, tuple[str, dict]]:
+    """``_Code.blocks``' variants of the open phase: in variant m, sign b is -1 where bit b of m is set (a closed
+    stage's rho_i then -rho_i), +1 otherwise."""
+    rho_of = {cl.rho_sign(i + 1): rho for i, rho in enumerate(code.sym.rho)}
+    variants = {}
+    for m in range(2 ** len(signs)):
+        value = {s: -1 if m >> b & 1 else 1 for b, s in enumerate(signs)}
+        flip = {rho_of[s]: -rho_of[s] for s, v in value.items() if v < 0 and s in rho_of}
+        variants["".join("p" if value[s] > 0 else "m" for s in signs)] = (
+            ", ".join(f"{s} = {value[s]:+d}" for s in signs), {**value, **flip})
+    return variants
+
+
+def _open_functions(chain: ChainScene, code: _Code) -> tuple[list[dict], dict[str, str], str]:
+    """The open phase of the stage with the clearance (``clearance.open_phase``, ``open_impact``): the groups'
+    accelerations, (jam, the closed stages' normal forces, the gap, what the switch measures), the stage forces,
+    the Jacobian and the impact's frame on each flank, each a sum of coefficients times the run-time symbols
+    (``_Code.blocks``), a block per combination of the signs they depend on (``_open_signs``); the valve's
+    friction in the output group's direction. Returns the functions, each one's call from the template (its
+    block chosen by ``open_block(p)`` from the sign latches) and open_block's sum."""
+    n, k = len(chain.stages), chain.clearance.stage
+    phase = cl.open_phase(n, k)
+    closed = sorted(phase.normal)
+    sym = code.sym
+    per_stage = []
+    for i in range(1, n + 1):
+        if i in phase.normal:
+            w = phase.stage_force[i]
+            per_stage += [sym.lever_in[i - 1] * -cl.signed_psi(i) * w, sym.lever_out[i - 1] * w, phase.normal[i]]
+        else:
+            per_stage += [sp.Integer(0)] * 3
+    switch = chain.switch
+    if switch is None:
+        measured = sp.Integer(0)
+    elif switch.stage == 0:
+        measured = sp.Symbol(chain.bodies[0].force.name, real=True) + (MOTOR if chain.bodies[0].motor else 0)
+    else:
+        measured = per_stage[3 * (switch.stage - 1) + 1]
+    restitution = sp.Symbol(chain.clearance.restitution.name, real=True)
+    exprs = {
+        "open_accel": ("(a_0, a_k): the input and output groups' accelerations", list(phase.accel)),
+        "open_contact": ("(jam, the closed stages' normal forces, the gap, what the torque switch measures)",
+                         [phase.jam, *(phase.normal[i] for i in closed), phase.gap, measured]),
+        "open_stage_forces": ("per stage (on its input body, on its output body, normal force; 0 for the open "
+                              "stage)", per_stage),
+        "open_jacobian": ("(d a_0, d a_k) by q_0, by the motor's torque and by q_k",
+                          [e for a in phase.accel for e in _by_state(code, chain, a, DIRECTION)])}
+    for flank in ("a", "b"):
+        im = cl.open_impact(n, k, flank)
+        exprs[f"open_impact_{flank}"] = (f"the collision's frame on flank {flank} (IMPACT_FRAME)", [
+            im.nu, im.slip, im.W[0, 0], im.W[0, 1], im.W[1, 1], im.mu, restitution, *im.jump_in, *im.jump_out])
+    signs = _open_signs(n, k, [e for _, group in exprs.values() for e in group])
+    variants = _open_variants(code, signs)
+    first = next(iter(variants))
+    functions, calls = [], {}
+    for name, (doc, e) in exprs.items():
+        f = code.blocks(name, f"{doc} while stage {k} is open (the body forces in the output group's `direction`; "
+                        f"the coefficients of the signs {', '.join(map(str, signs))} from slot k: "
+                        f"D_{name}_<p or m per sign>_0)", e, variants)
+        functions.append(f)
+        calls[name] = (f"{name}(t, y, p, p[P_DIRECTION_OUT], D_{name}_{first}_0 + {f['stride']} * open_block(p))"
+                       if f["stride"] else f"{name}(t, y, p, p[P_DIRECTION_OUT], 0)")
+    latch = {cl.DIRECTION_IN: "P_DIRECTION_IN", cl.DIRECTION_OUT: "P_DIRECTION_OUT",
+             **{cl.rho_sign(i): f"P_RHO_SIGN + {i - 1}" for i in range(1, n + 1)}}
+    block = " + ".join(f"(1 if p[{latch[s]}] < 0.0 else 0) * {2 ** b}" for b, s in enumerate(signs))
+    return functions, calls, block or "0"
+
+
+def _open_template(chain: ChainScene, slots: dict[sp.Symbol, str], calls: dict[str, str], block: str) -> dict:
+    """What the template's open phase needs: the stage, the open functions' calls, ``open_block``'s sum of the
+    sign latches' bits, the targets of open_contact and the slots it reads."""
+    n, c = len(chain.stages), chain.clearance
+    k = c.stage
+    closed = [i for i in range(1, n + 1) if i != k]
+    return {"stage": k, "call": calls, "block": block,
+            "contact_targets": ", ".join(["g[1]", *(f"g[{1 + i}]" for i in closed), "gap"]),
+            "c_k": slots[sp.Symbol(f"c_{k}", real=True)], "c_last": slots[sp.Symbol(f"c_{n}", real=True)],
+            "clearance": slots[sp.Symbol(c.clearance.name, real=True)]}
 
 
 def _psi(sym: dyn.Symbols, k: int, flank: str) -> sp.Expr:

@@ -103,6 +103,16 @@ class Motor:
 
 
 @dataclass(frozen=True)
+class Clearance:
+    """Stage ``stage``'s clearance along its flanks' normal (backlash), its restitution e and the normal gap from
+    flank a at the start (run.gap_k, in [0, clearance])."""
+    stage: int
+    clearance: Param
+    restitution: Param
+    gap: Param
+
+
+@dataclass(frozen=True)
 class ChainRun:
     """The run: t_end [s], body 0's speed at t = 0 (rad/s rotating, m/s translating; q = 0 there),
     tolerances and the step budget."""
@@ -123,6 +133,7 @@ class ChainScene:
     digest: str
     run: ChainRun = ChainRun(1.0, 0.0, 1e-6, 1e-9, 100000)
     switch: Switch | None = None
+    clearance: Clearance | None = None
 
     def values(self) -> ChainValues:
         """The equivalent wedges' numbers (slope, friction angle, levers) and the bodies', in SI."""
@@ -145,6 +156,9 @@ class ChainScene:
         if self.switch is not None:
             rules = switch_rules(self.switch.quantity)
             out += [(getattr(self.switch, key), rule) for key, rule in rules.items()]
+        if self.clearance is not None:
+            c = self.clearance
+            out += [(c.clearance, CLEARANCE), (c.restitution, IMPACT["restitution"]), (c.gap, GAP)]
         return out
 
 
@@ -303,9 +317,10 @@ class _ChainReader(_Reader):
         voltage = self.number(table, "voltage", path, VOLTAGE, free_ok=False)[0]
         return Motor(*numbers, voltage)
 
-    def clearances(self, stages: list[dict], run: dict) -> None:
-        """stage[k].clearance (>= 0) with stage[k].restitution (e in [0, 1]) and the start gap run.gap_k in
-        [0, clearance], checked; then refused: the chain's kernel integrates rigid chains only (one coordinate)."""
+    def clearances(self, stages: list[dict], run: dict) -> Clearance | None:
+        """stage[k].clearance (> 0) with stage[k].restitution (e in [0, 1]) and the start gap run.gap_k in
+        [0, clearance], at most one stage with a clearance per chain."""
+        first = None
         for k, table in enumerate(stages, 1):
             path, gap = f"stage[{k}]", f"gap_{k}"
             if "clearance" not in table:
@@ -314,10 +329,17 @@ class _ChainReader(_Reader):
                         self.fail(f"{where}.{key}", f"needs a clearance in stage {k}: give stage[{k}].clearance")
                 continue
             given = self.plain(table, path, STAGE_CLEARANCE)
-            self.number(run, gap, "run", GAP, free_ok=False, siblings=given)
-            self.fail(f"{path}.clearance", "a clearance (backlash) in a chain's stage is not supported yet: the chain "
-                      "moves as one rigid body; give the stage no clearance, or model the stage alone as a one-stage "
-                      "scene with wedge.clearance", _toml(table["clearance"]))
+            start = self.number(run, gap, "run", GAP, free_ok=False, siblings=given)[0]
+            if first is not None:
+                self.fail(f"{path}.clearance", f"one clearance per chain is supported, and stage[{first}] has one: "
+                          f"give stage {k} none", _toml(table["clearance"]))
+            if given["clearance"].value == 0.0:
+                self.fail(f"{path}.clearance", "must be > 0 in a chain (0: give the stage no clearance)",
+                          _toml(table["clearance"]))
+            own = _suffixed(given, k)
+            first = k
+            clearance = Clearance(k, own["clearance"], own["restitution"], Param(gap, start, "m", False, f"run.{gap}"))
+        return clearance if first is not None else None
 
     def chain_run(self, doc: dict, stages: int) -> ChainRun:
         table = self.table(doc, "run", required=False) or {}
@@ -343,6 +365,6 @@ class _ChainReader(_Reader):
         motions = [kinds[0].motion_in, *(kind.motion_out for kind in kinds)]
         bodies = tuple(self.body(t, j, m, j == len(stages)) for j, (t, m) in enumerate(zip(tables, motions)))
         run = self.chain_run(doc, len(stages))
-        self.clearances(stage_tables, self.table(doc, "run", required=False) or {})
+        clearance = self.clearances(stage_tables, self.table(doc, "run", required=False) or {})
         return ChainScene(name, description, stages, bodies, self.source, digest, run,
-                          self.switch(doc, stages, motions))
+                          self.switch(doc, stages, motions), clearance)

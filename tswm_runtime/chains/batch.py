@@ -14,6 +14,7 @@ import numpy as np
 from numba import prange, types
 
 from tswm_runtime.chains import kernel
+from tswm_runtime.chains.backlash import IMPACT_COLUMNS
 from tswm_runtime.chains.answers import (ANSWERING, I_EVENTS, I_STATUS, I_STEPS, I_VERDICT, N_F, N_I,
                                           VERDICTS, answer, answering)
 from tswm_runtime.chains.run import chain_functions, chain_tables, first_room, run_status, samples_room
@@ -39,7 +40,7 @@ ANSWERS = types.NamedTuple((MATRIX, types.int64[:, ::1]), Answers)
 
 _chain_at = function_at(types.FunctionType(kernel.CHAIN_SIG))
 
-BATCH_SIG = types.none(types.int64, ADDRESSES, types.UniTuple(types.int64, 2), kernel.CHAIN_TABLES, SETTINGS, VECTOR,
+BATCH_SIG = types.none(types.int64, ADDRESSES, types.UniTuple(types.int64, 3), kernel.CHAIN_TABLES, SETTINGS, VECTOR,
                        MATRIX, VECTOR, ROOM, ANSWERING, types.int64, ANSWERS)
 
 
@@ -53,7 +54,8 @@ def _records(t_out, n_p, stages, room):
                     np.zeros((0, 3)), np.zeros(segment.N_COUNTERS, np.int64), no_steps(2, n_p))
     chain = kernel.ChainRecord(np.empty((room.phases, 3), np.int64), np.empty((room.phases, 2 + n_p)),
                                np.empty((room.samples, 3 + 3 * stages)), np.empty((room.phases, 4), np.int64),
-                               np.empty((room.phases, 3 + n_p)), np.empty(5 + 3 * stages), np.zeros(3, np.int64))
+                               np.empty((room.phases, 3 + n_p)), np.empty(5 + 3 * stages), np.zeros(4, np.int64),
+                               np.empty((room.phases, len(IMPACT_COLUMNS))))
     return record, chain
 
 

@@ -13,8 +13,10 @@ from collections import namedtuple
 import numpy as np
 from numba import types
 
+from tswm_runtime.chains.backlash import strike
 from tswm_runtime.hybrid.addressed import ADDRESSES, model_functions, segment_function
-from tswm_runtime.chains.rules import (NO_MODE, NONE, RESTING, SEVERAL, START, ChainFunctions, ChainTables,
+from tswm_runtime.chains.rules import (NO_MODE, NONE, RESTING, RESTING_GROUP, SEVERAL, START, ChainFunctions,
+                                             ChainTables,
                                              chain_work, decide, settle)
 from tswm_runtime.integration import segment
 from tswm_runtime.jit import cache_guard
@@ -34,20 +36,22 @@ TOO_MANY_EVENTS = -23
 CHATTERING = -24
 INCONSISTENT_START = -25  # D or the jam factor <= 0 where a mode begins
 RECORD_FULL = -26     # more phases, events or samples than the record holds: run again with more room
+GROUP_AT_REST = -27   # a group would stay at rest while the stage with the clearance is open: not supported yet
+IMPACT_JAMMED = -28   # the impulse cannot stop the flanks' approach (dnu/dP_n <= 0)
 MAX_SAME_TIME = 8     # decisions at one instant before the run stops
 
 #: Where the run writes (sizes from ``chains/run.py``): phases (mode, first sample, end of samples) and
 #: phase_f (t_start, t_end, p); samples (t, q0, v0, 3 stage forces per stage); events (guard, from, to,
 #: outcome) and event_f (t, q0, v0, p); trip (t, q0, v0, drive, stage forces, mode; t NaN: no cut);
-#: counts (phases, samples, events).
-ChainRecord = namedtuple("ChainRecord", "phases phase_f samples events event_f trip counts")
+#: counts (phases, samples, events, impacts); impacts (backlash.IMPACT_COLUMNS per impact, as many rows as events).
+ChainRecord = namedtuple("ChainRecord", "phases phase_f samples events event_f trip counts impacts")
 INT_MATRIX = types.int64[:, ::1]
-CHAIN_RECORD = types.NamedTuple((INT_MATRIX, MATRIX, MATRIX, INT_MATRIX, MATRIX, VECTOR, INTS), ChainRecord)
+CHAIN_RECORD = types.NamedTuple((INT_MATRIX, MATRIX, MATRIX, INT_MATRIX, MATRIX, VECTOR, INTS, MATRIX), ChainRecord)
 CHAIN_TABLES = types.NamedTuple((INTS, INT_MATRIX, *(types.int64,) * 10, types.float64, types.float64,
-                                 types.float64), ChainTables)
-#: run_chain_at(functions, chain functions (stage_forces, body_forces_into), tables, settings, y, p, record,
+                                 types.float64, INTS, *(types.int64,) * 6), ChainTables)
+#: run_chain_at(functions, chain functions (stage_forces, body_forces_into, impact), tables, settings, y, p, record,
 #: chain record, max_events) -> (status, t_stop)
-CHAIN_SIG = types.Tuple((types.int64, types.float64))(ADDRESSES, types.UniTuple(types.int64, 2), CHAIN_TABLES,
+CHAIN_SIG = types.Tuple((types.int64, types.float64))(ADDRESSES, types.UniTuple(types.int64, 3), CHAIN_TABLES,
                                                        SETTINGS, VECTOR, VECTOR, RECORD, CHAIN_RECORD, types.int64)
 
 
@@ -118,10 +122,11 @@ def _run(functions, chain_addresses, c, settings, y, p, record, rec, max_events,
     borrowed: handing them on to the segments, the decisions and the record costs no reference counting."""
     c, settings, y, p, record, rec, w, scratch = borrowed((c, settings, y, p, record, rec, w, scratch))
     fns, run_segment = model_functions(functions), segment_function(functions)
-    chain_fns = ChainFunctions(guards_at(chain_addresses[0]), guards_at(chain_addresses[1]))
+    chain_fns = ChainFunctions(guards_at(chain_addresses[0]), guards_at(chain_addresses[1]),
+                               guards_at(chain_addresses[2]))
     out, counters = record.out, record.counters
-    stages, n_guards = c.stages, c.guard_direction.shape[1]
-    rec.counts[0], rec.counts[1], rec.counts[2] = 0, 0, 0
+    stages, n_guards, n_states = c.stages, c.guard_direction.shape[1], y.size
+    rec.counts[0], rec.counts[1], rec.counts[2], rec.counts[3] = 0, 0, 0, 0
     rec.trip[0] = np.nan
     t, t_end = 0.0, settings.t_end
     outcome, mode = settle(fns, chain_fns, c, t, y, p, RESTING, START, w, rec.trip)
@@ -132,7 +137,7 @@ def _run(functions, chain_addresses, c, settings, y, p, record, rec, max_events,
             status = RECORD_FULL
             break
         if mode == NO_MODE:
-            status = INDETERMINATE if outcome == SEVERAL else UNDECIDED
+            status = INDETERMINATE if outcome == SEVERAL else GROUP_AT_REST if outcome == RESTING_GROUP else UNDECIDED
             break
         if mode == RESTING:
             t_cut = p[c.p_pick] + p[c.p_delay] if p[c.p_switch] == c.picked else np.inf
@@ -141,7 +146,8 @@ def _run(functions, chain_addresses, c, settings, y, p, record, rec, max_events,
             h = 0.0   # leaving rest: a step chosen afresh
             for r in range(out.t.size):
                 if out.t[r] >= t:
-                    out.y[r, 0], out.y[r, 1] = y[0], 0.0
+                    for j in range(n_states):
+                        out.y[r, j] = 0.0 if j % 2 == 1 else y[j]
             if t_cut >= t_end:
                 t = t_end
                 break
@@ -177,8 +183,12 @@ def _run(functions, chain_addresses, c, settings, y, p, record, rec, max_events,
             if status == FINISHED and seg_status != segment.REACHED_END:
                 status = seg_status
             break
-        if k == stages + 2:   # v0 reached 0: at rest exactly
+        if k == stages + 2:   # v0 reached 0: at rest exactly (the whole chain unless a stage is open)
             y[1] = 0.0
+            if n_states == 4 and mode != c.open_mode:
+                y[3] = 0.0
+        if c.open_mode >= 0 and mode == c.open_mode and k == stages + 5:   # the output group stopped
+            y[3] = 0.0
         if not _sample(chain_fns, rec, mode, t, y, p, w.forces):
             status = RECORD_FULL
             break
@@ -187,6 +197,17 @@ def _run(functions, chain_addresses, c, settings, y, p, record, rec, max_events,
             _event(rec, t, k, mode, NO_MODE, NONE, y, p)
             status = SINGULAR
             break
+        if c.open_mode >= 0 and mode == c.open_mode and (k == stages + 3 or k == stages + 4):   # the flanks meet
+            i_row = rec.counts[3]
+            rec.counts[3] = i_row + 1
+            struck, flight = strike(fns, chain_fns, c, 1 if k == stages + 3 else -1, t, y, p, settings.tol, w,
+                                    rec.impacts[i_row])
+            if not struck:
+                _event(rec, t, k, mode, NO_MODE, NONE, y, p)
+                status = IMPACT_JAMMED
+                break
+            if p[c.p_contact] == 0.0:   # a rebound: its first step short enough for the gap's guard to see it end
+                h = flight / 4.0 if flight < np.inf else 0.0
         outcome, new = settle(fns, chain_fns, c, t, y, p, mode, k, w, rec.trip)
         _event(rec, t, k, mode, new, outcome, y, p)
         if same >= MAX_SAME_TIME:
@@ -204,8 +225,8 @@ def run_chain_at(functions, chain_addresses, c, settings, y0, p, record, rec, ma
     later phase's value, rows after a stop NaN). Returns (status, t_stop). Its work arrays are made here
     and kept alive for ``_run``, which borrows them (``borrow``) with its arguments."""
     n_guards = c.guard_direction.shape[1]
-    w = chain_work(n_guards, c.stages, c.direction.size, p.size)
-    scratch = segment.segment_work(2, n_guards, 0, 0)
+    w = chain_work(n_guards, c.stages, c.direction.size, p.size, y0.size)
+    scratch = segment.segment_work(y0.size, n_guards, 0, 0)
     return _run(functions, chain_addresses, c, settings, y0.copy(), p, record, rec, max_events, w, scratch)
 
 
@@ -213,6 +234,7 @@ def run_chain_at(functions, chain_addresses, c, settings, y0, p, record, rec, ma
 def decide_at(functions, chain_addresses, c, t, y, p, current):
     """The compiled decision (``rules.decide``) called from Python: (outcome, mode) at (t, y) under p."""
     fns = model_functions(functions)
-    chain_fns = ChainFunctions(guards_at(chain_addresses[0]), guards_at(chain_addresses[1]))
-    w = chain_work(c.guard_direction.shape[1], c.stages, c.direction.size, p.size)
+    chain_fns = ChainFunctions(guards_at(chain_addresses[0]), guards_at(chain_addresses[1]),
+                               guards_at(chain_addresses[2]))
+    w = chain_work(c.guard_direction.shape[1], c.stages, c.direction.size, p.size, y.size)
     return decide(fns, chain_fns, c, t, y, p, current, w)

@@ -25,9 +25,10 @@ from tswm_runtime.jit.cache_guard import njit
 RESTING = -1          # the resting chain (no mode of the module)
 NO_MODE = -2          # no mode: the run stops
 START, CHECK = -1, -3  # the "guards" of the start and of the switch's check on entering a mode
-UNIQUE, CRITICAL, NONE, SEVERAL = 0, 1, 2, 3
-OUTCOMES = ("unique", "critical", "none", "several")
+UNIQUE, CRITICAL, NONE, SEVERAL, RESTING_GROUP = 0, 1, 2, 3, 4
+OUTCOMES = ("unique", "critical", "none", "several", "group at rest")
 SET_ROWS = 64         # rows of an interval set's work array (a merged set holds a few)
+FRAME = 11            # an impact's frame: the module's IMPACT_FRAME
 
 #: A chain module's numbers for the decision: per mode its direction, per mode and guard the guard's
 #: direction; the number of stages; the slots of p (filled by the module's prepare) of the stages' Psi_t, Psi_i
@@ -35,21 +36,25 @@ SET_ROWS = 64         # rows of an interval set's work array (a merged set holds
 #: switch (the stage it measures, -1 none; the slots of its delay, its state and pick-up time, of the seat's
 #: latch; its states).
 ChainTables = namedtuple("ChainTables", "direction guard_direction stages p_psi p_lever_in p_lever_out p_slack "
-                                        "switch_on p_delay p_switch p_pick p_seated armed picked tripped")
+                                        "switch_on p_delay p_switch p_pick p_seated armed picked tripped "
+                                        "mode_contact open_mode open_stage p_contact p_direction p_rho_sign p_speed_k")
+#: With a clearance (``backlash.py``): per mode the flank of the stage with the clearance it loads (+1 a, -1 b, 0
+#: for OPEN), the mode OPEN (-1: no clearance), the stage, the slots of the contact latch (+1, -1, 0 open), the
+#: groups' directions (two) and the stages' regime signs, and of v_k / v_0 of the rigid chain.
 
 #: What a decision writes: guard values, a rate, the bodies' forces, interval sets (two and a cone),
 #: the candidates' modes and a_0, p before the latches moved, the stage forces at a cut.
-ChainWork = namedtuple("ChainWork", "g f force set_a set_b cone modes accel before forces")
+ChainWork = namedtuple("ChainWork", "g f force set_a set_b cone modes accel before forces frame y")
 
 #: The chain module's functions a decision calls besides rhs and guards.
-ChainFunctions = namedtuple("ChainFunctions", "stage_forces body_forces")
+ChainFunctions = namedtuple("ChainFunctions", "stage_forces body_forces impact")
 
 
 @njit(refcounted=True, error_model="numpy")
-def chain_work(n_guards, n_stages, n_modes, n_params):
-    return ChainWork(np.empty(n_guards), np.empty(2), np.empty(n_stages + 1), np.empty((SET_ROWS, 2)),
+def chain_work(n_guards, n_stages, n_modes, n_params, n_states):
+    return ChainWork(np.empty(n_guards), np.empty(n_states), np.empty(n_stages + 1), np.empty((SET_ROWS, 2)),
                      np.empty((SET_ROWS, 2)), np.empty((2, 2)), np.empty(n_modes, np.int64), np.empty(n_modes),
-                     np.empty(n_params), np.empty(3 * n_stages))
+                     np.empty(n_params), np.empty(3 * n_stages), np.empty(FRAME), np.empty(n_states))
 
 
 @njit(error_model="numpy")
@@ -125,6 +130,18 @@ def _affine(xs, n, offset, scale, out):
 
 
 @njit(error_model="numpy")
+def _one_side(s, n, side):
+    """The n intervals of s cut to x >= 0 (side > 0) or x <= 0 (side < 0); returns the count left."""
+    m = 0
+    for i in range(n):
+        lo, hi = (max(s[i, 0], 0.0), s[i, 1]) if side > 0 else (s[i, 0], min(s[i, 1], 0.0))
+        if lo <= hi:
+            s[m, 0], s[m, 1] = lo, hi
+            m += 1
+    return m
+
+
+@njit(error_model="numpy")
 def rest_holds(c, p, force, w):
     """Whether the resting chain holds under the bodies' forces ``force`` (its numbers from p): the
     stage-by-stage propagation of ``chain_decision.rest`` from body 0 meets what the last body's load and
@@ -137,6 +154,8 @@ def rest_holds(c, p, force, w):
         n_cone = _forward_cone(p[c.p_psi + 2 * i], p[c.p_psi + 2 * i + 1], w.cone)
         n = _scaled(a, n, w.cone, n_cone, b)
         n = _affine(b, n, 0.0, p[c.p_lever_out + i], a)
+        if i == c.open_stage - 1:   # a stage with a clearance pushes on its one flank in contact only
+            n = _one_side(a, n, p[c.p_contact])
         if i == stages - 1:
             lo, hi = -force[stages] - p[c.p_slack], -force[stages] + p[c.p_slack]
             for j in range(n):
@@ -153,13 +172,19 @@ def rest_holds(c, p, force, w):
 def decide(fns, chain_fns, c, t, y, p, current, w):
     """(outcome, mode) at (t, y) under latches p: the candidates in the direction of v0 (both at rest) and
     rest; ``current`` is the mode the event ended (a CRITICAL outcome takes another). Mode NO_MODE for
-    NONE and SEVERAL."""
+    NONE and SEVERAL. With a clearance: the open stage's phase (``open_phase``) while the contact latch is 0,
+    else the modes loading the flank in contact, rest with that stage pushing on it, and when neither holds the
+    stage opening (``opening``)."""
+    if c.open_mode >= 0 and p[c.p_contact] == 0.0:
+        return open_phase(fns, chain_fns, c, t, y, p, w)
     v = y[1]
     stages = c.stages
     n = 0
     for m in range(c.direction.size):
         d = c.direction[m]
         if not (v == 0.0 or (v > 0.0) == (d > 0)):
+            continue
+        if c.open_mode >= 0 and (m == c.open_mode or c.mode_contact[m] != p[c.p_contact]):
             continue
         fns.guards(m, t, y, p, w.g)
         fns.rhs(m, t, y, p, w.f)
@@ -174,7 +199,7 @@ def decide(fns, chain_fns, c, t, y, p, current, w):
         chain_fns.body_forces(0, t, y, p, w.force)
         stuck = rest_holds(c, p, w.force, w)
     if n + stuck == 0:
-        return NONE, NO_MODE
+        return opening(fns, chain_fns, c, t, y, p, w) if c.open_mode >= 0 else (NONE, NO_MODE)
     if n + stuck == 1:
         return UNIQUE, RESTING if stuck else w.modes[0]
     if not stuck:
@@ -186,6 +211,123 @@ def decide(fns, chain_fns, c, t, y, p, current, w):
                 if w.modes[j] != current:
                     return CRITICAL, w.modes[j]
     return SEVERAL, NO_MODE
+
+
+@njit(error_model="numpy")
+def _free(c, p, group):
+    """Whether a group's direction changes none of its forces while the stage with the clearance is open: it holds
+    no closed stage and (the output group) the last body feels no valve friction."""
+    if group == 0:
+        return c.open_stage == 1
+    return c.open_stage == c.stages and p[c.p_slack] == 0.0
+
+
+@njit(error_model="numpy")
+def _open_candidate(fns, c, t, y, p, w, combo):
+    """Set the open phase's latches to ``combo`` (bit 0 and 1: a group at rest moves backward; bit 2 + i: stage
+    i + 1 inverse-tractive); whether it is consistent: no closed stage jams or pulls (N_i >= 0), and a group
+    leaving rest accelerates in its direction. A free group's direction is 0 (its forces do not depend on it;
+    its speed's guard stays 0, never an event)."""
+    for g in range(2):
+        v = y[1] if g == 0 else y[3]
+        if _free(c, p, g) or (g == 1 and p[c.p_direction + 2] > 0.0):
+            p[c.p_direction + g] = 0.0
+        else:
+            p[c.p_direction + g] = (1.0 if v > 0.0 else -1.0) if v != 0.0 else (-1.0 if combo >> g & 1 else 1.0)
+    for i in range(c.stages):
+        p[c.p_rho_sign + i] = -1.0 if combo >> (2 + i) & 1 else 1.0
+    fns.guards(c.open_mode, t, y, p, w.g)
+    ok = w.g[1] > 0.0
+    for i in range(c.stages):
+        ok = ok and not w.g[2 + i] < 0.0
+    fns.rhs(c.open_mode, t, y, p, w.f)
+    for g in range(2):
+        v, a = (y[1], w.f[1]) if g == 0 else (y[3], w.f[3])
+        if v == 0.0 and not _free(c, p, g) and not (g == 1 and p[c.p_direction + 2] > 0.0):
+            ok = ok and p[c.p_direction + g] * a > 0.0
+    return ok
+
+
+@njit(error_model="numpy")
+def _held(chain_fns, c, t, y, p, w):
+    """Whether the output group, at rest while the stage is open, is the last body alone and its valve friction
+    holds it: its force without the friction within the friction's magnitude (those forces stay while it rests:
+    they depend on its coordinate only)."""
+    if y[3] != 0.0 or c.open_stage != c.stages or p[c.p_slack] == 0.0:
+        return False
+    chain_fns.body_forces(0, t, y, p, w.force)
+    return abs(w.force[c.stages]) <= p[c.p_slack]
+
+
+@njit(error_model="numpy")
+def _open_candidates(fns, c, t, y, p, w):
+    """(how many of the open phase's candidates hold, the first, whether they agree in both accelerations, whether
+    a group that is not free is at rest)."""
+    found, first, a_in, a_out, agree = 0, -1, 0.0, 0.0, True
+    still = False
+    for combo in range(1 << (2 + c.stages)):
+        if combo >> (2 + c.open_stage - 1) & 1:
+            continue
+        skip = False
+        for g in range(2):
+            v = y[1] if g == 0 else y[3]
+            skip = skip or (combo >> g & 1 == 1 and (v != 0.0 or _free(c, p, g)))
+        if skip:
+            continue
+        still = still or (y[1] == 0.0 and not _free(c, p, 0)) or (y[3] == 0.0 and not _free(c, p, 1))
+        if _open_candidate(fns, c, t, y, p, w, combo):
+            if found == 0:
+                first, a_in, a_out = combo, w.f[1], w.f[3]
+            else:
+                big = max(1.0, abs(a_in), abs(a_out))
+                agree = agree and abs(w.f[1] - a_in) <= SAME * big and abs(w.f[3] - a_out) <= SAME * big
+            found += 1
+    return found, first, agree, still
+
+
+@njit(error_model="numpy")
+def open_phase(fns, chain_fns, c, t, y, p, w):
+    """The open phase's latches at (t, y): each group's direction (its speed's sign; at rest, the way it leaves
+    rest), each closed stage's regime, such that ``_open_candidate`` holds; (UNIQUE, OPEN) when one does (or
+    several that agree in both accelerations), (NONE, NO_MODE) when none, (RESTING_GROUP, NO_MODE) when a group
+    that is not free would have to stay at rest (its own rest decision: not supported yet, but for the last body
+    alone held by its valve friction, ``_held``: latch held_out), (SEVERAL, NO_MODE)."""
+    p[c.p_direction + 2] = 0.0
+    found, first, agree, still = _open_candidates(fns, c, t, y, p, w)
+    if found == 0 and _held(chain_fns, c, t, y, p, w):
+        p[c.p_direction + 2] = 1.0   # the last body stays where it is: the input group alone moves
+        found, first, agree, still = _open_candidates(fns, c, t, y, p, w)
+    if found == 0:
+        return (RESTING_GROUP if still else NONE), NO_MODE
+    if found > 1 and not agree:
+        return SEVERAL, NO_MODE
+    _open_candidate(fns, c, t, y, p, w, first)
+    return UNIQUE, c.open_mode
+
+
+@njit(error_model="numpy")
+def separating(chain_fns, c, flank, t, y, p, w):
+    """f g'', the open stage's normal acceleration away from ``flank`` (+1 a, -1 b) in the open phase's latches: the
+    impact frame's normal speed nu = f g' (linear in the groups' speeds) at their accelerations (w.f, from rhs)."""
+    copy_into(w.y, y)
+    w.y[1], w.y[3] = w.f[1], w.f[3]
+    chain_fns.impact(flank, t, w.y, p, w.frame)
+    return w.frame[0]
+
+
+@njit(error_model="numpy")
+def opening(fns, chain_fns, c, t, y, p, w):
+    """No mode loading the flank in contact holds and the chain cannot rest: the stage opens when its open phase
+    is consistent and its gap's acceleration parts the flanks; else (NONE, NO_MODE) with the contact kept."""
+    flank = p[c.p_contact]
+    p[c.p_contact] = 0.0
+    outcome, mode = open_phase(fns, chain_fns, c, t, y, p, w)
+    if outcome == UNIQUE:
+        fns.rhs(c.open_mode, t, y, p, w.f)
+        if separating(chain_fns, c, int(flank), t, y, p, w) > 0.0:
+            return UNIQUE, mode
+    p[c.p_contact] = flank
+    return NONE, NO_MODE
 
 
 @njit(error_model="numpy")
@@ -224,8 +366,8 @@ def cut(chain_fns, c, mode, t, y, w, trip):
 
 @njit(error_model="numpy")
 def settle(fns, chain_fns, c, t, y, p, mode, guard, w, trip):
-    """The latches after ``guard`` fired in ``mode`` (the seat's contact flips; the switch moves), then the
-    next mode; a switch that picks up with no delay, or sees its setting already where the chain starts
+    """The latches after ``guard`` fired in ``mode`` (the seat's contact flips; the switch moves; the stage with a
+    clearance opens where its normal force reached 0), then the next mode; a switch that picks up with no delay, or sees its setting already where the chain starts
     or comes to rest, cuts the motor at once and the mode is decided again. The first cut is written
     into trip (trip[0] NaN until then). Returns (outcome, mode)."""
     n_guards = w.g.size
@@ -235,6 +377,8 @@ def settle(fns, chain_fns, c, t, y, p, mode, guard, w, trip):
     if (guard == n_guards - 2 or guard == n_guards - 1) and switched(fns, c, mode, guard, t, y, p, w):
         if np.isnan(trip[0]):
             cut(chain_fns, c, mode, t, y, w, trip)
+    if c.open_mode >= 0 and 0 <= mode != c.open_mode and guard == 1 + c.open_stage:
+        p[c.p_contact] = 0.0   # the normal force of the stage with the clearance reached 0: its flanks part
     outcome, new = decide(fns, chain_fns, c, t, y, p, mode, w)
     if new != NO_MODE and (guard == START or new == RESTING):
         copy_into(w.before, p)

@@ -46,6 +46,7 @@ coldstart.announce(("integrate", "chain"))  # before the next imports compile th
 
 from tswm_runtime.chains import rules as compiled  # noqa: E402
 from tswm_runtime.chains import kernel  # noqa: E402
+from tswm_runtime.chains.backlash import IMPACT_COLUMNS  # noqa: E402
 from tswm_runtime.hybrid import entry  # noqa: E402
 from tswm_runtime.integration import segment  # noqa: E402
 from tswm_runtime.jit.cache_guard import entry_point  # noqa: E402
@@ -98,6 +99,10 @@ class ChainEvent:
 
     @cached_property
     def decision(self) -> Decision:
+        if self.given is None and self.at and clearance_stage(self.at[0]):
+            k = clearance_stage(self.at[0])
+            return Decision(self.outcome, (), None, f"decided in compiled code with stage {k}'s clearance (the modes "
+                            "loading its flank in contact, rest with it pushing on that flank, or its flanks apart)")
         return self.given if self.given is not None else decide(self.seen[0], self.t, *self.seen[1:])
 
 
@@ -128,6 +133,14 @@ class ChainRun:
                 for j, (mode, s0, s1) in enumerate(chain.phases[:n_phases].tolist())]
 
     @cached_property
+    def impacts(self) -> list[dict]:
+        """The flanks' impacts of the stage with a clearance (backlash.IMPACT_COLUMNS; flank "a" or "b", closed:
+        whether the stage stayed closed after it)."""
+        rows = self.record.impacts[:int(self.record.counts[3])].tolist()
+        return [{**dict(zip(IMPACT_COLUMNS, row)), "flank": "a" if row[1] > 0 else "b", "closed": row[5] > 0}
+                for row in rows]
+
+    @cached_property
     def events(self) -> list[ChainEvent]:
         module, chain = self._module, self.record
         event_f, n_events = chain.event_f, int(chain.counts[2])
@@ -156,6 +169,10 @@ def latches(module, y: np.ndarray, voltage: float | None = None, values: np.ndar
         remember(prepared, voltage, known, 64)
     p = known.copy()
     p[module.P_SEATED] = float(module.HAS_SEAT and p[module.P_SPEED + module.STAGES] * y[0] >= p[module.P_SEAT])
+    k = clearance_stage(module)
+    if k:   # the stage with the clearance closed on flank a (gap 0), on flank b (gap = clearance), else open
+        gap, clearance = p[getattr(module, f"V_gap_{k}")], p[getattr(module, f"V_clearance_{k}")]
+        p[module.P_CONTACT] = 1.0 if gap <= 0.0 else -1.0 if gap >= clearance else 0.0
     return p
 
 
@@ -206,7 +223,7 @@ class _ModuleParts(NamedTuple):
     module: object
     digest: str
     tables: compiled.ChainTables
-    functions: tuple[int, int]
+    functions: tuple[int, int, int]
     event_log: EventLog
     mon: np.ndarray
     no_steps: tuple
@@ -224,16 +241,23 @@ def _parts(module) -> _ModuleParts:
         ints = dict(stages=module.STAGES, p_psi=module.P_PSI, p_lever_in=module.P_LEVER_IN,
                     p_lever_out=module.P_LEVER_OUT, p_slack=module.P_SLACK, switch_on=module.SWITCH_ON,
                     p_delay=module.P_DELAY, p_switch=module.P_SWITCH, p_pick=module.P_PICK, p_seated=module.P_SEATED)
+        k = clearance_stage(module)
+        flank = {"a": 1, "b": -1}
         tables = compiled.ChainTables(
             direction=np.array(module.MODE_DIRECTION, np.int64),
             guard_direction=np.array(module.GUARD_DIRECTIONS, np.int64).reshape(n_modes, len(module.GUARDS)),
             **{k: int(v) for k, v in ints.items()}, armed=float(module.ARMED), picked=float(module.PICKED),
-            tripped=float(module.TRIPPED))
+            tripped=float(module.TRIPPED),
+            mode_contact=np.array([flank[f[k - 1]] if k and f else 0 for f in module.MODE_FLANKS], np.int64),
+            open_mode=module.OPEN if k else -1, open_stage=k, p_contact=module.P_CONTACT if k else 0,
+            p_direction=module.P_DIRECTION_IN if k else 0, p_rho_sign=module.P_RHO_SIGN if k else 0,
+            p_speed_k=module.P_SPEED + k if k else 0)
         no_steps = (np.empty((0, 4)), np.empty((0, 2), np.int64), np.empty((0, 2)), np.empty((0, 2)),
                     np.empty((0, 3, 4)), np.empty(0, np.int64), np.empty((0, n_p)))
         known = _PARTS[module.__name__] = _ModuleParts(
             module, module.SCENE_DIGEST, tables,
-            (address(module.stage_forces, GUARDS_SIG), address(module.body_forces_into, GUARDS_SIG)),
+            (address(module.stage_forces, GUARDS_SIG), address(module.body_forces_into, GUARDS_SIG),
+             address(module.impact, GUARDS_SIG)),
             EventLog(np.empty(1), np.empty((1, 4), np.int64), np.empty((1, 2)), np.empty((1, 4))), np.zeros((0, 3)),
             no_steps, np.empty(0, np.int64), np.empty((0, n_p)), {})
     return known
@@ -242,14 +266,29 @@ def _parts(module) -> _ModuleParts:
 _PARTS: dict = {}
 
 
+def clearance_stage(module) -> int:
+    """The stage with a clearance (1-based), 0 for a rigid chain."""
+    return getattr(module, "CLEARANCE_STAGE", 0)
+
+
+def start_state(module, v0: float, p: np.ndarray) -> np.ndarray:
+    """The states at t = 0: q0 = 0 and v0; with a clearance in stage k also qk = 0 and vk = c_k v0 (the chain
+    moves as one body: the gap's rate 0)."""
+    y0 = np.zeros(len(module.STATES))
+    y0[1] = v0
+    if y0.size == 4:
+        y0[3] = p[module.P_SPEED + clearance_stage(module)] * v0
+    return y0
+
+
 def chain_tables(module) -> compiled.ChainTables:
     """The compiled decision's tables of a chain module: its modes and the slots of p it reads (the numbers
     themselves are in each run's p)."""
     return _parts(module).tables
 
 
-def chain_functions(module) -> tuple[int, int]:
-    """The addresses of the module's stage_forces and body_forces_into, as the kernel takes them."""
+def chain_functions(module) -> tuple[int, int, int]:
+    """The addresses of the module's stage_forces, body_forces_into and impact, as the kernel takes them."""
     return _parts(module).functions
 
 
@@ -267,14 +306,15 @@ def _record(module, t_out: np.ndarray, phases: int, samples: int) -> tuple[Recor
     """A run's records: its own output rows, counters and chain record, the module's shared parts besides."""
     parts = _parts(module)
     n_p, width = len(module.P_NAMES), 3 + 3 * module.STAGES
-    rows = np.empty((t_out.size, 2))
+    rows = np.empty((t_out.size, len(module.STATES)))
     rows.fill(np.nan)   # np.full costs three times as much
     out = Outputs(t_out, rows, parts.out_mode, parts.out_p)
     record = Record(out, parts.event_log, parts.mon, np.zeros(segment.N_COUNTERS, np.int64),
                     StepLog(*parts.no_steps, np.zeros(2, np.int64)))
     chain = kernel.ChainRecord(np.empty((phases, 3), np.int64), np.empty((phases, 2 + n_p)),
                                np.empty((samples, width)), np.empty((phases, 4), np.int64),
-                               np.empty((phases, 3 + n_p)), np.empty(5 + 3 * module.STAGES), np.zeros(3, np.int64))
+                               np.empty((phases, 3 + n_p)), np.empty(5 + 3 * module.STAGES), np.zeros(4, np.int64),
+                               np.empty((phases, len(IMPACT_COLUMNS))))
     return record, chain
 
 
@@ -285,14 +325,14 @@ def run_chain(module, *, t_end: float, v0: float, rtol: float, atol: float, t_ou
     events; ``voltage`` (U / U_n) replaces the scene's motor voltage, ``values`` (one per PARAM_NAMES, SI,
     checked by the caller) the scene's values."""
     t_out = np.ascontiguousarray(t_out, dtype=np.float64)
-    y0 = np.array([0.0, float(v0)])
-    settings = entry.settings(int(method), 2, t_end=float(t_end), rtol=float(rtol), atol=float(atol),
+    start = latches(module, np.zeros(2), voltage, values)   # the latches at q0 = 0 (y0's)
+    y0 = start_state(module, float(v0), start)
+    settings = entry.settings(int(method), y0.size, t_end=float(t_end), rtol=float(rtol), atol=float(atol),
                               max_steps=int(max_steps))
     args = (entry.functions(method, module), chain_functions(module), chain_tables(module), settings, y0)
     phases = first_room(max_events)
     while True:   # a record too small for the run's phases and samples: again with twice the room
-        p = latches(module, y0, voltage, values)
-        start = p.copy()
+        p = start.copy()
         record, chain = _record(module, t_out, phases, samples_room(phases, t_out.size))
         code, t_stop = entry_point(kernel.run_chain_at)(*args, p, record, chain, int(max_events))   # typed as built
         if code != kernel.RECORD_FULL:
@@ -310,8 +350,10 @@ def run_status(code: int) -> str:
         return "finished"
     if code == kernel.INDETERMINATE:
         return "indeterminate"
-    if code in (kernel.UNDECIDED, kernel.SINGULAR, kernel.INCONSISTENT_START):
+    if code in (kernel.UNDECIDED, kernel.SINGULAR, kernel.INCONSISTENT_START, kernel.IMPACT_JAMMED):
         return "inconsistent"
+    if code == kernel.GROUP_AT_REST:
+        return "group-at-rest"
     return STATUS.get(code, f"status {code}")
 
 
@@ -321,7 +363,10 @@ def _result(module, code: int, t_stop: float, record: Record, chain: kernel.Chai
     if code == kernel.FINISHED:
         return run
     last = run.events[-1]
-    if code in (kernel.UNDECIDED, kernel.INDETERMINATE):
+    if code in (kernel.UNDECIDED, kernel.INDETERMINATE) and clearance_stage(module):
+        run.message = (f"{'several modes hold' if code == kernel.INDETERMINATE else 'no mode holds'} at "
+                       f"t = {t_stop:.9g} s (the chain with stage {clearance_stage(module)}'s clearance)")
+    elif code in (kernel.UNDECIDED, kernel.INDETERMINATE):
         run.message = last.decision.reason
     elif code == kernel.SINGULAR:
         run.message = (f"{last.guard} reached 0 in mode {module.MODES[last.from_mode]} at t = {t_stop:.9g} s: no "
@@ -331,6 +376,12 @@ def _result(module, code: int, t_stop: float, record: Record, chain: kernel.Chai
     elif code == kernel.INCONSISTENT_START:
         run.message = (f"D or the jam factor is <= 0 where mode {module.MODES[run.phases[-1].mode]} begins at "
                        f"t = {t_stop:.9g} s: no contact force keeps the stages together")
+    elif code == kernel.GROUP_AT_REST:
+        run.message = (f"a group of bodies comes to rest at t = {t_stop:.9g} s while stage "
+                       f"{clearance_stage(module)}'s flanks are apart: its own rest (stick) is not decided yet")
+    elif code == kernel.IMPACT_JAMMED:
+        run.message = (f"stage {clearance_stage(module)}'s flanks meet at t = {t_stop:.9g} s and the impulse cannot "
+                       "stop their approach (the effective masses and friction jam the impact)")
     elif code == kernel.TOO_MANY_EVENTS:
         run.message = f"{len(run.events)} events"
     elif code == kernel.CHATTERING:

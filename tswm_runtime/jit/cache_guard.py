@@ -31,8 +31,8 @@ KERNEL_SOURCES = ("jit/cache_guard.py", "jit/borrow.py", "jit/structures.py", "i
                   "integration/single.py", "integration/painleve.py", "integration/steplog.py", "integration/steady.py",
                   "hybrid/machine.py", "hybrid/segments.py", "hybrid/addressed.py", "hybrid/impact.py", "hybrid/batch.py",
                   "hybrid/rows.py", "hybrid/entry.py",
-                  "jit/addresses.py", "jit/linking.py", "jit/arrays.py", "chains/rules.py", "chains/kernel.py",
-                  "chains/answers.py")
+                  "jit/addresses.py", "jit/linking.py", "jit/arrays.py", "chains/rules.py", "chains/backlash.py",
+                  "chains/kernel.py", "chains/answers.py")
 
 
 class CacheIOWarning(UserWarning):

@@ -102,7 +102,8 @@ class ChainResult:
         return {"scene": self.scene, "status": self.status, "message": self.message, "t_stop": self.t_stop,
                 "stages": [asdict(s) for s in self.stages], "events": [dict(e) for e in self.events],
                 "n_steps": self.n_steps,
-                "answers": self.answers}
+                "answers": self.answers,
+                **({"impacts": self.run.impacts} if getattr(self.module, "CLEARANCE_STAGE", 0) else {})}
 
 
 def settings(module: ModuleType, overrides: dict) -> dict:
@@ -196,18 +197,48 @@ def plot(result: ChainResult, module: ModuleType, path) -> object:
     t, q0, v0, forces = result.samples
     stages = [(f"stage {k + 1} ({module.STAGE_KINDS[k]})", UNITS[module.BODY_MOTIONS[k]],
                UNITS[module.BODY_MOTIONS[k + 1]]) for k in range(module.STAGES)]
-    return plot_stages(path, f"{module.SCENE}: {result.status}", t, speed_factor(module, result.p) * q0, v0, forces,
-                       stages, result.trip["t"] if result.trip else None)
+    travel, gap = speed_factor(module, result.p) * q0, None
+    k = getattr(module, "CLEARANCE_STAGE", 0)
+    if k:   # the last body moves with body k, not with q0: its travel and the gap from the output rows
+        rows = result.run.t
+        last = result.p[module.P_SPEED + module.STAGES] / result.p[module.P_SPEED + k] * result.run.y[:, 2]
+        travel, gap = np.interp(t, rows, last), (k - 1, rows, gaps(module, result))
+    return plot_stages(path, f"{module.SCENE}: {result.status}", t, travel, v0, forces, stages,
+                       result.trip["t"] if result.trip else None, gap)
 
 
-def _regime(module: ModuleType, mode: int, k: int) -> tuple[str, str]:
-    return ("resting", "") if mode == RESTING else (module.MODE_REGIMES[mode][k], module.MODE_FLANKS[mode][k])
+def gaps(module: ModuleType, result: ChainResult) -> np.ndarray:
+    """The normal gap of the stage with a clearance at the output rows (NaN after a stop): the module's open-phase
+    guard gap_a, which depends on the coordinates and the scene's values only."""
+    g, index, p = np.empty(len(module.GUARDS)), module.GUARDS.index("gap_a"), result.p.copy()
+    out = np.full(result.run.t.size, np.nan)
+    for i, (t, y) in enumerate(zip(result.run.t.tolist(), result.run.y)):
+        if np.isfinite(y).all():
+            module.guards(module.OPEN, t, np.ascontiguousarray(y), p, g)
+            out[i] = g[index]
+    return out
+
+
+def _regime(module: ModuleType, phase, k: int) -> tuple[str, str]:
+    """Stage k's (0-based) regime and flank in a phase: resting, open (the stage with the clearance while its
+    flanks are apart; the other stages' regimes then are the phase's latches), or the mode's."""
+    mode = phase.mode
+    if mode == RESTING:
+        return "resting", ""
+    if mode == getattr(module, "OPEN", None):
+        if k + 1 == module.CLEARANCE_STAGE:
+            return "open", ""
+        p = phase.latches
+        sign = p[module.P_RHO_SIGN + k]
+        direction = p[module.P_DIRECTION_IN if k + 1 < module.CLEARANCE_STAGE else module.P_DIRECTION_OUT]
+        return ("tractive" if sign > 0 else "inverse-tractive"), ("a" if sign * direction > 0 else "b")
+    return module.MODE_REGIMES[mode][k], module.MODE_FLANKS[mode][k]
 
 
 def _stage(module: ModuleType, run: ChainRun, k: int, peaks: dict) -> StageSummary:
     phases: list[StagePhase] = []
     for phase in run.phases:
-        regime, flank = _regime(module, phase.mode, k)
+        regime, flank = _regime(module, phase, k)
         if phases and (phases[-1].regime, phases[-1].flank) == (regime, flank):
             phases[-1] = StagePhase(regime, flank, phases[-1].t_start, phase.t_end)
         else:
@@ -259,6 +290,20 @@ def _events(module: ModuleType, run: ChainRun) -> tuple[EventRow, ...]:
     return tuple(EventRow(module, e) for e in run.events)
 
 
+def impact_lines(run: ChainRun, module: ModuleType) -> list[str]:
+    """The impacts of the stage with a clearance: time, flank, normal speed of approach and of rebound at the
+    flank, kinetic energy lost, and whether the stage closed; nothing for a rigid chain."""
+    k = getattr(module, "CLEARANCE_STAGE", 0)
+    if not k:
+        return []
+    lines = [f"  stage {k} impacts ({len(run.impacts)}):"]
+    for row in run.impacts:
+        lines.append(f"    t = {row['t']:.9g} s on flank {row['flank']}: normal speed {row['nu before']:.6g} -> "
+                     f"{row['nu after']:.6g} (SI), energy lost {row['energy lost']:.6g} J, "
+                     + ("closed" if row["closed"] else "rebounds"))
+    return lines
+
+
 def summary(result: ChainResult, module: ModuleType) -> list[str]:
     """The run at a glance, as printed by ``tswm simulate``: status, per stage its regimes, switch
     times and force maxima, the events with the decisions' outcomes."""
@@ -273,6 +318,7 @@ def summary(result: ChainResult, module: ModuleType) -> list[str]:
             shown = "- (never slid)" if peak is None else f"{abs(peak.value):.6g} {unit} at t = {peak.t:.6g} s" + (
                 f" (the force is {peak.value:.6g} {unit})" if peak.value < 0 else "")
             lines.append(f"    max |{name} force| while sliding: {shown}")
+    lines += impact_lines(result.run, module)
     lines += drive_train_lines(result.answers, module)
     lines.append(f"  decisions ({len(result.events)}):")
     for e in result.events:

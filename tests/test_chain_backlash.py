@@ -1,0 +1,242 @@
+"""A chain with a clearance in one stage, run (tswm_runtime/chains/kernel.py, backlash.py) against closed forms, the
+restitution law and scipy's solve_ivp on equations written by hand.
+
+The chain: three bodies on two plain wedges (levers 1: x1 = q_{k-1}, x2 = q_k; body 1 moves tan(g1) times body 0,
+stage 2's gap g = gap0 + q2 cos(g2) - q1 sin(g2)), the clearance in stage 2. Open: bodies 0 and 1 move together
+through stage 1 (a0 = F0 / (M0 + M1 tan(g1) tan(g1 + rho1)), body 1's force 0), body 2 alone (a2 = F2 / M2); the
+impact: group 0 reduced to x1 by its response to an impulse there (m1 = 1 / (tan(g1) dv0) with dv0 the speed change of
+body 0 for a unit impulse on body 1 through the stage's FTF), body 2 is m2 = M2, the flank frame's inverse mass W.
+"""
+import math
+
+import numpy as np
+import pytest
+from scipy.integrate import solve_ivp
+
+from derivation.chain.scene import parse_chain
+from tswm_runtime.hybrid.impact import collide
+from tswm_runtime.simulation.chain import simulate_chain, summary
+
+DEG = math.pi / 180
+G1, G2 = 30 * DEG, 40 * DEG
+M = (1.0, 2.0, 3.0)
+
+
+def _scene(name, *, mu=0.0, e=0.5, clearance="1 mm", gap="0.5 mm", f0=10.0, f2=-2.0, stiffness=0.0, v0=0.0,
+           t_end=0.3, valve=""):
+    return (f'name = "{name}"\n[[stage]]\nkind = "wedge"\ngamma = "30 deg"\nmu = {mu!r}\n'
+            f'[[stage]]\nkind = "wedge"\ngamma = "40 deg"\nmu = {mu!r}\nclearance = "{clearance}"\nrestitution = {e!r}\n'
+            f'[[body]]\nmass = "1 kg"\nforce = "{f0!r} N"\n[[body]]\nmass = "2 kg"\nforce = "0 N"\n'
+            f'[[body]]\nmass = "3 kg"\nforce = "{f2!r} N"\nstiffness = "{stiffness!r} N/m"\n{valve}'
+            f'[run]\nt_end = {t_end!r}\nv0 = {v0!r}\ngap_2 = "{gap}"\nrtol = 1e-10\natol = 1e-12\n')
+
+
+def _open_accels(mu, f0, f2):
+    """(a0, a2, g''): the groups' accelerations while stage 2 is open (stage 1 sliding tractive forward), the gap's."""
+    rho1 = math.atan(mu)
+    a0 = f0 / (M[0] + M[1] * math.tan(G1) * math.tan(G1 + rho1))
+    a2 = f2 / M[2]
+    return a0, a2, a2 * math.cos(G2) - math.tan(G1) * a0 * math.sin(G2)
+
+
+def _masses(mu):
+    """(m1, m2): the effective masses at stage 2's x1 (bodies 0 and 1 through stage 1 sliding tractive) and x2."""
+    rho1 = math.atan(mu)
+    dv0 = math.tan(G1 + rho1) / (M[0] + M[1] * math.tan(G1) * math.tan(G1 + rho1))
+    return 1.0 / (math.tan(G1) * dv0), M[2]
+
+
+def _hand_impact(mu, e, v0, v2, flank=1.0):
+    """Stage 2's impact by hand: the frame (nu, s) of x1 = tan(g1) v0, x2 = v2, W of the two effective masses, Routh's
+    process (collide) with tan(rho2) and e; body 2 takes P_n f n + P_t t, body 1's side the opposite, along each guide.
+    Returns (v0 after, v2 after, nu before, nu after, energy lost)."""
+    m1, m2 = _masses(mu)
+    s2, c2 = math.sin(G2), math.cos(G2)
+    x1 = math.tan(G1) * v0
+    nu, slip = flank * (v2 * c2 - x1 * s2), v2 * s2 + x1 * c2
+    w_nt = flank * s2 * c2 * (1 / m2 - 1 / m1)
+    p_n, p_t, nu_after, _, lost, _ = collide(nu, slip, c2**2 / m2 + s2**2 / m1, w_nt, s2**2 / m2 + c2**2 / m1, mu, e)
+    x1_after = x1 - (flank * p_n * s2 - p_t * c2) / m1
+    return x1_after / math.tan(G1), v2 + (flank * p_n * c2 + p_t * s2) / m2, nu, nu_after, lost
+
+
+def _kinetic(v0, v2):
+    return 0.5 * (M[0] * v0**2 + M[1] * (math.tan(G1) * v0)**2 + M[2] * v2**2)
+
+
+def test_frictionless_gap_closes_at_the_quadratic_time_and_bounces_by_newtons_law(chain_module):
+    """Started open (gap 0.5 mm) at rest, driven: g(t) = g0 + g'' t^2 / 2 closes at sqrt(-2 g0 / g''); each impact is
+    Newton's restitution of the two effective masses; the bounces end at their accumulation point t1 + 2 e |nu1| /
+    (|g''| (1 - e)) within the tolerance of the settling rule, the stage then closed (tractive on flank a); the
+    kinetic energy at the end equals the forces' work less the impacts' losses, each (1 - e^2)/2 m_n nu^2."""
+    e = 0.5
+    module = chain_module(_scene("gap-newton", e=e))
+    result = simulate_chain(module, points=5)
+    assert result.status == "finished"
+    impacts = result.run.impacts
+    a0, a2, gap_accel = _open_accels(0.0, 10.0, -2.0)
+    t1 = math.sqrt(-2 * 0.5e-3 / gap_accel)
+    first = impacts[0]
+    assert first["t"] == pytest.approx(t1, rel=1e-9) and first["flank"] == "a"
+    v0, v2 = a0 * t1, a2 * t1
+    assert first["v0 before"] == pytest.approx(v0, rel=1e-9) and first["vk before"] == pytest.approx(v2, rel=1e-9)
+    m1, m2 = _masses(0.0)
+    nu = gap_accel * t1
+    w_nn = math.sin(G2)**2 / m1 + math.cos(G2)**2 / m2
+    P = -(1 + e) * nu / w_nn
+    assert first["nu before"] == pytest.approx(nu, rel=1e-9) and first["nu after"] == pytest.approx(-e * nu, rel=1e-9)
+    assert first["v0 after"] == pytest.approx((math.tan(G1) * v0 - P * math.sin(G2) / m1) / math.tan(G1), rel=1e-9)
+    assert first["vk after"] == pytest.approx(v2 + P * math.cos(G2) / m2, rel=1e-9)
+    for row in impacts:   # the last, within the tolerances, taken as plastic
+        kept = 0.0 if row["closed"] else e
+        assert row["energy lost"] == pytest.approx((1 - kept**2) / 2 * row["nu before"]**2 / w_nn, rel=1e-9)
+    # the bounces: each approach at e times the last rebound's speed (free flight under constant accelerations)
+    assert impacts[-1]["nu after"] == pytest.approx(0.0, abs=1e-15)
+    for before, after in zip(impacts, impacts[1:]):
+        assert after["nu before"] == pytest.approx(-before["nu after"], rel=1e-7)
+        assert after["t"] - before["t"] == pytest.approx(2 * before["nu after"] / -gap_accel, rel=1e-7)
+    assert [row["closed"] for row in impacts] == [False] * (len(impacts) - 1) + [True]
+    t_acc = t1 + 2 * e * abs(nu) / (-gap_accel * (1 - e))
+    last = impacts[-1]["t"]
+    rest_of_bounces = 2 * e * abs(impacts[-1]["nu before"]) / (-gap_accel * (1 - e))
+    assert last < t_acc and t_acc - last == pytest.approx(rest_of_bounces, rel=1e-6)
+    stage = result.stages[1]
+    assert [p.regime for p in stage.phases] == ["open", "tractive"] and stage.phases[1].t_start == last
+    # energy: work of the constant forces less the impacts' losses
+    y = result.run.y[-1]
+    work = 10.0 * y[0] - 2.0 * y[2]
+    lost = sum(row["energy lost"] for row in impacts)
+    assert _kinetic(y[1], y[3]) == pytest.approx(work - lost, rel=1e-8)
+    assert y[3] == pytest.approx(math.tan(G1) * math.tan(G2) * y[1], rel=1e-12)    # closed: the rigid chain's ratio
+    text = "\n".join(summary(result, module))
+    assert f"stage 2 impacts ({len(impacts)}):" in text and "on flank a" in text and "closed" in text
+
+
+@pytest.mark.parametrize("mu", [0.05, 0.15])
+def test_impact_with_friction_is_the_single_stage_law_on_the_effective_masses(chain_module, mu):
+    """Friction in both stages: the closing time is the quadratic gap's with stage 1's FTF in group 0's motion, and
+    the impact is Routh's process with Coulomb's friction of stage 2 on the hand-written W of the effective masses."""
+    e = 0.3
+    module = chain_module(_scene(f"gap-friction-{int(mu * 100)}", mu=mu, e=e))
+    result = simulate_chain(module, points=5)
+    first = result.run.impacts[0]
+    a0, a2, gap_accel = _open_accels(mu, 10.0, -2.0)
+    t1 = math.sqrt(-2 * 0.5e-3 / gap_accel)
+    assert first["t"] == pytest.approx(t1, rel=1e-9)
+    v0_after, v2_after, nu, nu_after, lost = _hand_impact(mu, e, first["v0 before"], first["vk before"])
+    assert first["nu before"] == pytest.approx(nu, rel=1e-10) and first["nu after"] == pytest.approx(nu_after, rel=1e-9)
+    assert first["v0 after"] == pytest.approx(v0_after, rel=1e-10) and first["vk after"] == pytest.approx(v2_after,
+                                                                                                     rel=1e-10)
+    assert first["energy lost"] == pytest.approx(lost, rel=1e-9)
+
+
+def _hand_cycle(t_end):
+    """Scipy's DOP853 (rtol 1e-12) on Newton per body, frictionless: closed on flank b (body 2 pushed by 6 N less its
+    spring's 400 N/m q2, the chain moving forward at 1 m/s) until stage 2's force on body 2 reaches 0, open (bodies 0
+    and 1 coast, body 2 on its spring) until the gap closes on flank a, a plastic impact of the two effective masses,
+    closed again. Returns (opening time, impact time, sol)."""
+    c1 = math.tan(G1)
+    c2 = c1 * math.tan(G2)
+    inertia = M[0] + M[1] * c1**2 + M[2] * c2**2
+
+    def force2(q2):
+        return 6.0 - 400.0 * q2
+
+    def closed(_, y):
+        a0 = c2 * force2(y[2]) / inertia
+        return [y[1], a0, y[3], c2 * a0]
+
+    def pushes(_, y):   # stage 2's force on body 2, M2 a2 - F2: < 0 on flank b
+        return M[2] * c2 * c2 * force2(y[2]) / inertia - force2(y[2])
+    pushes.terminal, pushes.direction = True, 1
+
+    def flying(_, y):
+        return [y[1], 0.0, y[3], force2(y[2]) / M[2]]
+
+    def gap(_, y):
+        return 1e-3 + y[2] * math.cos(G2) - c1 * y[0] * math.sin(G2)
+    gap.terminal, gap.direction = True, -1
+    tight = {"method": "DOP853", "rtol": 1e-12, "atol": 1e-14, "dense_output": True}
+    one = solve_ivp(closed, (0, t_end), [0.0, 1.0, 0.0, c2], events=pushes, **tight)
+    t_open = one.t_events[0][0]
+    two = solve_ivp(flying, (t_open, t_end), one.y_events[0][0], events=gap, **tight)
+    t_hit = two.t_events[0][0]
+    q0, v0, q2, v2 = two.y_events[0][0]
+    m1, m2 = M[0] / c1**2 + M[1], M[2]
+    x1 = c1 * v0
+    nu = v2 * math.cos(G2) - x1 * math.sin(G2)
+    P = -nu / (math.sin(G2)**2 / m1 + math.cos(G2)**2 / m2)
+    v0 = (x1 - P * math.sin(G2) / m1) / c1
+    three = solve_ivp(closed, (t_hit, t_end), [q0, v0, q2, c2 * v0], **tight)
+    return t_open, t_hit, three
+
+
+def test_an_open_close_cycle_agrees_with_scipy_on_the_hand_equations(chain_module):
+    module = chain_module(_scene("gap-cycle", e=0.0, gap="1 mm", f0=0.0, f2=6.0, stiffness=400.0, v0=1.0,
+                                 t_end=0.25))
+    result = simulate_chain(module, points=6)
+    t_open, t_hit, ref = _hand_cycle(0.25)
+    assert result.status == "finished"
+    opened = [e for e in result.events if e["to"] == "open: stage 2"]
+    assert len(opened) == 1 and opened[0]["t"] == pytest.approx(t_open, rel=1e-8)
+    (impact,) = result.run.impacts
+    assert impact["t"] == pytest.approx(t_hit, rel=1e-8) and impact["closed"] and impact["nu after"] == 0.0
+    stage = result.stages[1]
+    assert [(p.regime, p.flank) for p in stage.phases] == [("inverse-tractive", "b"), ("open", ""), ("tractive", "a")]
+    assert result.run.y[-1] == pytest.approx(ref.y[:, -1], rel=1e-7, abs=1e-10)
+
+
+def test_a_chain_sweep_with_a_clearance_is_refused_with_exit_2(tmp_path, capsys):
+    from tswm_runtime.cli import main
+
+    path = tmp_path / "gap.toml"
+    path.write_text(_scene("gap-sweep"))
+    assert main(["sweep", str(path), "--grid", "mu_1=0.1,0.2"]) == 2
+    assert "stage[2].clearance: a chain sweep of a chain with a clearance is not supported yet" in \
+        capsys.readouterr().err
+
+
+def test_the_scene_keeps_the_clearance(tmp_path):
+    chain = parse_chain(_scene("gap-keys"), "gap.toml")
+    c = chain.clearance
+    assert (c.stage, c.clearance.value, c.restitution.value, c.gap.value) == (2, 1e-3, 0.5, 0.5e-3)
+    assert c.gap.key == "run.gap_2" and c.clearance.key == "stage[2].clearance"
+
+
+def test_a_group_left_at_rest_while_open_stops_the_run_with_its_status(chain_module):
+    """Bodies 0 and 1 unforced and at rest while stage 2 is open: their own rest (stick) is not decided yet, so the
+    run stops at once with status group-at-rest and says why, instead of guessing."""
+    module = chain_module(_scene("gap-rest", mu=0.1, f0=0.0))
+    result = simulate_chain(module, points=5)
+    assert result.status == "group-at-rest" and result.t_stop == 0.0
+    assert "comes to rest at t = 0 s while stage 2's flanks are apart" in result.message
+
+
+def test_the_figure_shows_the_gap_of_the_hand_kinematics(chain_module, tmp_path):
+    """The stage's gap at the output rows is g0 + q2 cos(g2) - tan(g1) q0 sin(g2) (the coordinates of the run's
+    rows), inside [0, clearance] within the tolerances; the figure is written with it."""
+    from tswm_runtime.simulation.chain import gaps, plot
+
+    module = chain_module(_scene("gap-plot"))
+    result = simulate_chain(module, points=21)
+    y = result.run.y
+    hand = 0.5e-3 + y[:, 2] * math.cos(G2) - math.tan(G1) * y[:, 0] * math.sin(G2)
+    assert gaps(module, result) == pytest.approx(hand, rel=1e-12, abs=1e-15)
+    assert (hand >= -1e-9).all() and (hand <= 1e-3 + 1e-9).all()
+    assert plot(result, module, tmp_path / "gap.png").stat().st_size > 0
+
+
+def test_the_last_body_held_by_its_valve_friction_waits_for_the_flanks(chain_module):
+    """The stem at rest, its load (2 N) within its packing's friction (5 N), while the driven group closes the gap:
+    it stays (a2 = 0), so the gap closes at sqrt(2 g0 / (tan(g1) a0 sin(g2))) with group 0's a0 through stage 1's
+    FTF; the impact takes it along (its friction finite, the impulse not)."""
+    module = chain_module(_scene("gap-held", mu=0.1, e=0.3, valve='packing = "5 N"\n'))
+    result = simulate_chain(module, points=5)
+    assert result.status != "group-at-rest", result.message
+    a0, _, _ = _open_accels(0.1, 10.0, 0.0)
+    first = result.run.impacts[0]
+    assert first["vk before"] == 0.0
+    assert first["t"] == pytest.approx(math.sqrt(2 * 0.5e-3 / (math.tan(G1) * a0 * math.sin(G2))), rel=1e-9)
+    v0_after, v2_after, *_ = _hand_impact(0.1, 0.3, first["v0 before"], 0.0)
+    assert first["v0 after"] == pytest.approx(v0_after, rel=1e-10) and first["vk after"] == pytest.approx(v2_after,
+                                                                                                     rel=1e-10)
