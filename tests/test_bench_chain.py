@@ -10,6 +10,9 @@ from derivation.chain.scene import parse_chain
 from tswm_runtime.bench import chain as bench_chain
 from tswm_runtime.model.contract import load_module
 
+# heavy: a chain module derived and compiled for this file alone, and bench runs; CI runs it after the default set
+pytestmark = pytest.mark.heavy
+
 
 @pytest.fixture(scope="module")
 def module(tmp_path_factory):

@@ -310,6 +310,7 @@ def test_two_stage_rest_gives_the_admissible_internal_torque(locking):
         assert inside == (stage1 and stage2), X
 
 
+@pytest.mark.heavy
 def test_three_stage_rest_ranges_against_a_grid():
     """Three stages: the propagated ranges of X_1, X_2 are the projections of the set where all three hold."""
     values = ChainValues((0.1, 0.2, 0.3), (0.15, 0.1, 0.05), (0.02, 0.05, 0.01), (0.1, 0.2, 1.0),

@@ -215,7 +215,7 @@ def test_two_open_stages_leave_a_middle_group_moving_alone():
     assert sp.simplify(chain.gap_rate[3] - (r6 * v3 * sp.cos(g3) - r5 * k * v1 * sp.sin(g3))) == 0
 
 
-@pytest.mark.parametrize("stages, open_stage", [(2, 2), (2, 1), (3, 2)])
+@pytest.mark.parametrize("stages, open_stage", [(2, 2), (2, 1), pytest.param(3, 2, marks=pytest.mark.heavy)])
 def test_open_phase_in_signed_friction_angles_is_every_regime_and_direction(stages, open_stage):
     """open_phase's one set of expressions (rho_i standing for rho_sign_i rho_i) equals open_chain with each closed
     stage's FTF (sliding_psi) and normal force (normal_force) of its regime and its group's direction, for every

@@ -22,6 +22,9 @@ from tswm_runtime.hybrid.impact import collide
 from tswm_runtime.model.contract import load_module
 from tswm_runtime.bench.chain import worm_and_nut
 
+# heavy: its modules take a SymPy derivation of six chains (two minutes of CPU); CI runs it after the default set
+pytestmark = pytest.mark.heavy
+
 E = 0.4
 
 

@@ -12,6 +12,9 @@ from derivation.chain.scene import load_chain, parse_chain
 from derivation.document import render
 from tests.chains import DEG, EXAMPLES
 
+# heavy: a chain's whole LaTeX derivation (SymPy) per test module; CI runs it after the default set
+pytestmark = pytest.mark.heavy
+
 MSL = EXAMPLES / "msl4000.toml"
 
 
@@ -41,7 +44,6 @@ def msl_document():
     return build_chain_document(load_chain(MSL))
 
 
-@pytest.mark.heavy
 def test_the_document_shows_every_modes_dynamics_and_switching_functions(msl_document):
     sections = _sections(msl_document)
     assert {"Kinetostatics of a stage", "Modes and reduced equation of motion", "Resting chain",
@@ -78,7 +80,6 @@ def test_the_msl4000_band_and_audit_agree_with_the_hand_efficiencies(msl_documen
 HOSTILE = '\\input{/etc/passwd} $x^2$ 100% & #1 _a ~ {} \\\\ \\end{document}'
 
 
-@pytest.mark.heavy
 def test_scene_text_reaches_latex_escaped():
     """A description full of LaTeX's specials is printed as text, never run; the name is limited to
     [a-z0-9-] by the scene reader."""

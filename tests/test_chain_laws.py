@@ -149,6 +149,7 @@ def _limit(hand: Train, k: int) -> float:
 MU_KEYS = ("worm_mu", "screw_mu", "wedge_mu")
 
 
+@pytest.mark.heavy
 @pytest.mark.parametrize("stage", (0, 1, 2), ids=("worm", "screw", "wedge"))
 def test_back_drivable_iff_no_stage_self_locks(stage):
     """The load alone (no torque on the worm) starts the resting train backward exactly when no stage

@@ -18,6 +18,7 @@ def _source(text: str) -> str:
     return generate_chain_module(parse_chain(text, "t.toml"))
 
 
+@pytest.mark.heavy
 def test_the_generated_code_depends_on_the_structure_only():
     """Two value sets of one structure (other slopes, friction, masses, forces, a spring's stiffness 0 or not)
     give one module but for the scene's own lines (name, values, run); another flank set or a spring

@@ -105,6 +105,7 @@ def test_at_most_four_stages():
         parse_chain('name = "long"\n' + stage * 5 + body * 6, "v.toml")
 
 
+@pytest.mark.heavy
 def test_cli_derive_of_a_chain_writes_its_document(tmp_path, capsys):
     from tswm_runtime.cli import main
 

@@ -72,6 +72,7 @@ def test_rodas4_converges_with_order_4():
     assert 3.8 <= _slope(1.0 / np.array(ns), errors) <= 4.3, errors
 
 
+@pytest.mark.heavy
 def test_the_error_estimate_and_the_dense_output_are_of_order_3():
     """One step of size h from the exact state: k_6 (the estimate) falls like h^4 and so does the
     dense output's largest error inside the step (order 3: slope 4, 3.8 to 4.3)."""
