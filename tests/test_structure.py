@@ -7,6 +7,7 @@ from __future__ import annotations
 import ast
 import importlib.util
 import re
+from functools import lru_cache
 from pathlib import Path
 
 import pytest
@@ -17,7 +18,12 @@ import_map = importlib.util.module_from_spec(_spec)
 _spec.loader.exec_module(import_map)
 
 MODULES = {name: path for name, path in import_map.modules(ROOT).items() if not name.startswith("generated")}
-GRAPH = {name: import_map.imports_of(name, path, MODULES) for name, path in MODULES.items()}
+
+
+@lru_cache(maxsize=1)
+def graph() -> dict[str, set[str]]:
+    """Each module's imports, lazy ones included (read when a test first asks: not while every worker collects)."""
+    return {name: import_map.imports_of(name, path, MODULES) for name, path in MODULES.items()}
 
 
 def _cycles(graph: dict[str, set[str]]) -> list[list[str]]:
@@ -69,11 +75,11 @@ def test_a_function_level_import_counts():
 
 
 def test_no_import_cycle():
-    assert _cycles(GRAPH) == []
+    assert _cycles(graph()) == []
 
 
 def test_layering_between_packages():
-    for name, targets in GRAPH.items():
+    for name, targets in graph().items():
         if name.startswith("derivation"):
             assert not any(t.startswith("tswm_runtime") for t in targets), (name, targets)
         if name.startswith("tswm_common"):
@@ -84,8 +90,8 @@ def test_the_cli_package_only_dispatches():
     """cli/__init__ imports its subcommands and cli.common; the subcommands import no subcommand."""
     cli = {n for n in MODULES if n.startswith("tswm_runtime.cli.")} - {"tswm_runtime.cli.__main__"}
     for name in cli:
-        assert not (GRAPH[name] & (cli - {"tswm_runtime.cli.common"})), name
-        assert "tswm_runtime.cli" not in GRAPH[name], name
+        assert not (graph()[name] & (cli - {"tswm_runtime.cli.common"})), name
+        assert "tswm_runtime.cli" not in graph()[name], name
 
 
 @pytest.mark.parametrize("folder", sorted({p.parent for p in MODULES.values()}), ids=lambda p: str(p.relative_to(ROOT)))
@@ -113,9 +119,9 @@ OUTSIDE = {"derivation", "generated", "tswm_runtime"}
 
 
 def test_rooms_import_only_from_lower_rooms():
-    packages = {name.rpartition(".")[0] for name in GRAPH}
+    packages = {name.rpartition(".")[0] for name in graph()}
     upward = []
-    for name, targets in GRAPH.items():
+    for name, targets in graph().items():
         here = import_map.room(name, packages)
         if here not in ROOM_ORDER:
             continue
@@ -129,8 +135,8 @@ def test_rooms_import_only_from_lower_rooms():
 
 
 def test_every_runtime_room_is_in_the_order():
-    packages = {name.rpartition(".")[0] for name in GRAPH}
-    rooms = {import_map.room(name, packages) for name in GRAPH if name.startswith("tswm_runtime.")}
+    packages = {name.rpartition(".")[0] for name in graph()}
+    rooms = {import_map.room(name, packages) for name in graph() if name.startswith("tswm_runtime.")}
     assert rooms - set(ROOM_ORDER) - OUTSIDE == set()
 
 
