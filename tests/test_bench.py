@@ -128,6 +128,7 @@ TINY = dict(quick=True, case_names=["decelerate-and-stick"], peers=("RK45",), to
             cases=16)
 
 
+@pytest.mark.heavy
 def test_tiny_run_writes_the_report(tmp_path, capsys):
     assert bench.main(output=tmp_path, skip=bench.PARTS, **TINY) == 0
     runs = pd.read_csv(tmp_path / "runs.csv")
@@ -200,6 +201,7 @@ def test_bench_full_run(tmp_path):
     assert len(verdicts) == 2 * len(CASES) and verdicts["verdict"].str.match("(met|missed|tswm|no peer)").all()
 
 
+@pytest.mark.heavy
 def test_empty_cache_rows_time_the_message_and_the_first_result(monkeypatch, tmp_path):
     """The empty-cache measurement's mechanics on a stand-in command (the real one compiles for
     minutes: test_bench_full_run): the stderr message and the result line are timed from the

@@ -108,6 +108,7 @@ def _coverage(runup_peaks, tmp_path, cases: int) -> tuple[int, list[float]]:
     return covered, widths
 
 
+@pytest.mark.heavy
 def test_profile_intervals_cover_the_truth(runup_peaks, tmp_path):
     """At least 17 of 20 95 % profile intervals must hold the truth (binomial(20, 0.95) gives >= 17
     with probability 0.98), and every interval must be a real one (determined, inside the bounds)."""
@@ -177,6 +178,7 @@ def test_with_noise_or_a_second_free_parameter_it_stays_undetermined(runup_after
     assert {p["verdict"] for p in res.profiles.values()} == {"not determined"}, res.notes
 
 
+@pytest.mark.heavy
 def test_two_parameters_with_correlation_and_contour(runup_peaks, tmp_path):
     """m2 and F2_after both free (the file gives t_step only): both recovered, a 2x2 correlation,
     a contour plot."""

@@ -43,6 +43,7 @@ def test_a_law_that_overflows_mid_run_ends_not_finite_naming_quantity_and_time(o
     assert "status: not-finite: S2 = -inf N at t = " in out
 
 
+@pytest.mark.heavy
 def test_a_sweep_records_not_finite_cases_and_goes_on(overflowing):
     """t_step 0.3 s overflows before t_end = 1 s; t_step 0.8 s would only at 1.15 s: finished."""
     module = load_module(overflowing)

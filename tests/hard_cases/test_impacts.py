@@ -284,6 +284,7 @@ ZERO = LAB.replace('name = "impact-lab"', 'name = "impact-lab-rigid"').replace(
     "[impact]\nrestitution = { value = 0.5, free = true }\n", "")
 
 
+@pytest.mark.heavy
 def test_zero_clearance_reproduces_the_rigid_model(lab, scene_module):
     """clearance = 0: the flanks part and meet again at once (no flight, no impulse), so the
     run is the zero-clearance model's, through the same flank change."""

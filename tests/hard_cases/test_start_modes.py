@@ -198,7 +198,7 @@ def issue_model(scene_module, modes: str):
                         .replace("MODES", modes))
 
 
-@pytest.mark.parametrize("modes", ['"forward", "backward", "stick"', '"forward", "stick"'])
+@pytest.mark.parametrize("modes", ['"forward", "backward", "stick"', pytest.param('"forward", "stick"', marks=pytest.mark.heavy)])
 def test_light_worm_on_heavy_wheel_drives_flank_a_from_the_start(scene_module, modes):
     """The issue's scene: the motor alone would accelerate the worm at F0 / m1 = 6154 m/s^2 into
     flank a, the load alone the wheel at 1.3 m/s^2, so flank a carries the drive from t = 0:
