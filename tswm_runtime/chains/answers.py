@@ -14,11 +14,11 @@ One row of floats and one of integers per run:
          seated at the end, resting at the end (finished at rest), impacts of the stage with a clearance)
 
 The thrust is the last stage's force on the last body; travel is the last body's coordinate (the kernel's
-``rules.last_coordinate``: c_N q0 for a rigid chain, from body k's own coordinate with a clearance in stage k). The torque
-needed holds the thrust with every stage sliding forward tractive at constant speed, from the stages'
-derived FTFs: prod_i Psi_t,i r_in,i / r_out,i times the thrust (the intermediate bodies' own forces not
-counted). The pull-out torque is the motor table's largest torque times (U/U_n)^2; the stall margin is
-it over the needed torque.
+``rules.last_coordinate``: c_N q0 for a rigid chain, from body k's own coordinate with a clearance in stage
+k). The torque needed holds the thrust with every stage sliding forward tractive at constant speed, from the
+stages' derived FTFs: prod_i Psi_t,i r_in,i / r_out,i times the thrust (the intermediate bodies' own forces
+not counted). The pull-out torque is the motor table's largest torque times (U/U_n)^2; the stall margin is it
+over the needed torque.
 """
 from collections import namedtuple
 
@@ -49,9 +49,9 @@ VERDICTS = ("no trip: the motor was not cut", "no seat in the scene", "undecided
             "seat lost: no stage self-locks", "seat lost", "rests before the seat (never reached it)",
             "undecided: still moving before the seat at the end of the run")
 
-#: The module's numbers the answers read: its stages; the slots of p of the stages' Psi (t, i per stage),
-#: levers in and out, the switch's state, the seat's contact and the voltage U / U_n; the switch's tripped state, whether the scene has a seat, the motor's
-#: largest torque (NaN: no motor).
+#: The module's numbers the answers read: its stages; the slots of p of the stages' Psi (t, i per stage), levers
+#: in and out, the switch's state, the seat's contact and the voltage U / U_n; the switch's tripped state,
+#: whether the scene has a seat, the motor's largest torque (NaN: no motor).
 Answering = namedtuple("Answering", "stages p_psi p_lever_in p_lever_out p_switch p_seated p_voltage "
                                     "tripped has_seat rated")
 ANSWERING = types.NamedTuple((*(types.int64,) * 7, types.float64, types.boolean, types.float64), Answering)

@@ -54,7 +54,8 @@ def _records(t_out, n_states, n_p, stages, room):
                     np.zeros((0, 3)), np.zeros(segment.N_COUNTERS, np.int64), no_steps(2, n_p))
     chain = kernel.ChainRecord(np.empty((room.phases, 3), np.int64), np.empty((room.phases, 2 + n_p)),
                                np.empty((room.samples, 4 + 3 * stages)), np.empty((room.phases, 4), np.int64),
-                               np.empty((room.phases, 1 + n_states + n_p)), np.empty(6 + 3 * stages), np.zeros(4, np.int64),
+                               np.empty((room.phases, 1 + n_states + n_p)), np.empty(6 + 3 * stages),
+                               np.zeros(4, np.int64),
                                np.empty((room.phases, len(IMPACT_COLUMNS))))
     return record, chain
 
@@ -92,8 +93,8 @@ def run_chain_batch(chain_at, functions, chain_addresses, c, settings, y0, P, t_
 #: The answers of a batch as arrays, one entry per case (chains/answers.py): status and verdict as
 #: codes into the lists of their words (``status_words``, ``verdict_words``).
 CaseAnswers = namedtuple("CaseAnswers", "status status_words verdict verdict_words t_stop t_trip thrust drive travel "
-                                        "peak t_peak extra_travel needed pull_out stall_margin energy_lost events steps "
-                                        "impacts")
+                                        "peak t_peak extra_travel needed pull_out stall_margin energy_lost events "
+                                        "steps impacts")
 
 
 def run_cases(module, P: np.ndarray, *, t_end: float, v0: float, rtol: float, atol: float, t_out: np.ndarray,

@@ -3,7 +3,8 @@ address), its events, the decision at each (``rules.settle``: the latches, then 
 its resting phases, written into a ChainRecord from which ``chains/run.py`` builds the result.
 
 Per phase (a stretch in one mode, or at rest) the record keeps its mode, times, latches and the
-range of its samples; a sliding phase's samples are (t, q0, v0, stage forces, the last body's coordinate) at its start, at every
+range of its samples; a sliding phase's samples are (t, q0, v0, stage forces, the last body's coordinate) at its
+start, at every
 output time inside it and at the event that ends it. Per event: the guard (START at the start), the
 modes before and after (NO_MODE: the run stops), the decision's outcome, the state and the latches
 the decision saw. The trip: what the chain carried just before the switch cut the motor.
@@ -41,7 +42,8 @@ MAX_SAME_TIME = 8     # decisions at one instant before the run stops
 
 #: Where the run writes (sizes from ``chains/run.py``): phases (mode, first sample, end of samples) and
 #: phase_f (t_start, t_end, p); samples (t, q0, v0, 3 stage forces per stage, q_N); events (guard, from, to,
-#: outcome) and event_f (t, y: q0, v0 and with a clearance qk, vk, p); trip (t, q0, v0, drive, stage forces, q_N, mode; t NaN: no cut);
+#: outcome) and event_f (t, y: q0, v0 and with a clearance qk, vk, p); trip (t, q0, v0, drive, stage forces, q_N, mode;
+#: t NaN: no cut);
 #: counts (phases, samples, events, impacts); impacts (backlash.IMPACT_COLUMNS per impact, as many rows as events).
 ChainRecord = namedtuple("ChainRecord", "phases phase_f samples events event_f trip counts impacts")
 INT_MATRIX = types.int64[:, ::1]

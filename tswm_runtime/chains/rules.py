@@ -37,7 +37,8 @@ FRAME = 11            # an impact's frame: the module's IMPACT_FRAME
 #: latch; its states).
 ChainTables = namedtuple("ChainTables", "direction guard_direction stages p_psi p_lever_in p_lever_out p_slack "
                                         "switch_on p_delay p_switch p_pick p_seated armed picked tripped "
-                                        "mode_contact open_mode open_stage p_contact p_direction p_rho_sign p_speed_k p_speed")
+                                        "mode_contact open_mode open_stage p_contact p_direction p_rho_sign p_speed_k "
+                                        "p_speed")
 #: With a clearance (``backlash.py``): per mode the flank of the stage with the clearance it loads (+1 a, -1 b, 0
 #: for OPEN), the mode OPEN (-1: no clearance), the stage, the slots of the contact latch (+1, -1, 0 open), the
 #: groups' directions (two) and the stages' regime signs, and of v_k / v_0 of the rigid chain; the first slot of the

@@ -285,7 +285,8 @@ def _open_words(module, p: np.ndarray) -> str:
     held by its valve friction), each closed stage's regime."""
     k, n = clearance_stage(module), module.STAGES
     names = {1.0: "forward", -1.0: "backward", 0.0: "free (its forces do not depend on its direction)"}
-    out = "held at rest by its valve friction" if p[module.P_HELD_OUT] > 0.0 else names[float(p[module.P_DIRECTION_OUT])]
+    held = p[module.P_HELD_OUT] > 0.0
+    out = "held at rest by its valve friction" if held else names[float(p[module.P_DIRECTION_OUT])]
     regimes = [f"stage {i + 1} {'tractive' if p[module.P_RHO_SIGN + i] > 0 else 'inverse-tractive'}"
                for i in range(n) if i != k - 1]
     group_in = "body 0" if k == 1 else f"bodies 0..{k - 1}"
@@ -393,7 +394,8 @@ def _record(module, t_out: np.ndarray, phases: int, samples: int) -> tuple[Recor
                     StepLog(*parts.no_steps, np.zeros(2, np.int64)))
     chain = kernel.ChainRecord(np.empty((phases, 3), np.int64), np.empty((phases, 2 + n_p)),
                                np.empty((samples, width)), np.empty((phases, 4), np.int64),
-                               np.empty((phases, 1 + len(module.STATES) + n_p)), np.empty(6 + 3 * module.STAGES), np.zeros(4, np.int64),
+                               np.empty((phases, 1 + len(module.STATES) + n_p)), np.empty(6 + 3 * module.STAGES),
+                               np.zeros(4, np.int64),
                                np.empty((phases, len(IMPACT_COLUMNS))))
     return record, chain
 
@@ -478,4 +480,5 @@ def _trip(module, trip: np.ndarray) -> dict | None:
         return None
     mode = int(trip[-1])
     return {"t": float(trip[0]), "y": trip[1:3].copy(), "mode": mode,
-            "forces": None if mode == RESTING else trip[4:-2].copy(), "drive": float(trip[3]), "q_last": float(trip[-2])}
+            "forces": None if mode == RESTING else trip[4:-2].copy(), "drive": float(trip[3]),
+            "q_last": float(trip[-2])}
