@@ -12,6 +12,7 @@ import math
 import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
+from scipy.optimize import brentq
 
 from derivation.chain.scene import parse_chain
 from tswm_runtime.hybrid.impact import collide
@@ -134,7 +135,7 @@ def _hand_cycle(t_end):
     """Scipy's DOP853 (rtol 1e-12) on Newton per body, frictionless: closed on flank b (body 2 pushed by 6 N less its
     spring's 400 N/m q2, the chain moving forward at 1 m/s) until stage 2's force on body 2 reaches 0, open (bodies 0
     and 1 coast, body 2 on its spring) until the gap closes on flank a, a plastic impact of the two effective masses,
-    closed again. Returns (opening time, impact time, sol)."""
+    closed again. Returns (opening time, impact time, the normal speed at the flank before the impact, sol)."""
     c1 = math.tan(G1)
     c2 = c1 * math.tan(G2)
     inertia = M[0] + M[1] * c1**2 + M[2] * c2**2
@@ -168,14 +169,14 @@ def _hand_cycle(t_end):
     P = -nu / (math.sin(G2)**2 / m1 + math.cos(G2)**2 / m2)
     v0 = (x1 - P * math.sin(G2) / m1) / c1
     three = solve_ivp(closed, (t_hit, t_end), [q0, v0, q2, c2 * v0], **tight)
-    return t_open, t_hit, three
+    return t_open, t_hit, nu, three
 
 
 def test_an_open_close_cycle_agrees_with_scipy_on_the_hand_equations(chain_module):
     module = chain_module(_scene("gap-cycle", e=0.0, gap="1 mm", f0=0.0, f2=6.0, stiffness=400.0, v0=1.0,
                                  t_end=0.25))
     result = simulate_chain(module, points=6)
-    t_open, t_hit, ref = _hand_cycle(0.25)
+    t_open, t_hit, _, ref = _hand_cycle(0.25)
     assert result.status == "finished"
     opened = [e for e in result.events if e["to"] == "open: stage 2"]
     assert len(opened) == 1 and opened[0]["t"] == pytest.approx(t_open, rel=1e-8)
@@ -186,14 +187,106 @@ def test_an_open_close_cycle_agrees_with_scipy_on_the_hand_equations(chain_modul
     assert result.run.y[-1] == pytest.approx(ref.y[:, -1], rel=1e-7, abs=1e-10)
 
 
-def test_a_chain_sweep_with_a_clearance_is_refused_with_exit_2(tmp_path, capsys):
-    from tswm_runtime.cli import main
+def test_each_event_of_a_cycle_gives_its_reason(chain_module):
+    """The cycle's events in words, as the hand analysis has them: at the start stage 2 is closed on flank b (body 2
+    pushed ahead by its spring drives body 1 and, through stage 1, body 0: both stages inverse-tractive; the modes
+    loading flank a are no candidates); as body 2's push fades both stages' normal forces reach 0 together (body 0
+    unforced: stage 1 carries only what body 2 pushes through), stage 1's guard fires first, no mode loading flank b
+    holds any more (stage 2 would pull) and the chain cannot rest moving, so its flanks part, bodies 0 and 1 coasting
+    forward, body 2 on its spring alone (no friction: its direction changes none of its forces),
+    stage 1 carrying nothing (frictionless: the first regime, tractive); the flanks meet on flank a at the hand
+    equations' normal speed and close (e = 0), and the closed chain is driven forward on flank a."""
+    module = chain_module(_scene("gap-cycle", e=0.0, gap="1 mm", f0=0.0, f2=6.0, stiffness=400.0, v0=1.0,
+                                 t_end=0.25))
+    result = simulate_chain(module, points=6)
+    _, _, nu, _ = _hand_cycle(0.25)
+    start, opened, hit = result.events
+    assert start["to"] == "forward: inverse-tractive (b), inverse-tractive (b)"
+    assert start["reason"].startswith("stage 2 closed on flank b: the only consistent mode; rejected: forward: "
+                                      "tractive (a), inverse-tractive (b): stage 1 would need N_1 = ")
+    assert "tractive (a), tractive (a)" not in start["reason"] and "(b), tractive (a)" not in start["reason"]
+    assert opened["guard"] == "N_1" and opened["reason"].startswith(
+        "no mode loading flank b holds and the chain cannot rest with stage 2 pushing on it (no mode is consistent")
+    assert "forward: tractive (a), inverse-tractive (b): stage 2 would need N_2 = " in opened["reason"]
+    assert opened["reason"].endswith("; its flanks part from flank b; open phase: bodies 0..1 forward, body 2 free "
+                                     "(its forces do not depend on its direction); closed stages: stage 1 tractive")
+    words = f"stage 2's flanks meet on flank a: normal speed {nu:.6g} -> 0 m/s, closed (plastic, or its rebound "
+    assert hit["reason"].startswith(words + "within the tolerances); stage 2 closed on flank a: the only consistent "
+                                    "mode; rejected: ") and hit["to"] == "forward: tractive (a), tractive (a)"
+    text = "\n".join(summary(result, module))
+    assert all(f"      {e['reason']}" in text for e in result.events)
 
-    path = tmp_path / "gap.toml"
-    path.write_text(_scene("gap-sweep"))
-    assert main(["sweep", str(path), "--grid", "mu_1=0.1,0.2"]) == 2
-    assert "stage[2].clearance: a chain sweep of a chain with a clearance is not supported yet" in \
-        capsys.readouterr().err
+
+def _trip_scene(setting):
+    """The cycle's scene with a switch on stage 2's force on body 2 at ``setting`` (N), 5 ms delay."""
+    switch = f'[switch]\non = "stage 2"\nsetting = "{setting} N"\ndelay = "5 ms"\n[run]'
+    return _scene("gap-trip", e=0.0, gap="1 mm", f0=0.0, f2=6.0, stiffness=400.0, v0=1.0,
+                  t_end=0.25).replace("[run]", switch)
+
+
+@pytest.mark.parametrize("setting", [15.0, 1.0])
+def test_travel_at_the_trip_is_the_last_bodys_own_coordinate(chain_module, setting):
+    """The cycle above with a switch on stage 2's force on body 2 (5 ms delay): at 15 N it picks up after the stage
+    has opened and closed again, where the force reaches 15 N; at 1 N at the impact, where the closing makes the
+    force jump from 0 past the setting. The travel at the trip is body 2's q2 on the hand equations (scipy), not the
+    rigid kinematics' c2 q0, which counts the backlash taken up before (here the 1 mm clearance along the flanks'
+    normal); the thrust there and the extra travel to the end (body 2 still moving forward) too."""
+    module = chain_module(_trip_scene(setting))
+    result = simulate_chain(module, points=6)
+    t_open, t_hit, _, ref = _hand_cycle(0.25)
+    c2 = math.tan(G1) * math.tan(G2)
+    inertia = M[0] + M[1] * math.tan(G1)**2 + M[2] * c2**2
+
+    def thrust(t):   # stage 2's force on body 2 while closed: M2 a2 - F2
+        q2 = ref.sol(t)[2]
+        return M[2] * c2 * c2 * (6.0 - 400.0 * q2) / inertia - (6.0 - 400.0 * q2)
+    assert thrust(t_hit) > 1.0
+    t_pick = t_hit if setting == 1.0 else brentq(lambda t: thrust(t) - setting, t_hit, 0.25, xtol=1e-15)
+    t_trip = t_pick + 0.005
+    trip = result.answers["trip"]
+    assert result.status == "finished" and t_hit <= t_pick
+    assert trip["t"] == pytest.approx(t_trip, rel=1e-8)
+    q0, v0, q2, v2 = ref.sol(t_trip)
+    assert trip["travel"] == pytest.approx(q2, rel=1e-8)
+    assert abs(c2 * q0 - q2) > 1e-4   # the rigid reading is off by the backlash
+    assert trip["thrust"] == pytest.approx(thrust(t_trip), rel=1e-7)
+    assert (ref.y[3] > 0).all()
+    assert result.answers["extra_travel"] == pytest.approx(ref.y[2, -1] - q2, rel=1e-7)
+
+
+def _same_as_simulate(module, grid, points):
+    """The chain sweep's table of ``grid`` against simulate_chain of each case's values (``--set``): every answer and
+    count exactly, the impacts' count and energy lost to rounding (summed in another order)."""
+    from tswm_runtime.sweeps.chain import sizing
+
+    table = sizing(module, grid, {"points": points}).table
+    names = list(grid)
+    for _, row in table.iterrows():
+        case = {name: row[column] for name, column in zip(names, table.columns)}
+        single = simulate_chain(module, case, points=points)
+        trip = single.answers["trip"] or {}
+        assert row["status"] == single.status, case
+        for column, value in (("t_trip [s]", trip.get("t")), ("travel at trip [m]", trip.get("travel")),
+                              ("thrust at trip [N]", trip.get("thrust")), ("t_stop [s]", single.t_stop),
+                              ("extra travel [m]", single.answers["extra_travel"])):
+            np.testing.assert_array_equal(row[column], np.nan if value is None else value, err_msg=column)
+        assert (row["events"], row["steps"], row["impacts"]) == (len(single.events), single.n_steps,
+                                                                 len(single.run.impacts))
+        assert row["holds"] == single.answers["holds"]["verdict"]
+        lost = sum(impact["energy lost"] for impact in single.run.impacts)
+        assert row["impact loss [J]"] == pytest.approx(lost, rel=1e-14, abs=1e-300)
+    return table
+
+
+def test_a_chain_sweep_with_a_clearance_runs_each_case_as_simulate(chain_module):
+    """The chain sweep of a chain with a clearance runs every case on the kernel's path of simulate (mode OPEN,
+    impacts): per case the same answers as simulate_chain with the case's values; a case whose group is left at rest
+    while the stage is open (force_0 = 0) keeps its status and the sweep goes on."""
+    table = _same_as_simulate(chain_module(_trip_scene(15.0)), {"switch_setting": [1.0, 15.0]}, 6)
+    assert list(table["status"]) == ["finished"] * 2 and list(table["impacts"]) == [1, 1]
+    assert table["t_trip [s]"].tolist()[0] < table["t_trip [s]"].tolist()[1]
+    table = _same_as_simulate(chain_module(_scene("gap-rest", mu=0.1, f0=0.0)), {"force_0": [0.0, 10.0]}, 5)
+    assert list(table["status"]) == ["group-at-rest", "finished"] and table["impacts"].tolist()[1] > 1
 
 
 def test_the_scene_keeps_the_clearance(tmp_path):

@@ -11,6 +11,7 @@ from derivation.chain.document import build_chain_document
 from derivation.chain.scene import load_chain, parse_chain
 from derivation.document import render
 from tests.chains import DEG, EXAMPLES
+from tests.test_chain_backlash import _scene
 
 # heavy: a chain's whole LaTeX derivation (SymPy) per test module; CI runs it after the default set
 pytestmark = pytest.mark.heavy
@@ -96,10 +97,31 @@ def test_scene_text_reaches_latex_escaped():
 def test_the_document_shows_the_last_stage_open(msl_document):
     """Stage 2 of the two-stage chain open: groups from bodies 0 and 2, the gap's rate in both groups' speeds,
     the effective masses; the stem (body 2) alone has m2 = M_2 / r_out,2^2."""
-    section = _sections(msl_document)["An open stage (clearance; derived, not simulated yet)"]
+    section = _sections(msl_document)["An open stage (clearance)"]
     texts = " ".join(b[1] for b in section.blocks if b[0] == "text")
-    assert "groups that start at bodies 0, 2" in texts and "runtime refuses a clearance" in texts
+    assert "Were stage 2 open" in texts and "groups that start at bodies 0, 2" in texts
     equations = [line for b in section.blocks if b[0] == "math" for line in b[1]]
     assert [e.split(" = ")[0] for e in equations] == ["a_{0}", "a_{2}", "\\dot g_{2}", "m_1", "m_2", "W_{nn}"]
     assert "v_{0}" in equations[2] and "v_{2}" in equations[2]
     assert equations[4] == "m_2 = \\frac{M_{2}}{r_{\\mathrm{out},2}^{2}}", equations[4]
+
+
+@pytest.mark.heavy
+def test_derive_of_a_chain_with_a_clearance_prints_it_and_its_section(tmp_path, capsys):
+    """tswm derive of the two-stage chain with stage 2's clearance (1 mm, e = 0.5, start gap 0.5 mm): its summary
+    names the stage, c, e and the start gap, the open mode's groups (bodies 0..1 and body 2), the extra states q2, v2
+    and guards, and the document's section on it, which the LaTeX file holds with the scene's clearance."""
+    from tswm_runtime.cli import main
+
+    path, tex = tmp_path / "gap.toml", tmp_path / "gap.tex"
+    path.write_text(_scene("gap-derive"))
+    assert main(["derive", str(path), "--latex", str(tex)]) == 0
+    out = capsys.readouterr().out
+    assert ("  clearance: stage 2 (wedge), c = 0.001 m along the flanks' normal, restitution e = 0.5, start gap "
+            "0.0005 m (open)") in out
+    assert "  open mode OPEN (stage 2's flanks apart): groups bodies 0..1 and body 2," in out
+    assert "  extra states q2, v2 (body 2); extra guards gap_a, gap_b, v_out" in out
+    assert '  document section: "An open stage (clearance)"' in out
+    text = tex.read_text()
+    assert "\\section{An open stage (clearance)}" in text
+    assert "Stage 2 has a clearance of 0.001 m along its flanks' normal (restitution 0.5, gap 0.0005 m" in text

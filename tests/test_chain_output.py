@@ -57,7 +57,7 @@ def module(**changes) -> SimpleNamespace:
 
 
 def phase(mode, seated: bool, samples=(), tripped=True):
-    """A phase in ``mode`` (RESTING = -1) with its latches and samples (t, q0, v0, six stage forces)."""
+    """A phase in ``mode`` (RESTING = -1) with its latches and samples (t, q0, v0, six stage forces, travel)."""
     return SimpleNamespace(mode=mode, latches=(2 if tripped else 0, 0.0, 1.0 if seated else 0.0), samples=samples)
 
 
@@ -71,9 +71,9 @@ def run(phases, status="finished", thrust=100.0, p=P):
     rows = [np.concatenate([(j, j + 1.0), p]) for j in range(len(phases))]
     for row, ph in zip(rows, phases):
         row[2:5] = ph.latches
-    trip = np.array([1.0, 0.1, 0.0, 3.0, 0.0, 0.0, 0.0, 0.0, thrust, 0.0, 0.0])
+    trip = np.array([1.0, 0.1, 0.0, 3.0, 0.0, 0.0, 0.0, 0.0, thrust, 0.0, 0.1 * 0.05, 0.0])   # travel c_2 q0
     record = ChainRecord(np.array([(ph.mode, a, b) for ph, a, b in zip(phases, bounds, bounds[1:])], np.int64),
-                         np.array(rows), np.array(samples, dtype=float).reshape(-1, 9), np.zeros((1, 4), np.int64),
+                         np.array(rows), np.array(samples, dtype=float).reshape(-1, 10), np.zeros((1, 4), np.int64),
                          np.zeros((1, 3 + p.size)), trip, np.array([len(phases), len(samples), 0, 0], np.int64),
                          np.zeros((1, 10)))
     return SimpleNamespace(phases=phases, status=status, code={"finished": 0, "max-steps": MAX_STEPS}[status],
@@ -123,9 +123,10 @@ def test_the_stall_margin_is_the_pull_out_torque_at_the_voltage_over_the_needed_
 def test_the_peak_and_the_extra_travel_after_the_trip_are_read_from_the_tripped_phases():
     """Samples before the trip (switch armed) are not counted; after it the thrust's largest magnitude
     (-250 N at t = 2.5 s, beyond 200 N at 2 s) is the peak, and the extra travel is the farthest travel
-    (q0 = 0.7, times the speed factor 0.05) less the travel at the trip (0.1 x 0.05), by hand."""
+    (q0 = 0.7, times the speed factor 0.05: the samples' last column) less the travel at the trip (0.1 x 0.05), by
+    hand."""
     def sample(t, q0, thrust):
-        return [t, q0, 0.0, 0.0, 0.0, 0.0, 0.0, thrust, 0.0]
+        return [t, q0, 0.0, 0.0, 0.0, 0.0, 0.0, thrust, 0.0, 0.05 * q0]
     phases = [phase(0, False, [sample(0.5, 0.05, 900.0)], tripped=False),
               phase(0, False, [sample(1.5, 0.3, 50.0), sample(2.0, 0.7, 200.0)]),
               phase(1, True, [sample(2.5, 0.6, -250.0)]), phase(-1, True)]

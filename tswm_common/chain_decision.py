@@ -46,13 +46,15 @@ class Candidate:
 class Statics:
     """What the resting chain's decision needs: each stage's FTFs of forward sliding (Psi_t, Psi_i),
     its levers, the generalized force on every body and the magnitude of a Coulomb friction on the last
-    body (a valve's packing), which at rest takes any value up to it."""
+    body (a valve's packing), which at rest takes any value up to it; ``flank``: a stage with a clearance closed on
+    one flank, (its index from 0, +1 flank a or -1 flank b), which pushes its output body on that side only."""
 
     psi: tuple[tuple[float, float], ...]
     lever_in: tuple[float, ...]
     lever_out: tuple[float, ...]
     force: tuple[float, ...]
     slack: float = 0.0
+    flank: tuple[int, int] | None = None
 
 
 def decide_numbers(candidates: list[Candidate], velocity: float, statics: Statics) -> Decision:
@@ -113,11 +115,16 @@ def rest(statics: Statics) -> tuple[tuple[Intervals, ...], str]:
     psi, lever_in, lever_out, force = statics.psi, statics.lever_in, statics.lever_out, statics.force
     load: Intervals = ((-force[-1] - statics.slack, -force[-1] + statics.slack),)
     stages = len(psi)
+
+    def one_side(xs: Intervals, i: int) -> Intervals:   # what stage i exerts on its output body, on its flank's side
+        if statics.flank is None or statics.flank[0] != i:
+            return xs
+        return _intersect(xs, ((0.0, math.inf),) if statics.flank[1] > 0 else ((-math.inf, 0.0),))
     forward: list[Intervals] = []
     p_set: Intervals = ((-force[0] / lever_in[0],) * 2,)
     for i in range(stages):
         q_set = _scaled(p_set, _forward_cone(*psi[i]))
-        w_set = _affine(q_set, 0.0, lever_out[i])
+        w_set = one_side(_affine(q_set, 0.0, lever_out[i]), i)
         if i == stages - 1:
             if not _intersect(w_set, load):
                 return (), (f"holding body {stages}'s load needs stage {stages} to exert {show(load)} on it, "
@@ -127,12 +134,12 @@ def rest(statics: Statics) -> tuple[tuple[Intervals, ...], str]:
         # body i + 1: stage i + 2 pushes it with -F_{i+1} - X_{i+1}; its lever turns that into p
         p_set = _affine(w_set, -force[i + 1] / lever_in[i + 1], -1.0 / lever_in[i + 1])
     backward: list[Intervals] = [()] * (stages - 1)
-    q_set = _affine(load, 0.0, 1.0 / lever_out[-1])
+    q_set = _affine(one_side(load, stages - 1), 0.0, 1.0 / lever_out[-1])
     for i in range(stages - 1, 0, -1):
         p_set = _scaled(q_set, _backward_cone(*psi[i]))
         u_set = _affine(p_set, 0.0, lever_in[i])
         backward[i - 1] = _affine(u_set, -force[i], -1.0)      # X_i = -F_i - u_{i+1}
-        q_set = _affine(backward[i - 1], 0.0, 1.0 / lever_out[i - 1])
+        q_set = _affine(one_side(backward[i - 1], i - 1), 0.0, 1.0 / lever_out[i - 1])
     internal = tuple(_intersect(f, b) for f, b in zip(forward, backward))
     return internal, ""
 

@@ -104,20 +104,36 @@ def _rest(n_st: int) -> Section:
     return s
 
 
-def _open_stage(n_st: int) -> Section:
-    """The last stage open (a clearance there), from clearance.py: groups, gap kinematics, impact masses."""
-    k = n_st
-    chain = cl.open_chain(n_st, (k,))
+OPEN_STAGE = "An open stage (clearance)"
+
+
+def open_stage_number(chain: ChainScene) -> int:
+    """The stage the document shows open: the one with the scene's clearance, else the last."""
+    return chain.clearance.stage if chain.clearance is not None else len(chain.stages)
+
+
+def _open_stage(chain: ChainScene) -> Section:
+    """Stage k open (the scene's clearance, else the last stage), from clearance.py: groups, gap kinematics, impact
+    masses."""
+    n_st, k = len(chain.stages), open_stage_number(chain)
+    opened = cl.open_chain(n_st, (k,))
     hit = cl.impact(n_st, (k,), k, "a")
-    s = Section("An open stage (clearance; derived, not simulated yet)")
-    s.text(f"Were stage {k} open (a clearance between its flanks: the runtime refuses a clearance for now), it "
-           f"would transmit nothing and the chain would split into the groups that start at bodies "
-           f"{', '.join(str(j) for j in chain.groups.first)}, each moving with its first body's coordinate. Newton "
-           "for every body, each closed stage's forces tied by its FTF, gives each group's acceleration:")
-    s.math(*(f"a_{{{j}}} = {_l(a)}" for j, a in zip(chain.groups.first, chain.accel)))
+    first = ", ".join(str(j) for j in opened.groups.first)
+    s = Section(OPEN_STAGE)
+    if chain.clearance is None:
+        s.text(f"Were stage {k} open (a clearance between its flanks), it would transmit nothing and the chain would "
+               f"split into the groups that start at bodies {first}, each moving with its first body's coordinate.")
+    else:
+        c = chain.clearance
+        s.text(f"Stage {k} has a clearance of {c.clearance.value:.6g} m along its flanks' normal (restitution "
+               f"{c.restitution.value:.6g}, gap {c.gap.value:.6g} m from flank a at the start). While its flanks are "
+               f"apart it transmits nothing and the chain splits into the groups that start at bodies {first}, each "
+               "moving with its first body's coordinate.")
+    s.text("Newton for every body, each closed stage's forces tied by its FTF, gives each group's acceleration:")
+    s.math(*(f"a_{{{j}}} = {_l(a)}" for j, a in zip(opened.groups.first, opened.accel)))
     s.text(f"Stage {k}'s normal gap $g_{{{k}}}$ (0 on flank a, the clearance on flank b) moves with the one-stage "
            "gap kinematics $\\dot g = \\dot x_2 \\cos\\gamma - \\dot x_1 \\sin\\gamma$:")
-    s.math(f"\\dot g_{{{k}}} = {_l(chain.gap_rate[k])}")
+    s.math(f"\\dot g_{{{k}}} = {_l(opened.gap_rate[k])}")
     s.text("When the gap closes the flanks collide: each group reduced to the stage's $x_1$ and $x_2$ by its "
            "response to an impulse there (its closed stages tied by their FTFs) gives the effective masses of the "
            "one-stage impact (its inverse mass in the flank's frame, Coulomb friction and restitution):")
@@ -275,7 +291,7 @@ def build_chain_document(chain: ChainScene) -> dict:
               for p in (*(q for s in chain.stages for q in s.params.values()),
                         *(q for b in chain.bodies for q in (b.inertia, b.force)))]
     sections = [_stages(chain), _kinetostatics(), *_modes(len(chain.stages), reachable), _rest(len(chain.stages)),
-                _open_stage(len(chain.stages)), _band(values), _decision(values), _audit(values, reachable)]
+                _open_stage(chain), _band(values), _decision(values), _audit(values, reachable)]
     return {"title": f"Derivation of the chain of stages for scene `{chain.name}`",
             "description": chain.description, "source": chain.source, "digest": chain.digest,
             "params": params, "sections": sections}

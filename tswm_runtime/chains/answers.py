@@ -6,18 +6,19 @@ One row of floats and one of integers per run:
 
     f = (t_stop, t_trip, thrust at the trip, body 0's drive at the trip, travel at the trip,
          peak thrust after the trip, its time, extra travel after the trip,
-         torque needed at the trip thrust, pull-out torque, stall margin)
+         torque needed at the trip thrust, pull-out torque, stall margin, kinetic energy the impacts lost)
         (NaN: no trip; thrust NaN when the chain rested at the trip; peak and its time NaN when it never
         slid after the trip, the extra travel then 0; needed NaN without a trip thrust; pull-out NaN
         without a motor; margin NaN without both or where the needed torque is <= 0)
     i = (status (kernel's code), hold verdict (``VERDICTS``), events, steps and rejected steps,
-         seated at the end, resting at the end (finished at rest))
+         seated at the end, resting at the end (finished at rest), impacts of the stage with a clearance)
 
-The thrust is the last stage's force on the last body; travel is the last body's coordinate. The torque
-needed holds the thrust with every stage sliding forward tractive at constant speed, from the stages'
-derived FTFs: prod_i Psi_t,i r_in,i / r_out,i times the thrust (the intermediate bodies' own forces not
-counted). The pull-out torque is the motor table's largest torque times (U/U_n)^2; the stall margin is
-it over the needed torque.
+The thrust is the last stage's force on the last body; travel is the last body's coordinate (the kernel's
+``rules.last_coordinate``: c_N q0 for a rigid chain, from body k's own coordinate with a clearance in stage
+k). The torque needed holds the thrust with every stage sliding forward tractive at constant speed, from the
+stages' derived FTFs: prod_i Psi_t,i r_in,i / r_out,i times the thrust (the intermediate bodies' own forces
+not counted). The pull-out torque is the motor table's largest torque times (U/U_n)^2; the stall margin is it
+over the needed torque.
 """
 from collections import namedtuple
 
@@ -29,15 +30,18 @@ from tswm_runtime.jit import coldstart
 coldstart.announce(("integrate", "chain"))  # before the next imports compile the kernels, if not cached
 
 from tswm_runtime.chains import kernel  # noqa: E402
+from tswm_runtime.chains.backlash import IMPACT_COLUMNS  # noqa: E402
 from tswm_runtime.chains.rules import RESTING  # noqa: E402
 from tswm_runtime.jit import cache_guard  # noqa: E402
 from tswm_runtime.jit.cache_guard import njit  # noqa: E402
 from tswm_runtime.jit.signatures import VECTOR  # noqa: E402
 
-F_T_STOP, F_T_TRIP, F_THRUST, F_DRIVE, F_TRAVEL, F_PEAK, F_T_PEAK, F_EXTRA, F_NEEDED, F_PULL_OUT, F_MARGIN = range(11)
-N_F = 11
-I_STATUS, I_VERDICT, I_EVENTS, I_STEPS, I_SEATED, I_RESTING = range(6)
-N_I = 6
+(F_T_STOP, F_T_TRIP, F_THRUST, F_DRIVE, F_TRAVEL, F_PEAK, F_T_PEAK, F_EXTRA, F_NEEDED, F_PULL_OUT, F_MARGIN,
+ F_LOST) = range(12)
+N_F = 12
+I_STATUS, I_VERDICT, I_EVENTS, I_STEPS, I_SEATED, I_RESTING, I_IMPACTS = range(7)
+N_I = 7
+LOST = IMPACT_COLUMNS.index("energy lost")   # an impact row's column
 
 #: What is left after the motor's cut, by code (``hold_verdict``); {status} is the run's status.
 VERDICTS = ("no trip: the motor was not cut", "no seat in the scene", "undecided: the run stopped ({status})",
@@ -45,13 +49,12 @@ VERDICTS = ("no trip: the motor was not cut", "no seat in the scene", "undecided
             "seat lost: no stage self-locks", "seat lost", "rests before the seat (never reached it)",
             "undecided: still moving before the seat at the end of the run")
 
-#: The module's numbers the answers read: its stages; the slots of p of the stages' Psi (t, i per stage),
-#: levers in and out, the switch's state, the seat's contact, the last body's speed factor (q_N = factor
-#: q0) and the voltage U / U_n; the switch's tripped state, whether the scene has a seat, the motor's
-#: largest torque (NaN: no motor).
-Answering = namedtuple("Answering", "stages p_psi p_lever_in p_lever_out p_switch p_seated p_speed p_voltage "
+#: The module's numbers the answers read: its stages; the slots of p of the stages' Psi (t, i per stage), levers
+#: in and out, the switch's state, the seat's contact and the voltage U / U_n; the switch's tripped state,
+#: whether the scene has a seat, the motor's largest torque (NaN: no motor).
+Answering = namedtuple("Answering", "stages p_psi p_lever_in p_lever_out p_switch p_seated p_voltage "
                                     "tripped has_seat rated")
-ANSWERING = types.NamedTuple((*(types.int64,) * 8, types.float64, types.boolean, types.float64), Answering)
+ANSWERING = types.NamedTuple((*(types.int64,) * 7, types.float64, types.boolean, types.float64), Answering)
 ANSWER_SIG = types.none(types.int64, types.float64, types.int64, kernel.CHAIN_RECORD, ANSWERING, VECTOR, VECTOR,
                         types.int64[::1])
 
@@ -59,7 +62,7 @@ ANSWER_SIG = types.none(types.int64, types.float64, types.int64, kernel.CHAIN_RE
 def answering(module) -> Answering:
     """The numbers of a chain module the answers read (``Answering``)."""
     return Answering(module.STAGES, module.P_PSI, module.P_LEVER_IN, module.P_LEVER_OUT, module.P_SWITCH,
-                     module.P_SEATED, module.P_SPEED + module.STAGES, module.P_VOLTAGE, float(module.TRIPPED),
+                     module.P_SEATED, module.P_VOLTAGE, float(module.TRIPPED),
                      bool(module.HAS_SEAT), float(max(module.MOTOR_TORQUE)) if hasattr(module, "MOTOR_TORQUE")
                      else np.nan)
 
@@ -86,10 +89,9 @@ _hold_verdict = njit(error_model="numpy")(hold_verdict)
 
 @njit(error_model="numpy")
 def answer(status, t_stop, steps, rec, a, p, f, i):
-    """The run's answers from its chain record (and its p at the start: the speed factor, Psi_i, levers,
+    """The run's answers from its chain record (and its p at the start: Psi_i, levers,
     voltage) into rows f and i (module docstring); ``steps`` its accepted and rejected steps."""
     n = a.stages
-    speed = p[a.p_speed]
     locking = False
     for k in range(n):
         locking = locking or p[a.p_psi + 2 * k + 1] <= 0.0
@@ -100,7 +102,7 @@ def answer(status, t_stop, steps, rec, a, p, f, i):
     tripped = not np.isnan(rec.trip[0])
     if tripped:
         f[F_T_TRIP], f[F_DRIVE] = rec.trip[0], rec.trip[3]
-        f[F_TRAVEL] = speed * rec.trip[1]
+        f[F_TRAVEL] = rec.trip[rec.trip.size - 2]
         if rec.trip[rec.trip.size - 1] != RESTING:
             f[F_THRUST] = rec.trip[4 + thrust_at]
         f[F_EXTRA] = 0.0
@@ -112,7 +114,7 @@ def answer(status, t_stop, steps, rec, a, p, f, i):
                 row = rec.samples[s]
                 if not found or abs(row[3 + thrust_at]) > abs(f[F_PEAK]):
                     f[F_PEAK], f[F_T_PEAK] = row[3 + thrust_at], row[0]
-                far = max(far, speed * row[1])
+                far = max(far, row[row.size - 1])
                 found = True
         if found:
             f[F_EXTRA] = far - f[F_TRAVEL]
@@ -136,6 +138,10 @@ def answer(status, t_stop, steps, rec, a, p, f, i):
     i[I_STEPS] = steps
     i[I_SEATED] = seated
     i[I_RESTING] = resting
+    i[I_IMPACTS] = rec.counts[3]
+    f[F_LOST] = 0.0
+    for k in range(rec.counts[3]):
+        f[F_LOST] += rec.impacts[k, LOST]
 
 
 @cache_guard.compile_cached(ANSWER_SIG, error_model="numpy")

@@ -15,9 +15,9 @@ from numba import prange, types
 
 from tswm_runtime.chains import kernel
 from tswm_runtime.chains.backlash import IMPACT_COLUMNS
-from tswm_runtime.chains.answers import (ANSWERING, I_EVENTS, I_STATUS, I_STEPS, I_VERDICT, N_F, N_I,
+from tswm_runtime.chains.answers import (ANSWERING, I_EVENTS, I_IMPACTS, I_STATUS, I_STEPS, I_VERDICT, N_F, N_I,
                                           VERDICTS, answer, answering)
-from tswm_runtime.chains.run import chain_functions, chain_tables, first_room, run_status, samples_room
+from tswm_runtime.chains.run import chain_functions, chain_tables, first_room, run_status, samples_room, start_state
 from tswm_runtime.hybrid import entry
 from tswm_runtime.hybrid.addressed import ADDRESSES
 from tswm_runtime.integration import segment
@@ -45,16 +45,17 @@ BATCH_SIG = types.none(types.int64, ADDRESSES, types.UniTuple(types.int64, 3), k
 
 
 @njit(refcounted=True, error_model="numpy")
-def _records(t_out, n_p, stages, room):
-    """A case's Record (the output rows at t_out; no event log or step log: the chain keeps its own)
+def _records(t_out, n_states, n_p, stages, room):
+    """A case's Record (the output rows of n_states at t_out; no event log or step log: the chain keeps its own)
     and its ChainRecord with room for ``room.phases`` phases and ``room.samples`` samples."""
-    out = Outputs(t_out, np.full((t_out.size, 2), np.nan), np.full(t_out.size, -1, np.int64),
+    out = Outputs(t_out, np.full((t_out.size, n_states), np.nan), np.full(t_out.size, -1, np.int64),
                   np.empty((t_out.size, n_p)))
     record = Record(out, EventLog(np.empty(1), np.empty((1, 4), np.int64), np.empty((1, 2)), np.empty((1, 4))),
                     np.zeros((0, 3)), np.zeros(segment.N_COUNTERS, np.int64), no_steps(2, n_p))
     chain = kernel.ChainRecord(np.empty((room.phases, 3), np.int64), np.empty((room.phases, 2 + n_p)),
-                               np.empty((room.samples, 3 + 3 * stages)), np.empty((room.phases, 4), np.int64),
-                               np.empty((room.phases, 3 + n_p)), np.empty(5 + 3 * stages), np.zeros(4, np.int64),
+                               np.empty((room.samples, 4 + 3 * stages)), np.empty((room.phases, 4), np.int64),
+                               np.empty((room.phases, 1 + n_states + n_p)), np.empty(6 + 3 * stages),
+                               np.zeros(4, np.int64),
                                np.empty((room.phases, len(IMPACT_COLUMNS))))
     return record, chain
 
@@ -79,7 +80,7 @@ def run_chain_batch(chain_at, functions, chain_addresses, c, settings, y0, P, t_
     tol = Tolerances(settings.tol.rtol, settings.tol.atol, settings.tol.hmin, settings.tol.hmax)
     run = _chain_at(chain_at)
     for chunk in prange((n_cases + CHUNK_CASES - 1) // CHUNK_CASES):
-        record, rec = _records(t_out, n_p, stages, room)
+        record, rec = _records(t_out, y0.size, n_p, stages, room)
         p = np.empty(n_p)
         case_settings = Settings(method, t_end, tol, max_steps)
         for case in range(chunk * CHUNK_CASES, min((chunk + 1) * CHUNK_CASES, n_cases)):
@@ -92,7 +93,8 @@ def run_chain_batch(chain_at, functions, chain_addresses, c, settings, y0, P, t_
 #: The answers of a batch as arrays, one entry per case (chains/answers.py): status and verdict as
 #: codes into the lists of their words (``status_words``, ``verdict_words``).
 CaseAnswers = namedtuple("CaseAnswers", "status status_words verdict verdict_words t_stop t_trip thrust drive travel "
-                                        "peak t_peak extra_travel needed pull_out stall_margin events steps")
+                                        "peak t_peak extra_travel needed pull_out stall_margin energy_lost events "
+                                        "steps impacts")
 
 
 def run_cases(module, P: np.ndarray, *, t_end: float, v0: float, rtol: float, atol: float, t_out: np.ndarray,
@@ -102,10 +104,11 @@ def run_cases(module, P: np.ndarray, *, t_end: float, v0: float, rtol: float, at
     The record starts with the room ``run.run_chain`` gives it; cases that need more run again with twice it."""
     P = np.ascontiguousarray(P, dtype=np.float64)
     t_out = np.ascontiguousarray(t_out, dtype=np.float64)
-    settings = entry.settings(int(method), 2, t_end=float(t_end), rtol=float(rtol), atol=float(atol),
+    y0 = start_state(module, float(v0))
+    settings = entry.settings(int(method), y0.size, t_end=float(t_end), rtol=float(rtol), atol=float(atol),
                               max_steps=int(max_steps))
     args = (address(kernel.run_chain_at, kernel.CHAIN_SIG), entry.functions(method, module), chain_functions(module),
-            chain_tables(module), settings, np.array([0.0, float(v0)]))
+            chain_tables(module), settings, y0)
     f, i = np.full((P.shape[0], N_F), np.nan), np.zeros((P.shape[0], N_I), np.int64)
     todo, phases = np.arange(P.shape[0]), first_room(max_events)
     while todo.size:
@@ -119,4 +122,4 @@ def run_cases(module, P: np.ndarray, *, t_end: float, v0: float, rtol: float, at
     pairs, verdict = np.unique(np.column_stack([i[:, I_VERDICT], status]), axis=0, return_inverse=True)
     verdict_words = [VERDICTS[v].format(status=status_words[s]) for v, s in pairs]
     return CaseAnswers(status.ravel(), status_words, verdict.ravel(), verdict_words, *f.T, i[:, I_EVENTS],
-                       i[:, I_STEPS])
+                       i[:, I_STEPS], i[:, I_IMPACTS])

@@ -3,7 +3,8 @@ address), its events, the decision at each (``rules.settle``: the latches, then 
 its resting phases, written into a ChainRecord from which ``chains/run.py`` builds the result.
 
 Per phase (a stretch in one mode, or at rest) the record keeps its mode, times, latches and the
-range of its samples; a sliding phase's samples are (t, q0, v0, stage forces) at its start, at every
+range of its samples; a sliding phase's samples are (t, q0, v0, stage forces, the last body's coordinate) at its
+start, at every
 output time inside it and at the event that ends it. Per event: the guard (START at the start), the
 modes before and after (NO_MODE: the run stops), the decision's outcome, the state and the latches
 the decision saw. The trip: what the chain carried just before the switch cut the motor.
@@ -16,8 +17,7 @@ from numba import types
 from tswm_runtime.chains.backlash import strike
 from tswm_runtime.hybrid.addressed import ADDRESSES, model_functions, segment_function
 from tswm_runtime.chains.rules import (NO_MODE, NONE, RESTING, RESTING_GROUP, SEVERAL, START, ChainFunctions,
-                                             ChainTables,
-                                             chain_work, decide, settle)
+                                             ChainTables, chain_work, decide, last_coordinate, settle)
 from tswm_runtime.integration import segment
 from tswm_runtime.jit import cache_guard
 from tswm_runtime.jit.addresses import guards_at
@@ -41,14 +41,15 @@ IMPACT_JAMMED = -28   # the impulse cannot stop the flanks' approach (dnu/dP_n <
 MAX_SAME_TIME = 8     # decisions at one instant before the run stops
 
 #: Where the run writes (sizes from ``chains/run.py``): phases (mode, first sample, end of samples) and
-#: phase_f (t_start, t_end, p); samples (t, q0, v0, 3 stage forces per stage); events (guard, from, to,
-#: outcome) and event_f (t, q0, v0, p); trip (t, q0, v0, drive, stage forces, mode; t NaN: no cut);
+#: phase_f (t_start, t_end, p); samples (t, q0, v0, 3 stage forces per stage, q_N); events (guard, from, to,
+#: outcome) and event_f (t, y: q0, v0 and with a clearance qk, vk, p); trip (t, q0, v0, drive, stage forces, q_N, mode;
+#: t NaN: no cut);
 #: counts (phases, samples, events, impacts); impacts (backlash.IMPACT_COLUMNS per impact, as many rows as events).
 ChainRecord = namedtuple("ChainRecord", "phases phase_f samples events event_f trip counts impacts")
 INT_MATRIX = types.int64[:, ::1]
 CHAIN_RECORD = types.NamedTuple((INT_MATRIX, MATRIX, MATRIX, INT_MATRIX, MATRIX, VECTOR, INTS, MATRIX), ChainRecord)
 CHAIN_TABLES = types.NamedTuple((INTS, INT_MATRIX, *(types.int64,) * 10, types.float64, types.float64,
-                                 types.float64, INTS, *(types.int64,) * 6), ChainTables)
+                                 types.float64, INTS, *(types.int64,) * 7), ChainTables)
 #: run_chain_at(functions, chain functions (stage_forces, body_forces_into, impact), tables, settings, y, p, record,
 #: chain record, max_events) -> (status, t_stop)
 CHAIN_SIG = types.Tuple((types.int64, types.float64))(ADDRESSES, types.UniTuple(types.int64, 3), CHAIN_TABLES,
@@ -56,15 +57,17 @@ CHAIN_SIG = types.Tuple((types.int64, types.float64))(ADDRESSES, types.UniTuple(
 
 
 @njit(error_model="numpy")
-def _sample(chain_fns, rec, mode, t, y, p, forces):
-    """Append (t, y, stage forces in mode) to the samples; False when the record is full."""
+def _sample(chain_fns, c, rec, mode, t, y, p, forces):
+    """Append (t, q0, v0, stage forces in mode, the last body's coordinate) to the samples; False when the record
+    is full."""
     s = rec.counts[1]
     if s >= rec.samples.shape[0]:
         return False
     row = rec.samples[s]
     row[0], row[1], row[2] = t, y[0], y[1]
     chain_fns.stage_forces(mode, t, y, p, forces)
-    copy_into(row[3:], forces)
+    copy_into(row[3:3 + forces.size], forces)
+    row[3 + forces.size] = last_coordinate(c, y, p)
     rec.counts[1] = s + 1
     return True
 
@@ -89,8 +92,9 @@ def _close(rec, t):
 def _event(rec, t, guard, before, after, outcome, y, p):
     e = rec.counts[2]
     rec.events[e, 0], rec.events[e, 1], rec.events[e, 2], rec.events[e, 3] = guard, before, after, outcome
-    rec.event_f[e, 0], rec.event_f[e, 1], rec.event_f[e, 2] = t, y[0], y[1]
-    copy_into(rec.event_f[e, 3:], p)
+    rec.event_f[e, 0] = t
+    copy_into(rec.event_f[e, 1:1 + y.size], y)
+    copy_into(rec.event_f[e, 1 + y.size:], p)
     rec.counts[2] = e + 1
 
 
@@ -159,7 +163,7 @@ def _run(functions, chain_addresses, c, settings, y, p, record, rec, max_events,
             status = TOO_MANY_EVENTS
             break
         _open(rec, mode, t, p)
-        if not _sample(chain_fns, rec, mode, t, y, p, w.forces):
+        if not _sample(chain_fns, c, rec, mode, t, y, p, w.forces):
             status = RECORD_FULL
             break
         if not _consistent(fns.guards, mode, t, y, p, w.g):
@@ -174,7 +178,7 @@ def _run(functions, chain_addresses, c, settings, y, p, record, rec, max_events,
         # initial step and no climb from it in each phase; DOPRI5's defect check judges it as any step
         seg_status, t_new, k, i, h = _slide(fns, run_segment, settings, c, mode, t, y, p, record, i, h, scratch)
         for r in range(i0, i):
-            if not _sample(chain_fns, rec, mode, out.t[r], out.y[r], p, w.forces):
+            if not _sample(chain_fns, c, rec, mode, out.t[r], out.y[r], p, w.forces):
                 status = RECORD_FULL
         same = same + 1 if t_new == t else 0
         t = t_new
@@ -189,7 +193,7 @@ def _run(functions, chain_addresses, c, settings, y, p, record, rec, max_events,
                 y[3] = 0.0
         if c.open_mode >= 0 and mode == c.open_mode and k == stages + 5:   # the output group stopped
             y[3] = 0.0
-        if not _sample(chain_fns, rec, mode, t, y, p, w.forces):
+        if not _sample(chain_fns, c, rec, mode, t, y, p, w.forces):
             status = RECORD_FULL
             break
         _close(rec, t)
@@ -222,12 +226,17 @@ def run_chain_at(functions, chain_addresses, c, settings, y0, p, record, rec, ma
     """The chain's run from (0, y0) under p (its latches written; its derived slots filled by the module's
     prepare) to settings.t_end: phases, events and their
     decisions, the trip, into rec; output rows into record.out.y (q0, v0; a row at an event time keeps the
-    later phase's value, rows after a stop NaN). Returns (status, t_stop). Its work arrays are made here
-    and kept alive for ``_run``, which borrows them (``borrow``) with its arguments."""
+    later phase's value, rows after a stop NaN). With a clearance in stage k y0 is (q0, v0, qk, vk) and vk is
+    set here to c_k v0 of p (the chain starts moving as one body: the gap's rate 0). Returns (status, t_stop).
+    Its work arrays are made here and kept alive for ``_run``, which borrows them (``borrow``) with its
+    arguments."""
     n_guards = c.guard_direction.shape[1]
     w = chain_work(n_guards, c.stages, c.direction.size, p.size, y0.size)
     scratch = segment.segment_work(y0.size, n_guards, 0, 0)
-    return _run(functions, chain_addresses, c, settings, y0.copy(), p, record, rec, max_events, w, scratch)
+    y = y0.copy()
+    if y.size == 4:
+        y[3] = p[c.p_speed_k] * y[1]
+    return _run(functions, chain_addresses, c, settings, y, p, record, rec, max_events, w, scratch)
 
 
 @njit(cache=True, error_model="numpy", no_cpython_wrapper=False, refcounted=True)  # chain_work allocates

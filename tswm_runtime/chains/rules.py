@@ -37,10 +37,12 @@ FRAME = 11            # an impact's frame: the module's IMPACT_FRAME
 #: latch; its states).
 ChainTables = namedtuple("ChainTables", "direction guard_direction stages p_psi p_lever_in p_lever_out p_slack "
                                         "switch_on p_delay p_switch p_pick p_seated armed picked tripped "
-                                        "mode_contact open_mode open_stage p_contact p_direction p_rho_sign p_speed_k")
+                                        "mode_contact open_mode open_stage p_contact p_direction p_rho_sign p_speed_k "
+                                        "p_speed")
 #: With a clearance (``backlash.py``): per mode the flank of the stage with the clearance it loads (+1 a, -1 b, 0
 #: for OPEN), the mode OPEN (-1: no clearance), the stage, the slots of the contact latch (+1, -1, 0 open), the
-#: groups' directions (two) and the stages' regime signs, and of v_k / v_0 of the rigid chain.
+#: groups' directions (two) and the stages' regime signs, and of v_k / v_0 of the rigid chain; the first slot of the
+#: speed factors c_j = v_j / v_0 of the rigid chain (c_0 to c_N).
 
 #: What a decision writes: guard values, a rate, the bodies' forces, interval sets (two and a cone),
 #: the candidates' modes and a_0, p before the latches moved, the stage forces at a cut.
@@ -350,9 +352,20 @@ def switched(fns, c, mode, guard, t, y, p, w):
 
 
 @njit(error_model="numpy")
+def last_coordinate(c, y, p):
+    """The last body's coordinate q_N: c_N q0 for a rigid chain; with a clearance in stage k body k's own qk
+    mapped through the stages after it, (c_N / c_k) qk (qk itself when k = N), so that the backlash taken up
+    before counts no travel."""
+    if y.size == 2:
+        return p[c.p_speed + c.stages] * y[0]
+    return p[c.p_speed + c.stages] / p[c.p_speed + c.open_stage] * y[2]
+
+
+@njit(error_model="numpy")
 def cut(chain_fns, c, mode, t, y, w, trip):
     """What the chain carried just before the motor's cut, with p still powered (w.before), into trip:
-    t, q0, v0, body 0's drive torque, the stage forces (NaN at rest: undetermined)."""
+    t, q0, v0, body 0's drive torque, the stage forces (NaN at rest: undetermined), the last body's coordinate
+    (``last_coordinate``), the mode."""
     trip[0], trip[1], trip[2] = t, y[0], y[1]
     chain_fns.body_forces(0 if mode == RESTING else c.direction[mode], t, y, w.before, w.force)
     trip[3] = w.force[0]
@@ -360,15 +373,17 @@ def cut(chain_fns, c, mode, t, y, w, trip):
         w.forces[:] = np.nan
     else:
         chain_fns.stage_forces(mode, t, y, w.before, w.forces)
-    copy_into(trip[4:], w.forces)
-    trip[4 + w.forces.size] = mode
+    copy_into(trip[4:4 + w.forces.size], w.forces)
+    trip[4 + w.forces.size] = last_coordinate(c, y, w.before)
+    trip[5 + w.forces.size] = mode
 
 
 @njit(error_model="numpy")
 def settle(fns, chain_fns, c, t, y, p, mode, guard, w, trip):
     """The latches after ``guard`` fired in ``mode`` (the seat's contact flips; the switch moves; the stage with a
-    clearance opens where its normal force reached 0), then the next mode; a switch that picks up with no delay, or sees its setting already where the chain starts
-    or comes to rest, cuts the motor at once and the mode is decided again. The first cut is written
+    clearance opens where its normal force reached 0), then the next mode; a switch that picks up with no delay, or
+    sees its setting already where the chain starts, comes to rest or leaves the open phase (an impact's closing
+    makes the stage's force jump), cuts the motor at once and the mode is decided again. The first cut is written
     into trip (trip[0] NaN until then). Returns (outcome, mode)."""
     n_guards = w.g.size
     copy_into(w.before, p)
@@ -380,7 +395,7 @@ def settle(fns, chain_fns, c, t, y, p, mode, guard, w, trip):
     if c.open_mode >= 0 and 0 <= mode != c.open_mode and guard == 1 + c.open_stage:
         p[c.p_contact] = 0.0   # the normal force of the stage with the clearance reached 0: its flanks part
     outcome, new = decide(fns, chain_fns, c, t, y, p, mode, w)
-    if new != NO_MODE and (guard == START or new == RESTING):
+    if new != NO_MODE and (guard == START or new == RESTING or (c.open_mode >= 0 and mode == c.open_mode)):
         copy_into(w.before, p)
         if switched(fns, c, new, CHECK, t, y, p, w):
             if np.isnan(trip[0]):

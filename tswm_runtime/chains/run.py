@@ -67,12 +67,12 @@ class Phase:
     t_start: float
     t_end: float
     latches: np.ndarray                          # p in the phase: switch state, pick-up time, seated
-    table: np.ndarray = field(default_factory=lambda: np.empty((0, 3)), repr=False)  # rows (t, q0, v0, forces)
+    table: np.ndarray = field(default_factory=lambda: np.empty((0, 4)), repr=False)  # rows (t, q0, v0, forces, q_N)
 
     @property
     def samples(self) -> list:
         """(t, y, stage_forces) at its ends and output points (sliding phases; none at rest)."""
-        return [(float(row[0]), row[1:3], row[3:]) for row in self.table]
+        return [(float(row[0]), row[1:3], row[3:-1]) for row in self.table]
 
 
 @dataclass
@@ -86,7 +86,7 @@ class ChainEvent:
     from_mode: int
     to_mode: int | None          # None: the run stops here
     outcome: str
-    at: tuple = field(default=(), repr=False)  # (module, the run's event_f, its row): what the decision saw
+    at: tuple = field(default=(), repr=False)  # (module, the run's chain record, its row): what the decision saw
     given: Decision | None = field(default=None, repr=False)
 
     @property
@@ -94,16 +94,17 @@ class ChainEvent:
         """(module, y, p) the decision saw, views into the run's record; () when given."""
         if not self.at:
             return ()
-        module, event_f, row = self.at
-        return module, event_f[row, 1:3], event_f[row, 3:3 + len(module.P_NAMES)]
+        module, chain, row = self.at
+        n = len(module.STATES)
+        return module, chain.event_f[row, 1:1 + n], chain.event_f[row, 1 + n:1 + n + len(module.P_NAMES)]
 
     @cached_property
     def decision(self) -> Decision:
-        if self.given is None and self.at and clearance_stage(self.at[0]):
-            k = clearance_stage(self.at[0])
-            return Decision(self.outcome, (), None, f"decided in compiled code with stage {k}'s clearance (the modes "
-                            "loading its flank in contact, rest with it pushing on that flank, or its flanks apart)")
-        return self.given if self.given is not None else decide(self.seen[0], self.t, *self.seen[1:])
+        if self.given is not None:
+            return self.given
+        if clearance_stage(self.seen[0]):
+            return _clearance_decision(self)
+        return decide(self.seen[0], self.t, *self.seen[1:])
 
 
 class ChainRun:
@@ -147,7 +148,7 @@ class ChainRun:
         times = event_f[:n_events, 0].tolist()
         return [ChainEvent(times[e], "start" if guard == compiled.START else module.GUARDS[guard], before,
                            None if after == compiled.NO_MODE else after, compiled.OUTCOMES[outcome],
-                           (module, event_f, e))
+                           (module, chain, e))
                 for e, (guard, before, after, outcome) in enumerate(chain.events[:n_events].tolist())]
 
 
@@ -169,11 +170,17 @@ def latches(module, y: np.ndarray, voltage: float | None = None, values: np.ndar
         remember(prepared, voltage, known, 64)
     p = known.copy()
     p[module.P_SEATED] = float(module.HAS_SEAT and p[module.P_SPEED + module.STAGES] * y[0] >= p[module.P_SEAT])
-    k = clearance_stage(module)
-    if k:   # the stage with the clearance closed on flank a (gap 0), on flank b (gap = clearance), else open
-        gap, clearance = p[getattr(module, f"V_gap_{k}")], p[getattr(module, f"V_clearance_{k}")]
-        p[module.P_CONTACT] = 1.0 if gap <= 0.0 else -1.0 if gap >= clearance else 0.0
+    if clearance_stage(module):
+        p[module.P_CONTACT] = start_contact(module, p)
     return p
+
+
+def start_contact(module, p: np.ndarray) -> float:
+    """The stage with the clearance at the start: closed on flank a (gap 0, +1), on flank b (gap = clearance, -1),
+    else open (0)."""
+    k = clearance_stage(module)
+    gap, clearance = p[getattr(module, f"V_gap_{k}")], p[getattr(module, f"V_clearance_{k}")]
+    return 1.0 if gap <= 0.0 else -1.0 if gap >= clearance else 0.0
 
 
 def numbers(module, p: np.ndarray) -> Statics:
@@ -184,11 +191,6 @@ def numbers(module, p: np.ndarray) -> Statics:
     return Statics(psi, tuple(float(x) for x in p[module.P_LEVER_IN:module.P_LEVER_IN + n]),
                    tuple(float(x) for x in p[module.P_LEVER_OUT:module.P_LEVER_OUT + n]), (),
                    float(p[module.P_SLACK]))
-
-
-def speed_factor(module, p: np.ndarray) -> float:
-    """v_N / v_0: the last body's travel per unit of q0."""
-    return float(p[module.P_SPEED + module.STAGES])
 
 
 def _candidates(module, t: float, y: np.ndarray, p: np.ndarray, directions) -> list[Candidate]:
@@ -203,13 +205,94 @@ def _candidates(module, t: float, y: np.ndarray, p: np.ndarray, directions) -> l
     return out
 
 
-def decide(module, t: float, y: np.ndarray, p: np.ndarray) -> Decision:
+def decide(module, t: float, y: np.ndarray, p: np.ndarray, flank: float = 0.0) -> Decision:
     """The chain's mode at (t, y) under latches p: every candidate in the direction of v0 (both at rest),
-    and rest (the valve's friction holding anything up to its magnitude)."""
+    and rest (the valve's friction holding anything up to its magnitude). With a clearance closed on ``flank``
+    (+1 a, -1 b): the candidates loading that flank, and rest with the stage pushing on it only."""
     v = y[1]
     directions = (1, -1) if v == 0 else ((1,) if v > 0 else (-1,))
     statics = replace(numbers(module, p), force=tuple(float(f) for f in module.body_forces(t, y, p, 0.0)))
-    return decide_numbers(_candidates(module, t, y, p, directions), v, statics)
+    candidates = _candidates(module, t, y, p, directions)
+    k = clearance_stage(module)
+    if k and flank:
+        loaded = {module.MODES[m] for m, flanks in enumerate(module.MODE_FLANKS)
+                  if flanks and flanks[k - 1] == FLANKS[flank]}
+        candidates = [c for c in candidates if c.name in loaded]
+        statics = replace(statics, flank=(k - 1, int(flank)))
+    return decide_numbers(candidates, v, statics)
+
+
+FLANKS = {1.0: "a", -1.0: "b"}
+
+
+def _clearance_decision(event: ChainEvent) -> Decision:
+    """The reason of an event of a chain with a clearance in stage k: the rigid decision with the flank constraint
+    while the stage is closed (``decide`` with the flank in contact); where it opens, which flank and why (its normal
+    force reached 0, or no mode loading that flank holds and the chain cannot rest); at an impact, the flank, the
+    normal speed before and after and whether the stage closed; in the open phase, each group's direction and the
+    closed stages' regimes (the latches the compiled decision set)."""
+    module, chain, row = event.at
+    _, y, p = event.seen
+    k = clearance_stage(module)
+    before = float(chain.event_f[row - 1, 1 + len(module.STATES) + module.P_CONTACT]) if row else start_contact(
+        module, p)
+    words = []
+    if event.from_mode == module.OPEN and event.guard in ("gap_a", "gap_b"):
+        if event.to_mode is None:
+            return Decision(event.outcome, (), None, f"stage {k}'s flanks meet on flank {event.guard[-1]} and the "
+                            "impulse cannot stop their approach")
+        hit = _impact(module, chain, row)
+        words.append(f"stage {k}'s flanks meet on flank {hit['flank']}: normal speed {hit['nu before']:.6g} -> "
+                     f"{hit['nu after']:.6g} m/s, " + ("closed (plastic, or its rebound within the tolerances)"
+                                                        if hit["closed"] else "rebound: the flanks part again"))
+        before = 1.0 if hit["flank"] == "a" else -1.0
+        if not hit["closed"]:
+            return Decision(event.outcome, (), None, f"{words[0]}; {_open_words(module, p)}")
+    elif event.from_mode == module.OPEN or (before == 0.0 and event.guard == "start"):
+        words.append(f"stage {k} starts open (its flanks apart)" if event.guard == "start" else
+                     f"{event.guard} in the open phase")
+        before = 0.0
+    if before == 0.0 or event.to_mode == module.OPEN:
+        if event.to_mode is None:
+            why = {"group at rest": "a group of bodies would stay at rest while the flanks are apart (its stick is not "
+                                    "decided yet)", "several": "several open phases hold"}
+            return Decision(event.outcome, (), None, "; ".join([*words, why.get(event.outcome, "no open phase holds")]))
+        if before != 0.0:
+            flank = FLANKS[before]
+            if event.guard == f"N_{k}":
+                words.append(f"stage {k}'s normal force on flank {flank} reached 0")
+            else:
+                closed = decide(module, event.t, y, p, before)
+                words.append(f"no mode loading flank {flank} holds and the chain cannot rest with stage {k} pushing "
+                             f"on it ({closed.reason})")
+            words.append(f"its flanks part from flank {flank}")
+        return Decision(event.outcome, (module.MODES[module.OPEN],), None, "; ".join([*words, _open_words(module, p)]))
+    closed = decide(module, event.t, y, p, before)
+    words.append(f"stage {k} closed on flank {FLANKS[before]}: {closed.reason}")
+    return Decision(closed.outcome, closed.modes, closed.accel, "; ".join(words), closed.internal)
+
+
+def _impact(module, chain: kernel.ChainRecord, row: int) -> dict:
+    """The impact of the gap event in ``row``: one impact row per gap event of the open phase, in order."""
+    gaps = (module.GUARDS.index("gap_a"), module.GUARDS.index("gap_b"))
+    i = sum(1 for guard, before in chain.events[:row, :2].tolist() if before == module.OPEN and guard in gaps)
+    values = chain.impacts[i].tolist()
+    return {**dict(zip(IMPACT_COLUMNS, values)), "flank": "a" if values[1] > 0 else "b", "closed": values[5] > 0}
+
+
+def _open_words(module, p: np.ndarray) -> str:
+    """The open phase's latches in words: each group's direction (free: its forces do not depend on it; the last body
+    held by its valve friction), each closed stage's regime."""
+    k, n = clearance_stage(module), module.STAGES
+    names = {1.0: "forward", -1.0: "backward", 0.0: "free (its forces do not depend on its direction)"}
+    held = p[module.P_HELD_OUT] > 0.0
+    out = "held at rest by its valve friction" if held else names[float(p[module.P_DIRECTION_OUT])]
+    regimes = [f"stage {i + 1} {'tractive' if p[module.P_RHO_SIGN + i] > 0 else 'inverse-tractive'}"
+               for i in range(n) if i != k - 1]
+    group_in = "body 0" if k == 1 else f"bodies 0..{k - 1}"
+    group_out = f"body {n}" if k == n else f"bodies {k}..{n}"
+    return (f"open phase: {group_in} {names[float(p[module.P_DIRECTION_IN])]}, {group_out} {out}; closed stages: "
+            f"{', '.join(regimes) or 'none'}")
 
 
 
@@ -251,7 +334,7 @@ def _parts(module) -> _ModuleParts:
             mode_contact=np.array([flank[f[k - 1]] if k and f else 0 for f in module.MODE_FLANKS], np.int64),
             open_mode=module.OPEN if k else -1, open_stage=k, p_contact=module.P_CONTACT if k else 0,
             p_direction=module.P_DIRECTION_IN if k else 0, p_rho_sign=module.P_RHO_SIGN if k else 0,
-            p_speed_k=module.P_SPEED + k if k else 0)
+            p_speed_k=module.P_SPEED + k if k else 0, p_speed=module.P_SPEED)
         no_steps = (np.empty((0, 4)), np.empty((0, 2), np.int64), np.empty((0, 2)), np.empty((0, 2)),
                     np.empty((0, 3, 4)), np.empty(0, np.int64), np.empty((0, n_p)))
         known = _PARTS[module.__name__] = _ModuleParts(
@@ -271,13 +354,11 @@ def clearance_stage(module) -> int:
     return getattr(module, "CLEARANCE_STAGE", 0)
 
 
-def start_state(module, v0: float, p: np.ndarray) -> np.ndarray:
-    """The states at t = 0: q0 = 0 and v0; with a clearance in stage k also qk = 0 and vk = c_k v0 (the chain
-    moves as one body: the gap's rate 0)."""
+def start_state(module, v0: float) -> np.ndarray:
+    """The states at t = 0: q0 = 0 and v0; with a clearance in stage k also qk = 0 and vk (which the kernel sets
+    to c_k v0 of each run's p: the chain moves as one body)."""
     y0 = np.zeros(len(module.STATES))
     y0[1] = v0
-    if y0.size == 4:
-        y0[3] = p[module.P_SPEED + clearance_stage(module)] * v0
     return y0
 
 
@@ -305,7 +386,7 @@ def samples_room(phases: int, points: int) -> int:
 def _record(module, t_out: np.ndarray, phases: int, samples: int) -> tuple[Record, kernel.ChainRecord]:
     """A run's records: its own output rows, counters and chain record, the module's shared parts besides."""
     parts = _parts(module)
-    n_p, width = len(module.P_NAMES), 3 + 3 * module.STAGES
+    n_p, width = len(module.P_NAMES), 4 + 3 * module.STAGES
     rows = np.empty((t_out.size, len(module.STATES)))
     rows.fill(np.nan)   # np.full costs three times as much
     out = Outputs(t_out, rows, parts.out_mode, parts.out_p)
@@ -313,7 +394,8 @@ def _record(module, t_out: np.ndarray, phases: int, samples: int) -> tuple[Recor
                     StepLog(*parts.no_steps, np.zeros(2, np.int64)))
     chain = kernel.ChainRecord(np.empty((phases, 3), np.int64), np.empty((phases, 2 + n_p)),
                                np.empty((samples, width)), np.empty((phases, 4), np.int64),
-                               np.empty((phases, 3 + n_p)), np.empty(5 + 3 * module.STAGES), np.zeros(4, np.int64),
+                               np.empty((phases, 1 + len(module.STATES) + n_p)), np.empty(6 + 3 * module.STAGES),
+                               np.zeros(4, np.int64),
                                np.empty((phases, len(IMPACT_COLUMNS))))
     return record, chain
 
@@ -326,7 +408,7 @@ def run_chain(module, *, t_end: float, v0: float, rtol: float, atol: float, t_ou
     checked by the caller) the scene's values."""
     t_out = np.ascontiguousarray(t_out, dtype=np.float64)
     start = latches(module, np.zeros(2), voltage, values)   # the latches at q0 = 0 (y0's)
-    y0 = start_state(module, float(v0), start)
+    y0 = start_state(module, float(v0))
     settings = entry.settings(int(method), y0.size, t_end=float(t_end), rtol=float(rtol), atol=float(atol),
                               max_steps=int(max_steps))
     args = (entry.functions(method, module), chain_functions(module), chain_tables(module), settings, y0)
@@ -393,9 +475,10 @@ def _result(module, code: int, t_stop: float, record: Record, chain: kernel.Chai
 
 def _trip(module, trip: np.ndarray) -> dict | None:
     """What the chain carried just before the motor's cut (None: no cut): mode, state, stage forces (None at
-    rest: undetermined), body 0's drive torque."""
+    rest: undetermined), body 0's drive torque, the last body's coordinate."""
     if np.isnan(trip[0]):
         return None
     mode = int(trip[-1])
     return {"t": float(trip[0]), "y": trip[1:3].copy(), "mode": mode,
-            "forces": None if mode == RESTING else trip[4:-1].copy(), "drive": float(trip[3])}
+            "forces": None if mode == RESTING else trip[4:-2].copy(), "drive": float(trip[3]),
+            "q_last": float(trip[-2])}

@@ -8,6 +8,7 @@ scene file's, without SymPy or the scene reader. A check is one of
     ("range", name, key, lo, hi, lo_inclusive, hi_inclusive, allowed)
     ("bound", name, key, lo, hi, allowed)         lo <= value(name) <= hi: where arithmetic holds
     ("less", name, key, other, allowed)          value(name) < value(other)
+    ("at_most", name, key, other, allowed)       value(name) <= value(other)
     ("jam", gamma, key, rho_key, law, allowed)   gamma + largest friction angle < 90 deg
 
 ``allowed`` is the rule as the scene reader words it, in display units. A chain module carries its
@@ -53,6 +54,8 @@ def _holds(check: tuple, value, finite=np.isfinite) -> np.ndarray:
         return finite(x) & (x >= check[3]) & (x <= check[4])
     if kind == "less":
         return value(check[1]) < value(check[3])
+    if kind == "at_most":
+        return value(check[1]) <= value(check[3])
     if kind == "jam":
         _, gamma, _, rho_key, law, _ = check
         return value(gamma) + _largest_friction_angle(law, value(rho_key)) < 90 * DEG
@@ -73,7 +76,7 @@ def _message(module: ModuleType, check: tuple, value) -> str:
         return f"parameter {show(check[1])}: must be {check[7]} ({check[2]} in the scene file)"
     if kind == "bound":
         return f"parameter {show(check[1])}: must be {check[5]} ({check[2]} in the scene file)"
-    if kind == "less":
+    if kind in ("less", "at_most"):
         return f"parameter {show(check[1])}: must be {check[4]} ({show(check[3])}; {check[2]} in the scene file)"
     return (f"parameters {show(check[1], 'angle')} and {show(check[3], 'angle')}: must keep {check[5]} ({check[2]} in "
             "the scene file)")
@@ -92,7 +95,8 @@ _CHAIN_CHECKS: dict = {}
 
 def _chain_checks(module: ModuleType) -> tuple:
     """A chain module's PARAM_RANGES (lo, hi, lo included, hi included; None: no bound; hi the name of a
-    sibling value, which the value must stay below) as "range" and "less" checks, and per stage the scene
+    sibling value, which the value must stay below, or at most equal where hi is included) as "range" and "less" or
+    "at_most" checks, and per stage the scene
     reader's jam rule: slope + effective friction angle (derived by ``prepare``) < 90 deg."""
     checks = []
     for name, key, (lo, hi, lo_in, hi_in) in zip(module.PARAM_NAMES, module.PARAM_KEYS, module.PARAM_RANGES):
@@ -103,7 +107,8 @@ def _chain_checks(module: ModuleType) -> tuple:
         checks.append(("range", name, key, lo, None if sibling else hi, lo_in, hi_in,
                        " and ".join(b for b in bound if b) or "finite"))
         if sibling:
-            checks.append(("less", name, key, sibling, f"< {sibling}"))
+            checks.append(("at_most", name, key, sibling, f"<= {sibling}") if hi_in else
+                          ("less", name, key, sibling, f"< {sibling}"))
     for k in range(module.STAGES):
         checks.append(("jam", module.P_NAMES[module.P_GAMMA + k], f"stage[{k + 1}]", module.P_NAMES[module.P_RHO + k],
                        "constant", "slope + effective friction angle < 90 deg, else the stage jams"))
@@ -189,6 +194,8 @@ def _compiled_check(module: ModuleType):
             terms.append(f"isfinite({x}) and {number(check[3])} <= {x} <= {number(check[4])}")
         elif kind == "less":
             terms.append(f"{value(check[1])} < {value(check[3])}")
+        elif kind == "at_most":
+            terms.append(f"{value(check[1])} <= {value(check[3])}")
         elif kind == "jam":
             _, gamma, _, rho_key, law, _ = check
             rho = value(rho_key) if law == "constant" else f"{number(DEG)} / {value(rho_key)}"

@@ -15,7 +15,7 @@ from types import ModuleType
 
 import numpy as np
 
-from tswm_runtime.chains.run import RESTING, ChainRun, run_chain, speed_factor
+from tswm_runtime.chains.run import RESTING, ChainRun, run_chain
 from tswm_runtime.common.memo import overrides_key, remember
 from tswm_runtime.results.rows import output_times
 from tswm_runtime.simulation.chain_values import chain_values
@@ -79,8 +79,9 @@ class ChainResult:
         return drive_train_answers(self.module, self.run, self.voltage)
 
     @cached_property
-    def samples(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """(t, q0, v0, stage forces) of the sliding phases' samples, NaN between phases."""
+    def samples(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(t, q0, v0, stage forces, the last body's coordinate) of the sliding phases' samples, NaN between
+        phases."""
         return _samples(self._sliding, self.module.STAGES)
 
     @property
@@ -164,15 +165,15 @@ def simulate_chain(module: ModuleType, params: dict | None = None, method: int =
                        result.y[:, 0], result.y[:, 1], result.n_steps, result, module, run["voltage"])
 
 
-def _samples(sliding: list, stages: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """The sliding phases' samples as arrays (t, q0, v0, forces with 3 columns per stage), a NaN row after
-    each phase so that plotted lines break where the chain rests or a force jumps."""
-    width = 3 + 3 * stages
+def _samples(sliding: list, stages: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The sliding phases' samples as arrays (t, q0, v0, forces with 3 columns per stage, the last body's
+    coordinate), a NaN row after each phase so that plotted lines break where the chain rests or a force jumps."""
+    width = 4 + 3 * stages
     breaks = np.full((len(sliding), width), np.nan)
     breaks[:, 0] = [phase.t_end for phase in sliding]
     table = np.concatenate([part for j, phase in enumerate(sliding) for part in (phase.table, breaks[j:j + 1])]
                            or [np.empty((0, width))])
-    return table[:, 0], table[:, 1], table[:, 2], table[:, 3:]
+    return table[:, 0], table[:, 1], table[:, 2], table[:, 3:-1], table[:, -1]
 
 
 def _peaks(sliding: list, stages: int) -> list[dict]:
@@ -181,7 +182,7 @@ def _peaks(sliding: list, stages: int) -> list[dict]:
     table = np.concatenate([phase.table for phase in sliding] or [np.empty((0, 3 + 3 * stages))])
     if table.shape[0] == 0:
         return [dict.fromkeys(FORCES) for _ in range(stages)]
-    forces = table[:, 3:]
+    forces = table[:, 3:3 + 3 * stages]
     size = np.abs(forces)
     size[np.isnan(size)] = -1.0
     rows = np.argmax(size, axis=0)
@@ -194,15 +195,12 @@ def plot(result: ChainResult, module: ModuleType, path) -> object:
     """The run's figure (results/chain_plot.py): travel and speed, each stage's forces, the trip."""
     from tswm_runtime.results.chain_plot import plot_stages
 
-    t, q0, v0, forces = result.samples
+    t, _, v0, forces, travel = result.samples
     stages = [(f"stage {k + 1} ({module.STAGE_KINDS[k]})", UNITS[module.BODY_MOTIONS[k]],
                UNITS[module.BODY_MOTIONS[k + 1]]) for k in range(module.STAGES)]
-    travel, gap = speed_factor(module, result.p) * q0, None
-    k = getattr(module, "CLEARANCE_STAGE", 0)
-    if k:   # the last body moves with body k, not with q0: its travel and the gap from the output rows
-        rows = result.run.t
-        last = result.p[module.P_SPEED + module.STAGES] / result.p[module.P_SPEED + k] * result.run.y[:, 2]
-        travel, gap = np.interp(t, rows, last), (k - 1, rows, gaps(module, result))
+    k, gap = getattr(module, "CLEARANCE_STAGE", 0), None
+    if k:   # the stage's gap from the output rows
+        gap = (k - 1, result.run.t, gaps(module, result))
     return plot_stages(path, f"{module.SCENE}: {result.status}", t, travel, v0, forces, stages,
                        result.trip["t"] if result.trip else None, gap)
 
@@ -306,7 +304,8 @@ def impact_lines(run: ChainRun, module: ModuleType) -> list[str]:
 
 def summary(result: ChainResult, module: ModuleType) -> list[str]:
     """The run at a glance, as printed by ``tswm simulate``: status, per stage its regimes, switch
-    times and force maxima, the events with the decisions' outcomes."""
+    times and force maxima, the events with the decisions' outcomes (and their reasons where not unique, at
+    rest of two stages or more, and at every event of a chain with a clearance)."""
     lines = [f"  status: {result.status}" + (f": {result.message}" if result.message else ""),
              f"  t_stop = {result.t_stop:.9g} s, steps {result.n_steps}"]
     for k, stage in enumerate(result.stages):
@@ -324,6 +323,7 @@ def summary(result: ChainResult, module: ModuleType) -> list[str]:
     for e in result.events:
         lines.append(f"    t = {e['t']:.9g} s, {e['guard']}: {e['from'] or '(start)'} -> {e['to'] or '(stop)'} "
                      f"[{e['outcome']}]")
-        if e["outcome"] != "unique" or (e["to"] == "resting" and module.STAGES > 1):
+        if e["outcome"] != "unique" or (e["to"] == "resting" and module.STAGES > 1) or getattr(module,
+                                                                                              "CLEARANCE_STAGE", 0):
             lines.append(f"      {e['reason']}")
     return lines

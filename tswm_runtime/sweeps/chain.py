@@ -26,7 +26,7 @@ from tswm_runtime.jit import coldstart
 coldstart.announce(("integrate", "chain", "chain-batch"))  # before the next import compiles them, if not cached
 
 from tswm_runtime.chains.batch import run_cases  # noqa: E402
-from tswm_runtime.chains.run import latches  # noqa: E402
+from tswm_runtime.chains.run import clearance_stage, latches  # noqa: E402
 from tswm_runtime.model.values import ValueInputError, quantities, si_value  # noqa: E402
 from tswm_runtime.simulation.chain import settings  # noqa: E402
 from tswm_runtime.simulation.chain_values import chain_values, unknown_value  # noqa: E402
@@ -46,12 +46,7 @@ class ChainSweepError(ValueError):
 
 def parse_grid(specs: list[str], module) -> dict[str, list[float]]:
     """The --grid items over the chain's values and voltage (sweeps/grid.py: ranges, lists or one value;
-    numbers in SI or with a unit of the value's quantity); a chain with a clearance is refused (its runs' answers
-    are not read for impacts yet: run it with tswm simulate)."""
-    k = getattr(module, "CLEARANCE_STAGE", 0)
-    if k:
-        raise ChainSweepError(f"{module.SCENE}: stage[{k}].clearance: a chain sweep of a chain with a clearance is not "
-                              "supported yet; run its cases with tswm simulate --set")
+    numbers in SI or with a unit of the value's quantity)."""
     names = {*module.PARAM_NAMES, *(("voltage",) if hasattr(module, "MOTOR_VOLTAGE") else ())}
 
     def unknown(name: str) -> str | None:
@@ -73,14 +68,14 @@ def parse_grid(specs: list[str], module) -> dict[str, list[float]]:
 
 def columns_of(module: ModuleType, swept: list[str]) -> list[str]:
     """The sizing table's columns, units in their names (the swept values' SI units, the last body's and
-    body 0's)."""
+    body 0's); with a clearance also the stage's impacts and the kinetic energy they lost."""
     thrust, torque = UNITS[module.BODY_MOTIONS[-1]], UNITS[module.BODY_MOTIONS[0]]
     travel = "m" if module.BODY_MOTIONS[-1] == "translation" else "rad"
     si = {name: unit for name, (unit, _) in quantities(module).items()}
     return [*(f"{name} [{si[name]}]" if si.get(name) else name for name in swept), "status", "t_trip [s]",
             f"thrust at trip [{thrust}]", f"drive at trip [{torque}]", f"travel at trip [{travel}]",
             f"peak after trip [{thrust}]", "t_peak [s]", f"extra travel [{travel}]", "holds", "stall margin",
-            "t_stop [s]", "events", "steps"]
+            "t_stop [s]", "events", "steps", *(("impacts", "impact loss [J]") if clearance_stage(module) else ())]
 
 
 def sizing(module: ModuleType, grid: dict[str, list[float]], overrides: dict, *, output: str | Path | None = None,
@@ -159,4 +154,6 @@ def _table(module: ModuleType, run: dict, method: int, swept: list[str], values:
              columns.numbers(spread(a.stall_margin)),
              columns.numbers(spread(a.t_stop)), columns.numbers(spread(a.events, 0)),
              columns.numbers(spread(a.steps, 0))]
+    if clearance_stage(module):
+        cells += [columns.numbers(spread(a.impacts, 0)), columns.numbers(spread(a.energy_lost))]
     return columns.table(dict(zip(names, cells)))
