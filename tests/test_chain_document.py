@@ -106,7 +106,6 @@ def test_the_document_shows_the_last_stage_open(msl_document):
     assert equations[4] == "m_2 = \\frac{M_{2}}{r_{\\mathrm{out},2}^{2}}", equations[4]
 
 
-@pytest.mark.heavy
 def test_derive_of_a_chain_with_a_clearance_prints_it_and_its_section(tmp_path, capsys):
     """tswm derive of the two-stage chain with stage 2's clearance (1 mm, e = 0.5, start gap 0.5 mm): its summary
     names the stage, c, e and the start gap, the open mode's groups (bodies 0..1 and body 2), the extra states q2, v2
