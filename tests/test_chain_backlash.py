@@ -203,13 +203,19 @@ def test_the_scene_keeps_the_clearance(tmp_path):
     assert c.gap.key == "run.gap_2" and c.clearance.key == "stage[2].clearance"
 
 
-def test_a_group_left_at_rest_while_open_stops_the_run_with_its_status(chain_module):
-    """Bodies 0 and 1 unforced and at rest while stage 2 is open: their own rest (stick) is not decided yet, so the
-    run stops at once with status group-at-rest and says why, instead of guessing."""
+def test_a_group_left_unforced_at_rest_while_open_sticks(chain_module):
+    """Bodies 0 and 1 unforced and at rest while stage 2 is open: their rest holds (no force asks anything of stage
+    1's stick cone) and leaving it would need an acceleration they do not have, so they stay (speeds exactly 0) while
+    body 2 alone (-2 N) closes the gap g = g0 + cos(g2) q2 at sqrt(2 g0 / (cos(g2) 2 N / M2))."""
     module = chain_module(_scene("gap-rest", mu=0.1, f0=0.0))
-    result = simulate_chain(module, points=5)
-    assert result.status == "group-at-rest" and result.t_stop == 0.0
-    assert "comes to rest at t = 0 s while stage 2's flanks are apart" in result.message
+    result = simulate_chain(module, points=31)
+    assert result.status == "finished", result.message
+    first = result.run.impacts[0]
+    assert first["v0 before"] == 0.0 and first["flank"] == "a"
+    assert first["t"] == pytest.approx(math.sqrt(2 * 0.5e-3 / (math.cos(G2) * 2.0 / M[2])), rel=1e-9)
+    rows = result.run.t < first["t"]
+    assert rows.sum() > 1 and np.all(result.run.y[rows, :2] == 0.0)
+    assert result.stages[0].phases[0].regime == "resting"
 
 
 def test_the_figure_shows_the_gap_of_the_hand_kinematics(chain_module, tmp_path):

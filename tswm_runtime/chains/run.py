@@ -377,8 +377,9 @@ def _result(module, code: int, t_stop: float, record: Record, chain: kernel.Chai
         run.message = (f"D or the jam factor is <= 0 where mode {module.MODES[run.phases[-1].mode]} begins at "
                        f"t = {t_stop:.9g} s: no contact force keeps the stages together")
     elif code == kernel.GROUP_AT_REST:
-        run.message = (f"a group of bodies comes to rest at t = {t_stop:.9g} s while stage "
-                       f"{clearance_stage(module)}'s flanks are apart: its own rest (stick) is not decided yet")
+        run.message = (f"a group of bodies is at rest at t = {t_stop:.9g} s while stage {clearance_stage(module)}'s "
+                       "flanks are apart and can neither stay at rest (its stages' stick cones and friction do not "
+                       "hold its forces) nor leave rest in any direction and regimes")
     elif code == kernel.IMPACT_JAMMED:
         run.message = (f"stage {clearance_stage(module)}'s flanks meet at t = {t_stop:.9g} s and the impulse cannot "
                        "stop their approach (the effective masses and friction jam the impact)")
