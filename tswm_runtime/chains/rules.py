@@ -8,7 +8,9 @@ cone (``rest_holds``: the admissible sets propagated stage by stage, as ``chain_
 One consistent mode is the answer (UNIQUE); several that agree in a_0 and exclude rest are a kink
 (CRITICAL: the one that is not the current mode is taken); none (NONE) or several (SEVERAL, a
 Painleve-type case) are outcomes too, never exceptions. tests/test_chain_kernel.py checks that both
-implementations decide alike.
+implementations decide alike. While the stage with a clearance is open (``open_phase``), each group at rest
+is decided the same way on its own: stuck where ``group_holds`` (the same propagation over its bodies and
+closed stages) admits its statics, or leaving rest.
 
 The functions a decision calls: ``rhs`` (a_0 is dy[1]) and ``guards`` (D, jam, N_k, v0, seat,
 switch, delay; mode RESTING: the last four) from the mode machine's Functions, and the chain
