@@ -20,14 +20,14 @@ DEG = math.pi / 180
 M = (1.0, 2.0, 3.0)
 
 
-def _scene(name, *, open_stage=1, g2=10.0, mu1=0.1, mu2=0.3, f0=10.0, f1=0.0, f2=-2.0, drive="", switch="",
+def _scene(name, *, open_stage=1, g2=10.0, mu1=0.1, mu2=0.3, f0=10.0, f1=0.0, f2=-2.0, drive="", switch="", valve="",
            t_end=0.3):
     """Stage 1 (30 deg) and stage 2 (g2), the clearance (1 mm, e = 0.3, start gap 0.5 mm) in ``open_stage``."""
     gap = 'clearance = "1 mm"\nrestitution = 0.3\n'
     return (f'name = "{name}"\n[[stage]]\nkind = "wedge"\ngamma = "30 deg"\nmu = {mu1!r}\n{gap if open_stage == 1 else ""}'
             f'[[stage]]\nkind = "wedge"\ngamma = "{g2!r} deg"\nmu = {mu2!r}\n{gap if open_stage == 2 else ""}'
             f'[[body]]\nmass = "1 kg"\nforce = "{f0!r} N"\n{drive}[[body]]\nmass = "2 kg"\nforce = "{f1!r} N"\n'
-            f'[[body]]\nmass = "3 kg"\nforce = "{f2!r} N"\n{switch}'
+            f'[[body]]\nmass = "3 kg"\nforce = "{f2!r} N"\n{valve}{switch}'
             f'[run]\nt_end = {t_end!r}\nv0 = 0.0\ngap_{open_stage} = "0.5 mm"\nrtol = 1e-10\natol = 1e-12\n')
 
 
@@ -157,3 +157,24 @@ def test_mov_with_its_clearance_in_the_worm_runs_and_the_worm_strikes_at_its_ene
     w = brentq(lambda w: inertia / b * (w - a / b * math.log1p(b * w / a)) - theta, 1e-9, 50.0, xtol=1e-14)
     assert w < 50.0
     assert first["v0 before"] == pytest.approx(w, rel=1e-8)
+
+
+@pytest.mark.parametrize("packing, stays", [(5.0, True), (1.0, False)])
+def test_both_groups_at_rest_are_decided_each_on_its_own(chain_module, packing, stays):
+    """Clearance in stage 2, nothing moving: bodies 0 and 1 unforced (their rest holds) and body 2's load -2 N against
+    its packing's friction. With 5 N both groups stay and nothing moves to the end; with 1 N body 2 leaves rest on its
+    own, a2 = (-2 + 1) / M2, while the input group stays, and the gap g = g0 + cos(g2) q2 closes at
+    sqrt(2 g0 / (cos(g2) |a2|))."""
+    module = chain_module(_scene(f"held-both-{int(packing)}", open_stage=2, g2=40.0, mu1=0.1, mu2=0.1, f0=0.0,
+                                 valve=f'packing = "{packing!r} N"\n'))
+    result = simulate_chain(module, points=31)
+    assert result.status == "finished", result.message
+    assert result.stages[0].phases[0].regime == "resting"
+    if stays:
+        assert not result.run.impacts and np.all(result.run.y == 0.0) and result.t_stop == 0.3
+        return
+    a2 = (-2.0 + packing) / M[2]
+    first = result.run.impacts[0]
+    assert first["v0 before"] == 0.0
+    assert first["t"] == pytest.approx(math.sqrt(2 * 0.5e-3 / (math.cos(40 * DEG) * -a2)), rel=1e-9)
+    assert first["vk before"] == pytest.approx(a2 * first["t"], rel=1e-9)
