@@ -178,3 +178,28 @@ def test_both_groups_at_rest_are_decided_each_on_its_own(chain_module, packing, 
     assert first["v0 before"] == 0.0
     assert first["t"] == pytest.approx(math.sqrt(2 * 0.5e-3 / (math.cos(40 * DEG) * -a2)), rel=1e-9)
     assert first["vk before"] == pytest.approx(a2 * first["t"], rel=1e-9)
+
+
+def test_a_held_group_beyond_a_middle_clearance_waits_for_the_driven_group(chain_module):
+    """Three stages (30, 40, 10 deg), the clearance in stage 2: bodies 0 and 1 driven by 10 N through stage 1 sliding
+    tractive, a0 = F0 / (M0 + M1 tan(g1) tan(g1 + rho1)); bodies 2 and 3 held at rest by the self-locking stage 3
+    (mu 0.3) under body 3's -3 N: they stay (speed exactly 0) and the gap g = g0 - sin(g2) tan(g1) q0 closes at
+    sqrt(2 g0 / (sin(g2) tan(g1) a0))."""
+    text = ('name = "held-middle"\n[[stage]]\nkind = "wedge"\ngamma = "30 deg"\nmu = 0.1\n'
+            '[[stage]]\nkind = "wedge"\ngamma = "40 deg"\nmu = 0.1\nclearance = "1 mm"\nrestitution = 0.3\n'
+            '[[stage]]\nkind = "wedge"\ngamma = "10 deg"\nmu = 0.3\n'
+            '[[body]]\nmass = "1 kg"\nforce = "10 N"\n[[body]]\nmass = "2 kg"\nforce = "0 N"\n'
+            '[[body]]\nmass = "3 kg"\nforce = "0 N"\n[[body]]\nmass = "4 kg"\nforce = "-3 N"\n'
+            '[run]\nt_end = 0.1\nv0 = 0.0\ngap_2 = "0.5 mm"\nrtol = 1e-10\natol = 1e-12\n')
+    module = chain_module(text)
+    result = simulate_chain(module, points=31)
+    assert result.status == "finished", result.message
+    assert [p.regime for p in result.stages[2].phases][0] == "resting"
+    assert [p.regime for p in result.stages[0].phases][0] == "tractive"
+    g1, g2 = 30 * DEG, 40 * DEG
+    a0 = 10.0 / (M[0] + M[1] * math.tan(g1) * math.tan(g1 + math.atan(0.1)))
+    first = result.run.impacts[0]
+    assert first["vk before"] == 0.0
+    assert first["t"] == pytest.approx(math.sqrt(2 * 0.5e-3 / (math.sin(g2) * math.tan(g1) * a0)), rel=1e-9)
+    rows = _open_rows(result)
+    assert rows.sum() > 1 and np.all(result.run.y[rows, 2:] == 0.0)
