@@ -203,3 +203,25 @@ def test_a_held_group_beyond_a_middle_clearance_waits_for_the_driven_group(chain
     assert first["t"] == pytest.approx(math.sqrt(2 * 0.5e-3 / (math.sin(g2) * math.tan(g1) * a0)), rel=1e-9)
     rows = _open_rows(result)
     assert rows.sum() > 1 and np.all(result.run.y[rows, 2:] == 0.0)
+
+
+def test_a_resting_groups_stick_is_the_rigid_chains_rest_decision_on_its_own_stages(chain_module):
+    """Clearance in stage 2, body 2 free and unforced; bodies 0 and 1 at rest under forces (F0, F1) on a grid: the
+    run keeps them at rest exactly where ``chain_decision.rest`` (the Python decision the derivation uses) admits the
+    statics of the group alone, stage 1 (30 deg, mu 0.3; Psi_t = tan(g + rho), Psi_i = tan(g - rho), levers 1) with
+    forces (F0, F1), and they leave rest otherwise; every run decides (status finished)."""
+    from tswm_common.chain_decision import Statics, rest
+
+    module = chain_module(_scene("held-grid", open_stage=2, g2=40.0, mu1=0.3, mu2=0.1, f0=0.0, f2=0.0))
+    g1, rho1 = 30 * DEG, math.atan(0.3)
+    stuck = {True: 0, False: 0}
+    for f1 in (-10.0, 0.0, 7.0):
+        for f0 in np.linspace(-13.0, 13.0, 14):
+            result = simulate_chain(module, {"force_0": float(f0), "force_1": f1}, t_end=1e-3, points=3)
+            assert result.status == "finished", (f0, f1, result.message)
+            _, why_not = rest(Statics(((math.tan(g1 + rho1), math.tan(g1 - rho1)),), (1.0,), (1.0,), (f0, f1)))
+            held = result.stages[0].phases[0].regime == "resting"
+            assert held == (why_not == ""), (f0, f1)
+            assert held == bool(np.all(result.run.y[:, :2] == 0.0)), (f0, f1)
+            stuck[held] += 1
+    assert stuck[True] >= 4 and stuck[False] >= 20
