@@ -40,18 +40,19 @@ def _open_accels(mu, f0, f2):
     return a0, a2, a2 * math.cos(G2) - math.tan(G1) * a0 * math.sin(G2)
 
 
-def _masses(mu):
-    """(m1, m2): the effective masses at stage 2's x1 (bodies 0 and 1 through stage 1 sliding tractive) and x2."""
-    rho1 = math.atan(mu)
+def _masses(mu, regime=1):
+    """(m1, m2): the effective masses at stage 2's x1 (bodies 0 and 1 through stage 1 sliding tractive, regime 1, or
+    inverse-tractive, -1: its friction angle's sign) and x2."""
+    rho1 = regime * math.atan(mu)
     dv0 = math.tan(G1 + rho1) / (M[0] + M[1] * math.tan(G1) * math.tan(G1 + rho1))
     return 1.0 / (math.tan(G1) * dv0), M[2]
 
 
-def _hand_impact(mu, e, v0, v2, flank=1.0):
-    """Stage 2's impact by hand: the frame (nu, s) of x1 = tan(g1) v0, x2 = v2, W of the two effective masses, Routh's
-    process (collide) with tan(rho2) and e; body 2 takes P_n f n + P_t t, body 1's side the opposite, along each guide.
-    Returns (v0 after, v2 after, nu before, nu after, energy lost)."""
-    m1, m2 = _masses(mu)
+def _hand_impact(mu, e, v0, v2, flank=1.0, regime=1):
+    """Stage 2's impact by hand: the frame (nu, s) of x1 = tan(g1) v0, x2 = v2, W of the two effective masses (stage 1
+    in ``regime``), Routh's process (collide) with tan(rho2) and e; body 2 takes P_n f n + P_t t, body 1's side the
+    opposite, along each guide. Returns (v0 after, v2 after, nu before, nu after, energy lost)."""
+    m1, m2 = _masses(mu, regime)
     s2, c2 = math.sin(G2), math.cos(G2)
     x1 = math.tan(G1) * v0
     nu, slip = flank * (v2 * c2 - x1 * s2), v2 * s2 + x1 * c2
@@ -296,13 +297,24 @@ def test_the_scene_keeps_the_clearance(tmp_path):
     assert c.gap.key == "run.gap_2" and c.clearance.key == "stage[2].clearance"
 
 
-def test_a_group_left_at_rest_while_open_stops_the_run_with_its_status(chain_module):
-    """Bodies 0 and 1 unforced and at rest while stage 2 is open: their own rest (stick) is not decided yet, so the
-    run stops at once with status group-at-rest and says why, instead of guessing."""
+def test_a_group_left_unforced_at_rest_while_open_sticks(chain_module):
+    """Bodies 0 and 1 unforced and at rest while stage 2 is open: their rest holds (no force asks anything of stage
+    1's stick cone) and leaving it would need an acceleration they do not have, so they stay (speeds exactly 0) while
+    body 2 alone (-2 N) closes the gap g = g0 + cos(g2) q2 at sqrt(2 g0 / (cos(g2) 2 N / M2)); the impact pushes them
+    backward through stage 1 driven from body 1, inverse-tractive: ``collide`` on W with that stage's m1."""
     module = chain_module(_scene("gap-rest", mu=0.1, f0=0.0))
-    result = simulate_chain(module, points=5)
-    assert result.status == "group-at-rest" and result.t_stop == 0.0
-    assert "comes to rest at t = 0 s while stage 2's flanks are apart" in result.message
+    result = simulate_chain(module, points=31)
+    assert result.status == "finished", result.message
+    first = result.run.impacts[0]
+    assert first["v0 before"] == 0.0 and first["flank"] == "a"
+    assert first["t"] == pytest.approx(math.sqrt(2 * 0.5e-3 / (math.cos(G2) * 2.0 / M[2])), rel=1e-9)
+    rows = result.run.t < first["t"]
+    assert rows.sum() > 1 and np.all(result.run.y[rows, :2] == 0.0)
+    assert result.stages[0].phases[0].regime == "resting"
+    v0_after, v2_after, nu, nu_after, lost = _hand_impact(0.1, 0.5, 0.0, first["vk before"], regime=-1)
+    assert first["nu before"] == pytest.approx(nu, rel=1e-10) and first["nu after"] == pytest.approx(nu_after, rel=1e-9)
+    assert first["v0 after"] == pytest.approx(v0_after, rel=1e-10) and first["vk after"] == pytest.approx(v2_after,
+                                                                                                     rel=1e-10)
 
 
 def test_the_figure_shows_the_gap_of_the_hand_kinematics(chain_module, tmp_path):

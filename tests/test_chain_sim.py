@@ -247,7 +247,8 @@ def test_the_shipped_motor_settles_where_it_meets_the_load_through_both_stages(c
 def test_a_force_peak_is_the_first_sample_of_largest_magnitude_over_the_sliding_phases():
     """By hand over two sliding phases' samples (t, q0, v0, one stage's three forces): input -3 at t = 2
     (the later -3 at t = 4 is as large, not larger), output 5 at t = 3 (the NaN at t = 4 is never a peak),
-    normal NaN at t = 1 (a NaN first sample is compared with nothing and stays, as comparisons have it)."""
+    normal -9.5 at t = 4 (a NaN, a stuck group's undetermined force, is never a peak, not even the first sample);
+    a force NaN in every sample peaks as NaN at the first."""
     from types import SimpleNamespace
 
     from tswm_runtime.simulation.chain import _peaks
@@ -257,7 +258,9 @@ def test_a_force_peak_is_the_first_sample_of_largest_magnitude_over_the_sliding_
     [peaks] = _peaks([SimpleNamespace(table=first), SimpleNamespace(table=second)], 1)
     assert (peaks["input"].value, peaks["input"].t) == (-3.0, 2.0)
     assert (peaks["output"].value, peaks["output"].t) == (5.0, 3.0)
-    assert math.isnan(peaks["normal"].value) and peaks["normal"].t == 1.0
+    assert (peaks["normal"].value, peaks["normal"].t) == (-9.5, 4.0)
+    [undetermined] = _peaks([SimpleNamespace(table=np.array([[1.0, 0, 0, np.nan, np.nan, np.nan]] * 2))], 1)
+    assert math.isnan(undetermined["normal"].value) and undetermined["normal"].t == 1.0
     assert _peaks([], 2) == [dict.fromkeys(("input", "output", "normal"))] * 2
 
 

@@ -13,6 +13,12 @@ When an open stage's gap closes, the flanks collide: the impulse balance of the 
 reduced to the stage's x1 and x2 (effective masses m1, m2, with the closed stages inside a group tied
 by their FTFs), is mechanics.impact_frame's with those masses; its frame, inverse mass W and Routh's
 process with Coulomb friction and restitution (tswm_runtime/hybrid/impact.py) apply unchanged.
+
+A group at rest while a stage is open needs no expressions of its own: its statics are the resting chain's over its
+own bodies and closed stages (each stage's stick cone from its FTFs Psi_t, Psi_i of forward sliding and its levers,
+which the generated module's ``prepare`` derives), the open stage carrying nothing, decided from numbers at run time
+(tswm_runtime/chains/rules.py, ``group_holds``); while it sticks the generated open phase holds its acceleration at 0
+(latches held_in, held_out).
 """
 from __future__ import annotations
 

@@ -34,7 +34,9 @@ STATES = ("q0", "v0")
 SWITCHED_GUARDS = ("seat", "switch", "delay")   # the seat's contact, the switch picking up or dropping out, its delay
 # With a clearance: the gap closing on flank a, on flank b, the output group's speed reaching 0.
 CLEARANCE_GUARDS = ("gap_a", "gap_b", "v_out")
-CLEARANCE_LATCHES = ("contact", "direction_in", "direction_out", "held_out")   # then rho_sign per stage
+# Its latches: the contact, the groups' directions, whether the output and the input group is held at rest (stuck while
+# the stage is open: its acceleration 0), then rho_sign per stage.
+CLEARANCE_LATCHES = ("contact", "direction_in", "direction_out", "held_out", "held_in")
 GENERATOR_SOURCES = ("chain/codegen.py", "chain/clearance.py", "chain/dynamics.py", "chain/stages.py", "chain/scene.py",
                      "chain/valve.py", "templates/chain_module.py.j2")
 
@@ -411,7 +413,7 @@ def generate_chain_module(chain: ChainScene) -> str:
             "MODE_REGIMES": (*constants["MODE_REGIMES"], ()), "MODE_FLANKS": (*constants["MODE_FLANKS"], ()),
             "P_NAMES": (*constants["P_NAMES"], *CLEARANCE_LATCHES, *(f"rho_sign {i + 1}" for i in range(n))),
             "P_CONTACT": open_first, "P_DIRECTION_IN": open_first + 1, "P_DIRECTION_OUT": open_first + 2,
-            "P_HELD_OUT": open_first + 3, "P_RHO_SIGN": open_first + 4, "IMPACT_FRAME": IMPACT_FRAME})
+            "P_HELD_OUT": open_first + 3, "P_HELD_IN": open_first + 4, "P_RHO_SIGN": open_first + 5, "IMPACT_FRAME": IMPACT_FRAME})
     for i, v in enumerate(values):
         v["index"] = first + i
     for d in derived:
@@ -551,7 +553,10 @@ def _open_template(chain: ChainScene, slots: dict[sp.Symbol, str], calls: dict[s
     n, c = len(chain.stages), chain.clearance
     k = c.stage
     closed = [i for i in range(1, n + 1) if i != k]
+    held = {"held_in": ("P_HELD_IN", 0, k - 1), "held_out": ("P_HELD_OUT", k, n)}   # its latch, its closed stages i < j <= n
     return {"stage": k, "call": calls, "block": block,
+            "held": [{"latch": latch, "guards": f"g[{2 + i}:{2 + j}]", "forces": f"out[{3 * i}:{3 * j}]",
+                      "switch": f"{i} < SWITCH_ON <= {j}"} for latch, i, j in held.values() if j > i],
             "contact_targets": ", ".join(["g[1]", *(f"g[{1 + i}]" for i in closed), "gap"]),
             "c_k": slots[sp.Symbol(f"c_{k}", real=True)], "c_last": slots[sp.Symbol(f"c_{n}", real=True)],
             "clearance": slots[sp.Symbol(c.clearance.name, real=True)]}

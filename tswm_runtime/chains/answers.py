@@ -112,8 +112,9 @@ def answer(status, t_stop, steps, rec, a, p, f, i):
                 continue
             for s in range(rec.phases[k, 1], rec.phases[k, 2]):
                 row = rec.samples[s]
-                if not found or abs(row[3 + thrust_at]) > abs(f[F_PEAK]):
-                    f[F_PEAK], f[F_T_PEAK] = row[3 + thrust_at], row[0]
+                thrust = row[3 + thrust_at]    # NaN: a stuck group's undetermined force, never the peak
+                if not np.isnan(thrust) and (np.isnan(f[F_PEAK]) or abs(thrust) > abs(f[F_PEAK])):
+                    f[F_PEAK], f[F_T_PEAK] = thrust, row[0]
                 far = max(far, row[row.size - 1])
                 found = True
         if found:

@@ -23,6 +23,19 @@ IMPACT_COLUMNS = ("t", "flank", "nu before", "nu after", "energy lost", "closed"
                   "vk after")
 
 
+@njit(error_model="numpy")
+def pushed(c, flank, p):
+    """A group stuck at rest (latch held_in or held_out) takes the impulse on ``flank`` moving the way it pushes it
+    (the output group forward on flank a, the input group backward), its closed stages driven from the open stage's
+    side: the output group's tractive, the input group's inverse-tractive (their regimes in the impact's frame)."""
+    for g in range(2):
+        if p[c.p_direction + 3 - g] > 0.0:
+            p[c.p_direction + g] = float(flank if g == 1 else -flank)
+            for i in range(c.stages):
+                if (i + 1 < c.open_stage) if g == 0 else (i + 1 > c.open_stage):
+                    p[c.p_rho_sign + i] = 1.0 if g == 1 else -1.0
+
+
 @njit(error_model="numpy", refcounted=True)  # impact.collide (numba.njit: counted as its caller) allocates
 def strike(fns, chain_fns, c, flank, t, y, p, tol, w, row):
     """The impact on ``flank`` (+1 a, -1 b) at (t, y): y's groups' speeds after it, the contact latch (``flank``: the
@@ -30,6 +43,7 @@ def strike(fns, chain_fns, c, flank, t, y, p, tol, w, row):
     approach, the flight time to the next impact on this flank if the open phase's accelerations stay: inf for
     none), so that the step after a rebound can be kept short enough for the gap's guard to see it return."""
     f = w.frame
+    pushed(c, flank, p)
     copy_into(w.before, p)   # the latches of the impact (the open phase's regimes), for a plastic one again
     chain_fns.impact(flank, t, y, p, f)
     nu_before = f[0]

@@ -36,7 +36,7 @@ TOO_MANY_EVENTS = -23
 CHATTERING = -24
 INCONSISTENT_START = -25  # D or the jam factor <= 0 where a mode begins
 RECORD_FULL = -26     # more phases, events or samples than the record holds: run again with more room
-GROUP_AT_REST = -27   # a group would stay at rest while the stage with the clearance is open: not supported yet
+GROUP_AT_REST = -27   # a group at rest while the stage with the clearance is open can neither stay nor leave rest
 IMPACT_JAMMED = -28   # the impulse cannot stop the flanks' approach (dnu/dP_n <= 0)
 MAX_SAME_TIME = 8     # decisions at one instant before the run stops
 

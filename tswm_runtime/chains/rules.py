@@ -8,7 +8,9 @@ cone (``rest_holds``: the admissible sets propagated stage by stage, as ``chain_
 One consistent mode is the answer (UNIQUE); several that agree in a_0 and exclude rest are a kink
 (CRITICAL: the one that is not the current mode is taken); none (NONE) or several (SEVERAL, a
 Painleve-type case) are outcomes too, never exceptions. tests/test_chain_kernel.py checks that both
-implementations decide alike.
+implementations decide alike. While the stage with a clearance is open (``open_phase``), each group at rest
+is decided the same way on its own: stuck where ``group_holds`` (the same propagation over its bodies and
+closed stages) admits its statics, or leaving rest.
 
 The functions a decision calls: ``rhs`` (a_0 is dy[1]) and ``guards`` (D, jam, N_k, v0, seat,
 switch, delay; mode RESTING: the last four) from the mode machine's Functions, and the chain
@@ -148,18 +150,29 @@ def rest_holds(c, p, force, w):
     """Whether the resting chain holds under the bodies' forces ``force`` (its numbers from p): the
     stage-by-stage propagation of ``chain_decision.rest`` from body 0 meets what the last body's load and
     friction ask of the last stage."""
-    stages = c.stages
+    return group_holds(c, p, force, w, 0, c.stages)
+
+
+@njit(error_model="numpy")
+def group_holds(c, p, force, w, first, last):
+    """Whether bodies ``first`` .. ``last``, joined by stages first + 1 .. last and taking no force from the stages
+    beyond them, rest under ``force``: ``chain_decision.rest``'s propagation from body ``first`` (what it asks of
+    stage first + 1) to body ``last``, whose balance it must meet (the valve's friction widening it on the last
+    body of the chain). One body alone holds when its force is within that friction."""
     a, b = w.set_a, w.set_b
-    a[0, 0] = a[0, 1] = -force[0] / p[c.p_lever_in]
+    slack = p[c.p_slack] if last == c.stages else 0.0
+    lo, hi = -force[last] - slack, -force[last] + slack
+    if first == last:
+        return lo <= 0.0 <= hi
+    a[0, 0] = a[0, 1] = -force[first] / p[c.p_lever_in + first]
     n = 1
-    for i in range(stages):
+    for i in range(first, last):
         n_cone = _forward_cone(p[c.p_psi + 2 * i], p[c.p_psi + 2 * i + 1], w.cone)
         n = _scaled(a, n, w.cone, n_cone, b)
         n = _affine(b, n, 0.0, p[c.p_lever_out + i], a)
         if i == c.open_stage - 1:   # a stage with a clearance pushes on its one flank in contact only
             n = _one_side(a, n, p[c.p_contact])
-        if i == stages - 1:
-            lo, hi = -force[stages] - p[c.p_slack], -force[stages] + p[c.p_slack]
+        if i == last - 1:
             for j in range(n):
                 if max(a[j, 0], lo) <= min(a[j, 1], hi):
                     return True
@@ -225,14 +238,23 @@ def _free(c, p, group):
 
 
 @njit(error_model="numpy")
-def _open_candidate(fns, c, t, y, p, w, combo):
+def _in_group(c, stage, group):
+    """Whether closed stage ``stage`` (1-based) joins bodies of ``group`` (0 input, 1 output) while the stage with the
+    clearance is open."""
+    return stage < c.open_stage if group == 0 else stage > c.open_stage
+
+
+@njit(error_model="numpy")
+def _open_candidate(fns, c, t, y, p, w, combo, held):
     """Set the open phase's latches to ``combo`` (bit 0 and 1: a group at rest moves backward; bit 2 + i: stage
-    i + 1 inverse-tractive); whether it is consistent: no closed stage jams or pulls (N_i >= 0), and a group
-    leaving rest accelerates in its direction. A free group's direction is 0 (its forces do not depend on it;
-    its speed's guard stays 0, never an event)."""
+    i + 1 inverse-tractive) and ``held`` (bit 0 and 1: the input, the output group stuck at rest: latches held_in,
+    held_out, its acceleration 0); whether it is consistent: no closed stage jams or pulls (N_i >= 0; a stuck group's
+    are undetermined, its guards 1), and a group leaving rest accelerates in its direction. A free or stuck group's
+    direction is 0 (its speed's guard stays 0, never an event)."""
+    p[c.p_direction + 3], p[c.p_direction + 2] = float(held & 1), float(held >> 1 & 1)
     for g in range(2):
         v = y[1] if g == 0 else y[3]
-        if _free(c, p, g) or (g == 1 and p[c.p_direction + 2] > 0.0):
+        if _free(c, p, g) or held >> g & 1:
             p[c.p_direction + g] = 0.0
         else:
             p[c.p_direction + g] = (1.0 if v > 0.0 else -1.0) if v != 0.0 else (-1.0 if combo >> g & 1 else 1.0)
@@ -245,26 +267,29 @@ def _open_candidate(fns, c, t, y, p, w, combo):
     fns.rhs(c.open_mode, t, y, p, w.f)
     for g in range(2):
         v, a = (y[1], w.f[1]) if g == 0 else (y[3], w.f[3])
-        if v == 0.0 and not _free(c, p, g) and not (g == 1 and p[c.p_direction + 2] > 0.0):
+        if v == 0.0 and not _free(c, p, g) and not held >> g & 1:
             ok = ok and p[c.p_direction + g] * a > 0.0
     return ok
 
 
 @njit(error_model="numpy")
-def _held(chain_fns, c, t, y, p, w):
-    """Whether the output group, at rest while the stage is open, is the last body alone and its valve friction
-    holds it: its force without the friction within the friction's magnitude (those forces stay while it rests:
-    they depend on its coordinate only)."""
-    if y[3] != 0.0 or c.open_stage != c.stages or p[c.p_slack] == 0.0:
+def _stuck(chain_fns, c, t, y, p, w, group):
+    """Whether ``group``, at rest while the stage is open and not free, can stay at rest: ``group_holds`` over its
+    bodies and closed stages under its forces at rest (the valve's friction at most its magnitude), the open stage
+    carrying nothing. Its forces depend on its own coordinate and speed and on the latches only, so they stay while
+    it rests and the other group moves: the stick is decided again at every event (a cut motor, a seat, an impact)."""
+    if (y[1] if group == 0 else y[3]) != 0.0 or _free(c, p, group):
         return False
     chain_fns.body_forces(0, t, y, p, w.force)
-    return abs(w.force[c.stages]) <= p[c.p_slack]
+    return group_holds(c, p, w.force, w, 0, c.open_stage - 1) if group == 0 else \
+        group_holds(c, p, w.force, w, c.open_stage, c.stages)
 
 
 @njit(error_model="numpy")
-def _open_candidates(fns, c, t, y, p, w):
-    """(how many of the open phase's candidates hold, the first, whether they agree in both accelerations, whether
-    a group that is not free is at rest)."""
+def _open_candidates(fns, c, t, y, p, w, held):
+    """(how many of the open phase's candidates with the stuck groups ``held`` hold, the first, whether they agree in
+    both accelerations, whether a group that is not free is at rest). A stuck group's direction and regimes are
+    fixed (0, tractive): one candidate for it."""
     found, first, a_in, a_out, agree = 0, -1, 0.0, 0.0, True
     still = False
     for combo in range(1 << (2 + c.stages)):
@@ -273,11 +298,14 @@ def _open_candidates(fns, c, t, y, p, w):
         skip = False
         for g in range(2):
             v = y[1] if g == 0 else y[3]
-            skip = skip or (combo >> g & 1 == 1 and (v != 0.0 or _free(c, p, g)))
+            skip = skip or (combo >> g & 1 == 1 and (v != 0.0 or _free(c, p, g) or held >> g & 1 == 1))
+        for i in range(c.stages):
+            for g in range(2):
+                skip = skip or (held >> g & 1 == 1 and combo >> (2 + i) & 1 == 1 and _in_group(c, i + 1, g))
         if skip:
             continue
         still = still or (y[1] == 0.0 and not _free(c, p, 0)) or (y[3] == 0.0 and not _free(c, p, 1))
-        if _open_candidate(fns, c, t, y, p, w, combo):
+        if _open_candidate(fns, c, t, y, p, w, combo, held):
             if found == 0:
                 first, a_in, a_out = combo, w.f[1], w.f[3]
             else:
@@ -290,20 +318,32 @@ def _open_candidates(fns, c, t, y, p, w):
 @njit(error_model="numpy")
 def open_phase(fns, chain_fns, c, t, y, p, w):
     """The open phase's latches at (t, y): each group's direction (its speed's sign; at rest, the way it leaves
-    rest), each closed stage's regime, such that ``_open_candidate`` holds; (UNIQUE, OPEN) when one does (or
-    several that agree in both accelerations), (NONE, NO_MODE) when none, (RESTING_GROUP, NO_MODE) when a group
-    that is not free would have to stay at rest (its own rest decision: not supported yet, but for the last body
-    alone held by its valve friction, ``_held``: latch held_out), (SEVERAL, NO_MODE)."""
-    p[c.p_direction + 2] = 0.0
-    found, first, agree, still = _open_candidates(fns, c, t, y, p, w)
-    if found == 0 and _held(chain_fns, c, t, y, p, w):
-        p[c.p_direction + 2] = 1.0   # the last body stays where it is: the input group alone moves
-        found, first, agree, still = _open_candidates(fns, c, t, y, p, w)
-    if found == 0:
+    rest) or, for a group at rest whose rest holds (``_stuck``), its stick (held_in, held_out), and each closed
+    stage's regime, such that ``_open_candidate`` holds. The groups do not interact while the stage is open, so each
+    at rest is decided on its own: stuck, or leaving rest, as the rigid chain's rest beside its break-away.
+    (UNIQUE, OPEN) when one candidate holds (or several that agree in both accelerations), (NONE, NO_MODE) when none
+    and both groups move or are free, (RESTING_GROUP, NO_MODE) when none and a group is at rest: it can neither stay
+    (its statics exceed its stages' stick cones or its friction) nor leave rest in any direction and regimes (a
+    Painleve-type case of the group), (SEVERAL, NO_MODE) when a group could both stay and leave rest, or leave it
+    in ways that differ."""
+    stuck = (1 if _stuck(chain_fns, c, t, y, p, w, 0) else 0) + (2 if _stuck(chain_fns, c, t, y, p, w, 1) else 0)
+    total, first, first_held, agree, still = 0, -1, 0, True, False
+    for held in range(4):
+        if held & ~stuck:
+            continue
+        found, combo, agreed, resting = _open_candidates(fns, c, t, y, p, w, held)
+        still = still or resting
+        if found > 0 and total == 0:
+            first, first_held, agree = combo, held, agreed
+        elif found > 0:
+            agree = False    # staying at rest and leaving it: never the same accelerations
+        total += found
+    if total == 0:
+        p[c.p_direction + 2], p[c.p_direction + 3] = 0.0, 0.0
         return (RESTING_GROUP if still else NONE), NO_MODE
-    if found > 1 and not agree:
+    if total > 1 and not agree:
         return SEVERAL, NO_MODE
-    _open_candidate(fns, c, t, y, p, w, first)
+    _open_candidate(fns, c, t, y, p, w, first, first_held)
     return UNIQUE, c.open_mode
 
 

@@ -281,20 +281,20 @@ def _impact(module, chain: kernel.ChainRecord, row: int) -> dict:
 
 
 def _open_words(module, p: np.ndarray) -> str:
-    """The open phase's latches in words: each group's direction (free: its forces do not depend on it; the last body
-    held by its valve friction), each closed stage's regime."""
+    """The open phase's latches in words: each group's direction (free: its forces do not depend on it; held: at rest,
+    its own statics holding it), each closed stage's regime."""
     k, n = clearance_stage(module), module.STAGES
     names = {1.0: "forward", -1.0: "backward", 0.0: "free (its forces do not depend on its direction)"}
-    held = p[module.P_HELD_OUT] > 0.0
-    out = "held at rest by its valve friction" if held else names[float(p[module.P_DIRECTION_OUT])]
+
+    def group(held: int, direction: int) -> str:
+        return "held at rest (its statics hold it)" if p[held] > 0.0 else names[float(p[direction])]
+
     regimes = [f"stage {i + 1} {'tractive' if p[module.P_RHO_SIGN + i] > 0 else 'inverse-tractive'}"
                for i in range(n) if i != k - 1]
     group_in = "body 0" if k == 1 else f"bodies 0..{k - 1}"
     group_out = f"body {n}" if k == n else f"bodies {k}..{n}"
-    return (f"open phase: {group_in} {names[float(p[module.P_DIRECTION_IN])]}, {group_out} {out}; closed stages: "
-            f"{', '.join(regimes) or 'none'}")
-
-
+    return (f"open phase: {group_in} {group(module.P_HELD_IN, module.P_DIRECTION_IN)}, {group_out} "
+            f"{group(module.P_HELD_OUT, module.P_DIRECTION_OUT)}; closed stages: {', '.join(regimes) or 'none'}")
 
 
 class _ModuleParts(NamedTuple):
@@ -459,8 +459,9 @@ def _result(module, code: int, t_stop: float, record: Record, chain: kernel.Chai
         run.message = (f"D or the jam factor is <= 0 where mode {module.MODES[run.phases[-1].mode]} begins at "
                        f"t = {t_stop:.9g} s: no contact force keeps the stages together")
     elif code == kernel.GROUP_AT_REST:
-        run.message = (f"a group of bodies comes to rest at t = {t_stop:.9g} s while stage "
-                       f"{clearance_stage(module)}'s flanks are apart: its own rest (stick) is not decided yet")
+        run.message = (f"a group of bodies is at rest at t = {t_stop:.9g} s while stage {clearance_stage(module)}'s "
+                       "flanks are apart and can neither stay at rest (its stages' stick cones and friction do not "
+                       "hold its forces) nor leave rest in any direction and regimes")
     elif code == kernel.IMPACT_JAMMED:
         run.message = (f"stage {clearance_stage(module)}'s flanks meet at t = {t_stop:.9g} s and the impulse cannot "
                        "stop their approach (the effective masses and friction jam the impact)")

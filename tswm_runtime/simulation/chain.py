@@ -178,7 +178,7 @@ def _samples(sliding: list, stages: int) -> tuple[np.ndarray, np.ndarray, np.nda
 
 def _peaks(sliding: list, stages: int) -> list[dict]:
     """Per stage, FORCES -> Peak over the sliding phases' samples (None: no samples): the first sample of
-    largest magnitude (a NaN first sample stays the peak, later NaNs never are, as comparisons have it)."""
+    largest magnitude; a NaN (a stuck group's undetermined force) is never the peak, unless all are NaN."""
     table = np.concatenate([phase.table for phase in sliding] or [np.empty((0, 3 + 3 * stages))])
     if table.shape[0] == 0:
         return [dict.fromkeys(FORCES) for _ in range(stages)]
@@ -186,7 +186,6 @@ def _peaks(sliding: list, stages: int) -> list[dict]:
     size = np.abs(forces)
     size[np.isnan(size)] = -1.0
     rows = np.argmax(size, axis=0)
-    rows[np.isnan(forces[0])] = 0
     values, times = forces[rows, np.arange(forces.shape[1])].tolist(), table[rows, 0].tolist()
     return [{name: Peak(values[3 * k + j], times[3 * k + j]) for j, name in enumerate(FORCES)} for k in range(stages)]
 
@@ -219,7 +218,8 @@ def gaps(module: ModuleType, result: ChainResult) -> np.ndarray:
 
 def _regime(module: ModuleType, phase, k: int) -> tuple[str, str]:
     """Stage k's (0-based) regime and flank in a phase: resting, open (the stage with the clearance while its
-    flanks are apart; the other stages' regimes then are the phase's latches), or the mode's."""
+    flanks are apart; the other stages' regimes then are the phase's latches, resting in a group stuck at rest),
+    or the mode's."""
     mode = phase.mode
     if mode == RESTING:
         return "resting", ""
@@ -227,8 +227,11 @@ def _regime(module: ModuleType, phase, k: int) -> tuple[str, str]:
         if k + 1 == module.CLEARANCE_STAGE:
             return "open", ""
         p = phase.latches
+        before = k + 1 < module.CLEARANCE_STAGE
+        if p[module.P_HELD_IN if before else module.P_HELD_OUT] > 0.0:
+            return "resting", ""    # its group stuck at rest
         sign = p[module.P_RHO_SIGN + k]
-        direction = p[module.P_DIRECTION_IN if k + 1 < module.CLEARANCE_STAGE else module.P_DIRECTION_OUT]
+        direction = p[module.P_DIRECTION_IN if before else module.P_DIRECTION_OUT]
         return ("tractive" if sign > 0 else "inverse-tractive"), ("a" if sign * direction > 0 else "b")
     return module.MODE_REGIMES[mode][k], module.MODE_FLANKS[mode][k]
 
