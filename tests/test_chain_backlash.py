@@ -255,16 +255,17 @@ def test_travel_at_the_trip_is_the_last_bodys_own_coordinate(chain_module, setti
     assert result.answers["extra_travel"] == pytest.approx(ref.y[2, -1] - q2, rel=1e-7)
 
 
-def _same_as_simulate(module, grid, points):
-    """The chain sweep's table of ``grid`` against simulate_chain of each case's values (``--set``): every answer and
-    count exactly, the impacts' count and energy lost to rounding (summed in another order)."""
+def _same_as_simulate(module, grid, points, **run):
+    """The chain sweep's table of ``grid`` (run settings ``run``) against simulate_chain of each case's values
+    (``--set``): every answer and count exactly, the impacts' count and energy lost to rounding (summed in another
+    order)."""
     from tswm_runtime.sweeps.chain import sizing
 
-    table = sizing(module, grid, {"points": points}).table
+    table = sizing(module, grid, {"points": points, **run}).table
     names = list(grid)
     for _, row in table.iterrows():
         case = {name: row[column] for name, column in zip(names, table.columns)}
-        single = simulate_chain(module, case, points=points)
+        single = simulate_chain(module, case, points=points, **run)
         trip = single.answers["trip"] or {}
         assert row["status"] == single.status, case
         for column, value in (("t_trip [s]", trip.get("t")), ("travel at trip [m]", trip.get("travel")),
@@ -281,13 +282,16 @@ def _same_as_simulate(module, grid, points):
 
 def test_a_chain_sweep_with_a_clearance_runs_each_case_as_simulate(chain_module):
     """The chain sweep of a chain with a clearance runs every case on the kernel's path of simulate (mode OPEN,
-    impacts): per case the same answers as simulate_chain with the case's values; a case whose group is left at rest
-    while the stage is open (force_0 = 0) keeps its status and the sweep goes on."""
+    impacts): per case the same answers as simulate_chain with the case's values; a case that stops early (its
+    bounces exceed max_events) keeps its status and the sweep goes on to the next, an unforced one whose groups both
+    stick while the stage is open (force_0 = force_2 = 0: no event after the start)."""
     table = _same_as_simulate(chain_module(_trip_scene(15.0)), {"switch_setting": [1.0, 15.0]}, 6)
     assert list(table["status"]) == ["finished"] * 2 and list(table["impacts"]) == [1, 1]
     assert table["t_trip [s]"].tolist()[0] < table["t_trip [s]"].tolist()[1]
-    table = _same_as_simulate(chain_module(_scene("gap-rest", mu=0.1, f0=0.0)), {"force_0": [0.0, 10.0]}, 5)
-    assert list(table["status"]) == ["group-at-rest", "finished"] and table["impacts"].tolist()[1] > 1
+    table = _same_as_simulate(chain_module(_scene("gap-rest", mu=0.1, f0=0.0, f2=0.0)), {"force_0": [10.0, 0.0]}, 5,
+                              max_events=2)
+    assert list(table["status"]) == ["too-many-events", "finished"], table["status"]
+    assert table["impacts"].tolist() == [1, 0] and table["events"].tolist()[1] == 1
 
 
 def test_the_scene_keeps_the_clearance(tmp_path):
