@@ -309,6 +309,7 @@ include = ["forward", "sliding"]
 """
 
 
+@pytest.mark.heavy
 def test_literal_slide_mode_equals_filippov_by_hand(tmp_path):
     scene = tmp_path / "literal.toml"
     scene.write_text(LITERAL_SLIDING)

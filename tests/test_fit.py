@@ -137,6 +137,7 @@ def runup_after_speed():
     return pd.DataFrame(rows)
 
 
+@pytest.mark.heavy
 def test_a_parameter_the_data_do_not_depend_on_is_not_determined(runup_after_speed, tmp_path):
     """Noise-free peaks that do not depend on L: the misfit's differences over L are the
     integrator's error, so L must be reported as not determined, with the range it could take,
@@ -157,6 +158,7 @@ def test_a_parameter_the_data_do_not_depend_on_is_not_determined(runup_after_spe
     assert (tmp_path / "out" / "profile.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
+@pytest.mark.heavy
 def test_with_noise_or_a_second_free_parameter_it_stays_undetermined(runup_after_speed, tmp_path):
     """Three noisy data sets (0.5 % of each quantity's RMS): L is never called determined. With m2
     free as well (L re-optimised along m2's profile and the other way round) neither is: once the
@@ -220,6 +222,7 @@ def test_non_identifiable_m2_is_flagged(tmp_path):
     assert "not identifiable" in (tmp_path / "out" / "fit-report.md").read_text()
 
 
+@pytest.mark.heavy
 def test_time_history_of_v1_and_s1(tmp_path):
     """Samples of v1 and S1 during the run-up of two cases (reference: v(t) by quadrature, S1
     from the force balance in the mode the reference reports)."""

@@ -118,6 +118,7 @@ def test_sol_follows_the_quadrature_reference_at_random_times_and_across_the_loa
     assert np.isnan(r.sol([-1e-9, 1.0 + 1e-9])).all()
 
 
+@pytest.mark.heavy
 def test_sol_covers_the_painleve_approach():
     r, v_ref, in_sigma = painleve_run()
     t = np.linspace(in_sigma[0, 0], r.t_stop, 50)[:-1]

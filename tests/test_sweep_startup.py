@@ -4,6 +4,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 ROOT = Path(__file__).parents[1]
 # What a warm sweep never needs: numba's lowering registries (loaded by its cache's refresh, with
 # scipy.linalg), pandas (pyarrow builds and writes the tables), the plots, code generation, the
@@ -29,6 +31,7 @@ def _sweep(tmp: Path, before: str = "") -> tuple[list[str], bytes]:
     return json.loads(done.stdout.splitlines()[-1]), (tmp / "paper-runup-sweep.csv").read_bytes()
 
 
+@pytest.mark.heavy
 def test_a_warm_sweep_imports_no_registry_pandas_plot_cluster_or_cas_and_computes_the_same(tmp_path):
     """The second of two sweep processes (the first fills numba's cache if it is cold) loads its
     kernels without numba's registries, builds and writes its tables without pandas, and writes

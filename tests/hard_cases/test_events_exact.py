@@ -277,6 +277,7 @@ def test_every_status_message_builds_for_every_mode():
 
 # --- the Result's dense solution and tables --------------------------------------------------
 
+@pytest.mark.heavy
 def test_result_sol_follows_the_reference_across_a_load_step():
     """result.sol(t): cubic Hermite between output points, split at events, against the
     quadrature reference at off-grid times, including just before and after the step."""
@@ -362,6 +363,7 @@ atol = 1e-13
 """
 
 
+@pytest.mark.heavy
 def test_steps_in_x2_are_located_where_body_2_reaches_them(scene_module):
     """A load stepped on at x2 = 1 mm (the law reads only its latched piece, the breakpoint's
     guard reads x2): reached at the closed-form time of uniform acceleration on flank a."""

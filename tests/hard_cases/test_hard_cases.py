@@ -211,6 +211,7 @@ def test_paper_literal_slides_along_its_phi_zero_and_stops_when_excluded():
     assert len(r.events) == 1
 
 
+@pytest.mark.heavy
 def test_paper_literal_follows_the_sliding_motion_when_declared(scene_module):
     """Declared, the slide mode follows phi = 0: since the printed phi depends on v1
     only (constant load), the sliding motion holds v1 at the speed where phi = 0."""

@@ -75,6 +75,7 @@ def test_each_method_delivers_at_the_tightest_rtol_it_accepts(case, method):
         simulate(scene, params, method=method, rtol=rtol / 10)
 
 
+@pytest.mark.heavy
 def test_the_reference_agrees_with_the_quadrature():
     """The dense reference is the quadrature's to about 1e-12 of |v1|, far below 10 rtol at rtol 1e-9."""
     for case in CASES:
