@@ -6,7 +6,7 @@ import sys
 import time
 
 from tswm_runtime.common.words import plural
-from tswm_runtime.cli.common import (UsageError, add_setting_options, output_directory, prepare_kernels, run_method,
+from tswm_runtime.cli.common import (add_setting_options, output_directory, prepare_kernels, run_method,
                                      setting_error, setting_overrides)
 
 FIT_SETTINGS = ("t_end", "rtol", "atol", "method", "max_steps", "max_events", "points")
@@ -15,10 +15,6 @@ FIT_SETTINGS = ("t_end", "rtol", "atol", "method", "max_steps", "max_events", "p
 def run(args: argparse.Namespace) -> int:
     start = time.perf_counter()
     output_directory(args.output)
-    try:
-        import pandas  # noqa: F401  (reads the measured file)
-    except ModuleNotFoundError:
-        raise UsageError("tswm fit reads CSV and Parquet with pandas and pyarrow: pip install -e '.[sweep]'") from None
     spec, cold = prepare_kernels(args.scene, ("integrate", "batch"), many_runs=True)
     from tswm_runtime.fitting.fit import FitInputError, fit
     from tswm_runtime.fitting.report import write_outputs
