@@ -106,15 +106,15 @@ def answer(status, t_stop, steps, rec, a, p, f, i):
         if rec.trip[rec.trip.size - 1] != RESTING:
             f[F_THRUST] = rec.trip[4 + thrust_at]
         f[F_EXTRA] = 0.0
-        far, found = -np.inf, False
+        far, found, m = -np.inf, False, 3 * n
         for k in range(n_phases):
             if rec.phases[k, 0] == RESTING or rec.phase_f[k, 2 + a.p_switch] != a.tripped:
                 continue
+            thrust = rec.peaks[k, thrust_at]    # the phase's maximum; NaN: undetermined (a stuck group's)
+            if not np.isnan(thrust) and (np.isnan(f[F_PEAK]) or abs(thrust) > abs(f[F_PEAK])):
+                f[F_PEAK], f[F_T_PEAK] = thrust, rec.peaks[k, m + thrust_at]
             for s in range(rec.phases[k, 1], rec.phases[k, 2]):
                 row = rec.samples[s]
-                thrust = row[3 + thrust_at]    # NaN: a stuck group's undetermined force, never the peak
-                if not np.isnan(thrust) and (np.isnan(f[F_PEAK]) or abs(thrust) > abs(f[F_PEAK])):
-                    f[F_PEAK], f[F_T_PEAK] = thrust, row[0]
                 far = max(far, row[row.size - 1])
                 found = True
         if found:

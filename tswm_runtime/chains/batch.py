@@ -46,17 +46,18 @@ BATCH_SIG = types.none(types.int64, ADDRESSES, types.UniTuple(types.int64, 3), k
 
 @njit(refcounted=True, error_model="numpy")
 def _records(t_out, n_states, n_p, stages, room):
-    """A case's Record (the output rows of n_states at t_out; no event log or step log: the chain keeps its own)
-    and its ChainRecord with room for ``room.phases`` phases and ``room.samples`` samples."""
+    """A case's Record (the output rows of n_states at t_out, the stage forces' maxima; no event log or step log:
+    the chain keeps its own) and its ChainRecord with room for ``room.phases`` phases and ``room.samples``
+    samples."""
     out = Outputs(t_out, np.full((t_out.size, n_states), np.nan), np.full(t_out.size, -1, np.int64),
                   np.empty((t_out.size, n_p)))
     record = Record(out, EventLog(np.empty(1), np.empty((1, 4), np.int64), np.empty((1, 2)), np.empty((1, 4))),
-                    np.zeros((0, 3)), np.zeros(segment.N_COUNTERS, np.int64), no_steps(2, n_p))
+                    np.empty((3 * stages, 3)), np.zeros(segment.N_COUNTERS, np.int64), no_steps(2, n_p))
     chain = kernel.ChainRecord(np.empty((room.phases, 3), np.int64), np.empty((room.phases, 2 + n_p)),
                                np.empty((room.samples, 4 + 3 * stages)), np.empty((room.phases, 4), np.int64),
                                np.empty((room.phases, 1 + n_states + n_p)), np.empty(6 + 3 * stages),
                                np.zeros(4, np.int64),
-                               np.empty((room.phases, len(IMPACT_COLUMNS))))
+                               np.empty((room.phases, len(IMPACT_COLUMNS))), np.empty((room.phases, 6 * stages)))
     return record, chain
 
 

@@ -2,12 +2,21 @@
 address), its events, the decision at each (``rules.settle``: the latches, then the next mode) and
 its resting phases, written into a ChainRecord from which ``chains/run.py`` builds the result.
 
-Per phase (a stretch in one mode, or at rest) the record keeps its mode, times, latches and the
-range of its samples; a sliding phase's samples are (t, q0, v0, stage forces, the last body's coordinate) at its
-start, at every
-output time inside it and at the event that ends it. Per event: the guard (START at the start), the
-modes before and after (NO_MODE: the run stops), the decision's outcome, the state and the latches
-the decision saw. The trip: what the chain carried just before the switch cut the motor.
+Per phase (a stretch in one mode, or at rest) the record keeps its mode, times, latches, the range of its
+samples and its peaks; a sliding phase's samples are (t, q0, v0, stage forces, the last body's coordinate) at
+its start, at every output time inside it and where it ends (its event, t_end or a stop). Its peaks are per
+stage force the largest |value| of the continuous solution in the phase, signed, and its time (NaN:
+undetermined in the whole phase, a stuck group's force; a resting phase has none). A stage force is affine in
+the bodies' forces, which depend on q0 (springs, the seat while its latch holds), on v0 through a motor's
+torque and on nothing else (no time): without a powered motor and outside a clearance's open phase it is
+affine in q0, which is monotone in a sliding phase (v0 = 0 is an event), so its largest |value| is at a phase
+end, a sample. In a phase with a powered motor and in the open phase (affine in q0 and qk) the segment kernel
+monitors the module's observables (``observe``: the stage forces) in every step and refines their maxima on
+its dense output (``segment._monitor``, ``_refine``); the peaks are the larger of those and the samples (a
+phase that ends where D reaches 0 keeps its samples': the forces grow without bound there and the run stops).
+Per event: the guard (START at the start), the modes before and after (NO_MODE: the run stops), the
+decision's outcome, the state and the latches the decision saw. The trip: what the chain carried just before
+the switch cut the motor.
 """
 from collections import namedtuple
 
@@ -25,7 +34,7 @@ from tswm_runtime.jit.arrays import copy_into
 from tswm_runtime.jit.borrow import borrowed
 from tswm_runtime.jit.cache_guard import njit
 from tswm_runtime.jit.signatures import MATRIX, VECTOR
-from tswm_runtime.jit.structures import INTS, RECORD, SETTINGS, EventSettings, Segment, State
+from tswm_runtime.jit.structures import INTS, RECORD, SETTINGS, EventSettings, Record, Segment, State
 
 # Status codes besides FINISHED (0) and the integrator's (segment's negative codes).
 FINISHED = 0
@@ -44,12 +53,14 @@ MAX_SAME_TIME = 8     # decisions at one instant before the run stops
 #: phase_f (t_start, t_end, p); samples (t, q0, v0, 3 stage forces per stage, q_N); events (guard, from, to,
 #: outcome) and event_f (t, y: q0, v0 and with a clearance qk, vk, p); trip (t, q0, v0, drive, stage forces, q_N, mode;
 #: t NaN: no cut);
-#: counts (phases, samples, events, impacts); impacts (backlash.IMPACT_COLUMNS per impact, as many rows as events).
-ChainRecord = namedtuple("ChainRecord", "phases phase_f samples events event_f trip counts impacts")
+#: counts (phases, samples, events, impacts); impacts (backlash.IMPACT_COLUMNS per impact, as many rows as events);
+#: peaks per phase (the 3 per stage stage forces' maxima, signed, then their times).
+ChainRecord = namedtuple("ChainRecord", "phases phase_f samples events event_f trip counts impacts peaks")
 INT_MATRIX = types.int64[:, ::1]
-CHAIN_RECORD = types.NamedTuple((INT_MATRIX, MATRIX, MATRIX, INT_MATRIX, MATRIX, VECTOR, INTS, MATRIX), ChainRecord)
+CHAIN_RECORD = types.NamedTuple((INT_MATRIX, MATRIX, MATRIX, INT_MATRIX, MATRIX, VECTOR, INTS, MATRIX, MATRIX),
+                                ChainRecord)
 CHAIN_TABLES = types.NamedTuple((INTS, INT_MATRIX, *(types.int64,) * 10, types.float64, types.float64,
-                                 types.float64, INTS, *(types.int64,) * 7), ChainTables)
+                                 types.float64, INTS, *(types.int64,) * 8), ChainTables)
 #: run_chain_at(functions, chain functions (stage_forces, body_forces_into, impact), tables, settings, y, p, record,
 #: chain record, max_events) -> (status, t_stop)
 CHAIN_SIG = types.Tuple((types.int64, types.float64))(ADDRESSES, types.UniTuple(types.int64, 3), CHAIN_TABLES,
@@ -73,19 +84,46 @@ def _sample(chain_fns, c, rec, mode, t, y, p, forces):
 
 
 @njit(error_model="numpy")
+def _unmonitored(mon):
+    """The maxima made ready for a phase: none yet (a NaN force never replaces them: abs(NaN) > -1 is False)."""
+    mon[:, 0] = -1.0
+    mon[:, 1] = np.nan
+    mon[:, 2] = np.nan
+
+
+@njit(error_model="numpy")
+def _keep_peaks(mon, row):
+    """The phase's maxima (values, then times) into its row of the record's peaks; not the inf the Painleve
+    approach marks where D reaches 0 (the run stops there: the samples' largest, at the near side, stands)."""
+    m = mon.shape[0]
+    for k in range(m):
+        if np.isfinite(mon[k, 0]):
+            row[k], row[m + k] = mon[k, 1], mon[k, 2]
+
+
+@njit(error_model="numpy")
 def _open(rec, mode, t, p):
     k = rec.counts[0]
     rec.phases[k, 0], rec.phases[k, 1], rec.phases[k, 2] = mode, rec.counts[1], rec.counts[1]
     rec.phase_f[k, 0], rec.phase_f[k, 1] = t, t
     copy_into(rec.phase_f[k, 2:], p)
+    rec.peaks[k, :] = np.nan
     rec.counts[0] = k + 1
 
 
 @njit(error_model="numpy")
 def _close(rec, t):
+    """End the phase at t; its peaks: per force the first of largest magnitude of its monitored maximum (if
+    any) and its samples, a NaN never."""
     k = rec.counts[0] - 1
     rec.phase_f[k, 1] = t
     rec.phases[k, 2] = rec.counts[1]
+    peaks, m = rec.peaks[k], rec.peaks.shape[1] // 2
+    for s in range(rec.phases[k, 1], rec.counts[1]):
+        row = rec.samples[s]
+        for j in range(m):
+            if abs(row[3 + j]) > abs(peaks[j]) or (np.isnan(peaks[j]) and not np.isnan(row[3 + j])):
+                peaks[j], peaks[m + j] = row[3 + j], row[0]
 
 
 @njit(error_model="numpy")
@@ -129,6 +167,7 @@ def _run(functions, chain_addresses, c, settings, y, p, record, rec, max_events,
     chain_fns = ChainFunctions(guards_at(chain_addresses[0]), guards_at(chain_addresses[1]),
                                guards_at(chain_addresses[2]))
     out, counters = record.out, record.counters
+    quiet = Record(out, record.log, record.mon[:0], counters, record.steps)   # its segments monitor nothing
     stages, n_guards, n_states = c.stages, c.guard_direction.shape[1], y.size
     rec.counts[0], rec.counts[1], rec.counts[2], rec.counts[3] = 0, 0, 0, 0
     rec.trip[0] = np.nan
@@ -171,18 +210,27 @@ def _run(functions, chain_addresses, c, settings, y, p, record, rec, max_events,
             break
         i = np.searchsorted(out.t, t)
         i0 = i
+        watched = (c.motor != 0 and p[c.p_switch] != c.tripped) or mode == c.open_mode
+        if watched:
+            _unmonitored(record.mon)
         if counters[segment.N_SWITCHES] % 2 == 1:  # each phase starts on DOPRI5 (method auto): its step chosen
             h = 0.0
         counters[segment.N_SWITCHES] = 0
         # the last phase's next step is carried over the event (as the mode machine does): no fresh
         # initial step and no climb from it in each phase; DOPRI5's defect check judges it as any step
-        seg_status, t_new, k, i, h = _slide(fns, run_segment, settings, c, mode, t, y, p, record, i, h, scratch)
+        seg_status, t_new, k, i, h = _slide(fns, run_segment, settings, c, mode, t, y, p,
+                                            record if watched else quiet, i, h, scratch)
+        if watched:
+            _keep_peaks(record.mon, rec.peaks[rec.counts[0] - 1])
         for r in range(i0, i):
             if not _sample(chain_fns, c, rec, mode, out.t[r], out.y[r], p, w.forces):
                 status = RECORD_FULL
         same = same + 1 if t_new == t else 0
         t = t_new
         if status != FINISHED or seg_status != segment.EVENT:
+            if status == FINISHED and not (i > i0 and out.t[i - 1] == t):   # the end, unless an output time
+                if not _sample(chain_fns, c, rec, mode, t, y, p, w.forces):
+                    status = RECORD_FULL
             _close(rec, t)
             if status == FINISHED and seg_status != segment.REACHED_END:
                 status = seg_status
@@ -225,14 +273,15 @@ def _run(functions, chain_addresses, c, settings, y, p, record, rec, max_events,
 def run_chain_at(functions, chain_addresses, c, settings, y0, p, record, rec, max_events):
     """The chain's run from (0, y0) under p (its latches written; its derived slots filled by the module's
     prepare) to settings.t_end: phases, events and their
-    decisions, the trip, into rec; output rows into record.out.y (q0, v0; a row at an event time keeps the
+    decisions, the trip, into rec, each sliding phase's maxima of the module's observables (record.mon's rows:
+    3 per stage) into rec.peaks; output rows into record.out.y (q0, v0; a row at an event time keeps the
     later phase's value, rows after a stop NaN). With a clearance in stage k y0 is (q0, v0, qk, vk) and vk is
     set here to c_k v0 of p (the chain starts moving as one body: the gap's rate 0). Returns (status, t_stop).
     Its work arrays are made here and kept alive for ``_run``, which borrows them (``borrow``) with its
     arguments."""
     n_guards = c.guard_direction.shape[1]
     w = chain_work(n_guards, c.stages, c.direction.size, p.size, y0.size)
-    scratch = segment.segment_work(y0.size, n_guards, 0, 0)
+    scratch = segment.segment_work(y0.size, n_guards, 0, record.mon.shape[0])
     y = y0.copy()
     if y.size == 4:
         y[3] = p[c.p_speed_k] * y[1]

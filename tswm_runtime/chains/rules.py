@@ -40,11 +40,12 @@ FRAME = 11            # an impact's frame: the module's IMPACT_FRAME
 ChainTables = namedtuple("ChainTables", "direction guard_direction stages p_psi p_lever_in p_lever_out p_slack "
                                         "switch_on p_delay p_switch p_pick p_seated armed picked tripped "
                                         "mode_contact open_mode open_stage p_contact p_direction p_rho_sign p_speed_k "
-                                        "p_speed")
+                                        "p_speed motor")
 #: With a clearance (``backlash.py``): per mode the flank of the stage with the clearance it loads (+1 a, -1 b, 0
 #: for OPEN), the mode OPEN (-1: no clearance), the stage, the slots of the contact latch (+1, -1, 0 open), the
 #: groups' directions (two) and the stages' regime signs, and of v_k / v_0 of the rigid chain; the first slot of the
-#: speed factors c_j = v_j / v_0 of the rigid chain (c_0 to c_N).
+#: speed factors c_j = v_j / v_0 of the rigid chain (c_0 to c_N). Whether body 0 has a motor (1; its torque depends on
+#: v0, so that a stage force's maximum may lie inside a phase while it is powered).
 
 #: What a decision writes: guard values, a rate, the bodies' forces, interval sets (two and a cone),
 #: the candidates' modes and a_0, p before the latches moved, the stage forces at a cut.

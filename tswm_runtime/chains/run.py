@@ -61,13 +61,14 @@ STATUS = {segment.STEP_TOO_SMALL: "step-too-small", segment.MAX_STEPS: "max-step
 
 @dataclass
 class Phase:
-    """A stretch of the run in one mode (RESTING: at rest), with the stage forces sampled in it."""
+    """A stretch of the run in one mode (RESTING: at rest), with the stage forces sampled in it and their maxima."""
 
     mode: int
     t_start: float
     t_end: float
     latches: np.ndarray                          # p in the phase: switch state, pick-up time, seated
     table: np.ndarray = field(default_factory=lambda: np.empty((0, 4)), repr=False)  # rows (t, q0, v0, forces, q_N)
+    peaks: np.ndarray = field(default_factory=lambda: np.empty(0), repr=False)  # the forces' maxima, then their times
 
     @property
     def samples(self) -> list:
@@ -130,7 +131,7 @@ class ChainRun:
         phase_f = chain.phase_f
         n_phases = int(chain.counts[0])
         times = phase_f[:n_phases, :2].tolist()
-        return [Phase(mode, *times[j], phase_f[j, 2:], chain.samples[s0:s1])
+        return [Phase(mode, *times[j], phase_f[j, 2:], chain.samples[s0:s1], chain.peaks[j])
                 for j, (mode, s0, s1) in enumerate(chain.phases[:n_phases].tolist())]
 
     @cached_property
@@ -300,7 +301,7 @@ def _open_words(module, p: np.ndarray) -> str:
 class _ModuleParts(NamedTuple):
     """What a chain module's runs share (``_parts``): the compiled decision's tables, the addresses of its
     stage_forces and body_forces_into, and the parts of a Record that a chain's run never writes (the event
-    log, the observables' maxima, the step log's rows: a chain keeps its phases and samples in its own record;
+    log, the step log's rows: a chain keeps its phases, samples and maxima in its own record;
     the output rows' modes and p), and p prepared from the scene's values (copied by each run)."""
 
     module: object
@@ -308,7 +309,6 @@ class _ModuleParts(NamedTuple):
     tables: compiled.ChainTables
     functions: tuple[int, int, int]
     event_log: EventLog
-    mon: np.ndarray
     no_steps: tuple
     out_mode: np.ndarray
     out_p: np.ndarray
@@ -334,15 +334,14 @@ def _parts(module) -> _ModuleParts:
             mode_contact=np.array([flank[f[k - 1]] if k and f else 0 for f in module.MODE_FLANKS], np.int64),
             open_mode=module.OPEN if k else -1, open_stage=k, p_contact=module.P_CONTACT if k else 0,
             p_direction=module.P_DIRECTION_IN if k else 0, p_rho_sign=module.P_RHO_SIGN if k else 0,
-            p_speed_k=module.P_SPEED + k if k else 0, p_speed=module.P_SPEED)
+            p_speed_k=module.P_SPEED + k if k else 0, p_speed=module.P_SPEED, motor=int(hasattr(module, "MOTOR_POINTS")))
         no_steps = (np.empty((0, 4)), np.empty((0, 2), np.int64), np.empty((0, 2)), np.empty((0, 2)),
                     np.empty((0, 3, 4)), np.empty(0, np.int64), np.empty((0, n_p)))
         known = _PARTS[module.__name__] = _ModuleParts(
             module, module.SCENE_DIGEST, tables,
             (address(module.stage_forces, GUARDS_SIG), address(module.body_forces_into, GUARDS_SIG),
              address(module.impact, GUARDS_SIG)),
-            EventLog(np.empty(1), np.empty((1, 4), np.int64), np.empty((1, 2)), np.empty((1, 4))), np.zeros((0, 3)),
-            no_steps, np.empty(0, np.int64), np.empty((0, n_p)), {})
+            EventLog(np.empty(1), np.empty((1, 4), np.int64), np.empty((1, 2)), np.empty((1, 4))), no_steps, np.empty(0, np.int64), np.empty((0, n_p)), {})
     return known
 
 
@@ -386,17 +385,18 @@ def samples_room(phases: int, points: int) -> int:
 def _record(module, t_out: np.ndarray, phases: int, samples: int) -> tuple[Record, kernel.ChainRecord]:
     """A run's records: its own output rows, counters and chain record, the module's shared parts besides."""
     parts = _parts(module)
-    n_p, width = len(module.P_NAMES), 4 + 3 * module.STAGES
+    n_p, forces = len(module.P_NAMES), 3 * module.STAGES
+    width = 4 + forces
     rows = np.empty((t_out.size, len(module.STATES)))
     rows.fill(np.nan)   # np.full costs three times as much
     out = Outputs(t_out, rows, parts.out_mode, parts.out_p)
-    record = Record(out, parts.event_log, parts.mon, np.zeros(segment.N_COUNTERS, np.int64),
+    record = Record(out, parts.event_log, np.empty((forces, 3)), np.zeros(segment.N_COUNTERS, np.int64),
                     StepLog(*parts.no_steps, np.zeros(2, np.int64)))
     chain = kernel.ChainRecord(np.empty((phases, 3), np.int64), np.empty((phases, 2 + n_p)),
                                np.empty((samples, width)), np.empty((phases, 4), np.int64),
                                np.empty((phases, 1 + len(module.STATES) + n_p)), np.empty(6 + 3 * module.STAGES),
                                np.zeros(4, np.int64),
-                               np.empty((phases, len(IMPACT_COLUMNS))))
+                               np.empty((phases, len(IMPACT_COLUMNS))), np.empty((phases, 2 * forces)))
     return record, chain
 
 

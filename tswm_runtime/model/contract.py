@@ -76,7 +76,7 @@ CHAIN_CONSTANTS = {
     "BODY_MOTIONS": "per body 'rotation' or 'translation'",
     "GUARDS": "('D', 'jam', 'N_1', ..., 'N_N', 'v0', 'seat', 'switch', 'delay')",
     "GUARD_DIRECTIONS": "per mode, per guard",
-    "OBSERVABLES": "() (the stage forces come from stage_forces)", "RUN": "t_end, v0, rtol, atol, max_steps",
+    "OBSERVABLES": "() (observe writes the stage forces, whose maxima the chain kernel locates)", "RUN": "t_end, v0, rtol, atol, max_steps",
     "PARAM_NAMES": "the scene's values, slots P_VALUES.. of p", "PARAM_UNITS": "their SI units",
     "PARAM_KEYS": "their scene keys", "PARAM_DEFAULTS": "the scene's values in SI",
     "PARAM_RANGES": "per value (lo, hi, lo included, hi included); hi may name another value",
@@ -93,7 +93,7 @@ CHAIN_CONSTANTS = {
     "HAS_SEAT": "whether the last body has a seat",
 }
 CHAIN_FUNCTIONS = {
-    "rhs": "as above", "jac": "as above", "guards": "as above", "observe": "fills nothing",
+    "rhs": "as above", "jac": "as above", "guards": "as above", "observe": "observe(mode, t, y, p, out): the stage forces, as stage_forces",
     "impact": "NaN: nothing collides", "accel": "accel(mode, t, y, p) -> a_0",
     "body_forces": "body_forces(t, y, p, direction) -> (F_0, ..., F_N), the valve's friction against direction",
     "stage_forces": "stage_forces(mode, t, y, p, out): per stage (on its input body, on its output body, N)",

@@ -177,16 +177,18 @@ def _samples(sliding: list, stages: int) -> tuple[np.ndarray, np.ndarray, np.nda
 
 
 def _peaks(sliding: list, stages: int) -> list[dict]:
-    """Per stage, FORCES -> Peak over the sliding phases' samples (None: no samples): the first sample of
-    largest magnitude; a NaN (a stuck group's undetermined force) is never the peak, unless all are NaN."""
-    table = np.concatenate([phase.table for phase in sliding] or [np.empty((0, 3 + 3 * stages))])
-    if table.shape[0] == 0:
+    """Per stage, FORCES -> Peak over the sliding phases' maxima (the kernel's, of the continuous solution; None:
+    it never slid): the first phase's of largest magnitude; a NaN (a force undetermined in a whole phase, a stuck
+    group's) is never the peak, unless all are NaN (then its time is NaN too)."""
+    m = 3 * stages
+    maxima = np.array([phase.peaks for phase in sliding]).reshape(-1, 2 * m)
+    if maxima.shape[0] == 0:
         return [dict.fromkeys(FORCES) for _ in range(stages)]
-    forces = table[:, 3:3 + 3 * stages]
+    forces = maxima[:, :m]
     size = np.abs(forces)
     size[np.isnan(size)] = -1.0
-    rows = np.argmax(size, axis=0)
-    values, times = forces[rows, np.arange(forces.shape[1])].tolist(), table[rows, 0].tolist()
+    rows, columns = np.argmax(size, axis=0), np.arange(m)
+    values, times = forces[rows, columns].tolist(), maxima[rows, m + columns].tolist()
     return [{name: Peak(values[3 * k + j], times[3 * k + j]) for j, name in enumerate(FORCES)} for k in range(stages)]
 
 
