@@ -56,9 +56,11 @@ def module(**changes) -> SimpleNamespace:
                               **changes})
 
 
-def phase(mode, seated: bool, samples=(), tripped=True):
-    """A phase in ``mode`` (RESTING = -1) with its latches and samples (t, q0, v0, six stage forces, travel)."""
-    return SimpleNamespace(mode=mode, latches=(2 if tripped else 0, 0.0, 1.0 if seated else 0.0), samples=samples)
+def phase(mode, seated: bool, samples=(), tripped=True, peak=(np.nan, np.nan)):
+    """A phase in ``mode`` (RESTING = -1) with its latches, samples (t, q0, v0, six stage forces, travel) and its
+    thrust's maximum (value, t), as the kernel's record holds them."""
+    return SimpleNamespace(mode=mode, latches=(2 if tripped else 0, 0.0, 1.0 if seated else 0.0), samples=samples,
+                           peak=peak)
 
 
 def run(phases, status="finished", thrust=100.0, p=P):
@@ -72,10 +74,12 @@ def run(phases, status="finished", thrust=100.0, p=P):
     for row, ph in zip(rows, phases):
         row[2:5] = ph.latches
     trip = np.array([1.0, 0.1, 0.0, 3.0, 0.0, 0.0, 0.0, 0.0, thrust, 0.0, 0.1 * 0.05, 0.0])   # travel c_2 q0
+    peaks = np.full((len(phases), 12), np.nan)    # six forces' maxima, then their times; the thrust is force 4
+    peaks[:, 4], peaks[:, 10] = np.array([ph.peak for ph in phases]).reshape(-1, 2).T
     record = ChainRecord(np.array([(ph.mode, a, b) for ph, a, b in zip(phases, bounds, bounds[1:])], np.int64),
                          np.array(rows), np.array(samples, dtype=float).reshape(-1, 10), np.zeros((1, 4), np.int64),
                          np.zeros((1, 3 + p.size)), trip, np.array([len(phases), len(samples), 0, 0], np.int64),
-                         np.zeros((1, 10)))
+                         np.zeros((1, 10)), peaks)
     return SimpleNamespace(phases=phases, status=status, code={"finished": 0, "max-steps": MAX_STEPS}[status],
                            t_stop=5.0, n_steps=0, events=[], p=p, record=record)
 
@@ -121,16 +125,18 @@ def test_the_stall_margin_is_the_pull_out_torque_at_the_voltage_over_the_needed_
 
 
 def test_the_peak_and_the_extra_travel_after_the_trip_are_read_from_the_tripped_phases():
-    """Samples before the trip (switch armed) are not counted; after it the thrust's largest magnitude
-    (-250 N at t = 2.5 s, beyond 200 N at 2 s) is the peak, and the extra travel is the farthest travel
-    (q0 = 0.7, times the speed factor 0.05: the samples' last column) less the travel at the trip (0.1 x 0.05), by
-    hand."""
+    """Phases before the trip (switch armed) are not counted; after it the thrust's largest magnitude among the
+    phases' maxima (the kernel's, of the continuous solution: 300 N at t = 1.8 s inside the second phase, between
+    its samples of 50 and 200 N; beyond -250 N at t = 2.5 s, a NaN never) is the peak, and the extra travel is the
+    farthest travel (q0 = 0.7, times the speed factor 0.05: the samples' last column) less the travel at the trip
+    (0.1 x 0.05), by hand."""
     def sample(t, q0, thrust):
         return [t, q0, 0.0, 0.0, 0.0, 0.0, 0.0, thrust, 0.0, 0.05 * q0]
-    phases = [phase(0, False, [sample(0.5, 0.05, 900.0)], tripped=False),
-              phase(0, False, [sample(1.5, 0.3, 50.0), sample(2.0, 0.7, 200.0)]),
-              phase(1, True, [sample(2.5, 0.6, -250.0)]), phase(-1, True)]
+    phases = [phase(0, False, [sample(0.5, 0.05, 900.0)], tripped=False, peak=(900.0, 0.5)),
+              phase(0, False, [sample(1.0, 0.2, np.nan)]),
+              phase(0, False, [sample(1.5, 0.3, 50.0), sample(2.0, 0.7, 200.0)], peak=(300.0, 1.8)),
+              phase(1, True, [sample(2.5, 0.6, -250.0)], peak=(-250.0, 2.5)), phase(-1, True)]
     out = answers(module(), run(phases))
-    assert out["peak_after_trip"] == {"thrust": -250.0, "t": 2.5}
+    assert out["peak_after_trip"] == {"thrust": 300.0, "t": 1.8}
     assert out["extra_travel"] == pytest.approx(0.05 * 0.7 - 0.05 * 0.1, rel=1e-15)
     assert out["trip"] == {"t": 1.0, "thrust": 100.0, "drive": 3.0, "travel": 0.1 * 0.05}
