@@ -203,3 +203,21 @@ def test_impact_with_friction_is_the_single_stage_law_on_the_effective_masses(mo
     # body 2 takes P_n n + P_t t, body 1's side the opposite, each along its guide
     assert v2_after == pytest.approx(y[3] + (p_n * math.cos(g2) + p_t * math.sin(g2)) / m2 / r4, rel=1e-12)
     assert v0_after == pytest.approx(y[1] - (p_n * math.sin(g2) - p_t * math.cos(g2)) / m1 / (r3 * k), rel=1e-12)
+
+
+@pytest.mark.parametrize("stages, k", [(2, 1), (2, 2), (3, 2)])
+def test_an_open_phase_stage_force_depends_on_its_own_groups_bodies_only(stages, k):
+    """What the chain kernel's peaks rest on (chains/kernel.py): while stage k is open, a closed stage's force and
+    normal force depend on the forces and inertias of its own group's bodies only (bodies 0..k-1 or k..N), so each
+    on one coordinate (q0 or qk), monotone between the group's speed's events, and on v0 (a motor) in the input
+    group only."""
+    from derivation.chain import clearance as cl
+
+    phase = cl.open_phase(stages, k)
+    bodies = {f"{x}_{j}" for x in ("F", "M") for j in range(stages + 1)}
+    assert sorted(phase.stage_force) == [i for i in range(1, stages + 1) if i != k]
+    for i in phase.stage_force:
+        group = range(0, k) if i < k else range(k, stages + 1)
+        for expr in (phase.stage_force[i], phase.normal[i]):
+            used = {str(s) for s in expr.free_symbols} & bodies
+            assert used == {f"{x}_{j}" for x in ("F", "M") for j in group}, (i, used)

@@ -7,13 +7,16 @@ samples and its peaks; a sliding phase's samples are (t, q0, v0, stage forces, t
 its start, at every output time inside it and where it ends (its event, t_end or a stop). Its peaks are per
 stage force the largest |value| of the continuous solution in the phase, signed, and its time (NaN:
 undetermined in the whole phase, a stuck group's force; a resting phase has none). A stage force is affine in
-the bodies' forces, which depend on q0 (springs, the seat while its latch holds), on v0 through a motor's
-torque and on nothing else (no time): without a powered motor and outside a clearance's open phase it is
-affine in q0, which is monotone in a sliding phase (v0 = 0 is an event), so its largest |value| is at a phase
-end, a sample. In a phase with a powered motor and in the open phase (affine in q0 and qk) the segment kernel
-monitors the module's observables (``observe``: the stage forces) in every step and refines their maxima on
-its dense output (``segment._monitor``, ``_refine``); the peaks are the larger of those and the samples (a
-phase that ends where D reaches 0 keeps its samples': the forces grow without bound there and the run stops).
+the bodies' forces, which depend on the coordinates (springs, the seat while its latch holds), on v0 through a
+motor's torque and on nothing else (no time). Without a powered motor it is affine in q0, monotone in a sliding
+phase (v0 = 0 is an event), so its largest |value| is at a phase end, a sample; in a clearance's open phase a
+closed stage's force depends on its own group's bodies only (derivation/chain/clearance.py ``open_phase``: the
+open stage carries nothing), so on q0 or on qk, each monotone there (a group's speed reaching 0 is an event,
+except for a free group, which holds no closed stage, and a stuck one, whose forces are NaN). While a motor is
+powered the segment kernel monitors the module's observables (``observe``: the stage forces) in every step and
+refines their maxima on its dense output (``segment._monitor``, ``_refine``); the peaks are the larger of those
+and the samples (a phase that ends where D reaches 0 keeps its samples': the forces grow without bound there
+and the run stops).
 Per event: the guard (START at the start), the modes before and after (NO_MODE: the run stops), the
 decision's outcome, the state and the latches the decision saw. The trip: what the chain carried just before
 the switch cut the motor.
@@ -210,7 +213,7 @@ def _run(functions, chain_addresses, c, settings, y, p, record, rec, max_events,
             break
         i = np.searchsorted(out.t, t)
         i0 = i
-        watched = (c.motor != 0 and p[c.p_switch] != c.tripped) or mode == c.open_mode
+        watched = c.motor != 0 and p[c.p_switch] != c.tripped   # a powered motor: the peaks may lie inside
         if watched:
             _unmonitored(record.mon)
         if counters[segment.N_SWITCHES] % 2 == 1:  # each phase starts on DOPRI5 (method auto): its step chosen

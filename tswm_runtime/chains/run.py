@@ -25,10 +25,10 @@ Each event keeps the state and latches its decision saw; its ``decision`` (with 
 and, at rest, the admissible internal forces) is the Python decision (``decide``) evaluated there on
 first access, which tests/test_chain_kernel.py checks against the compiled one.
 
-While sliding, every stage force is affine in the bodies' forces; each phase keeps
-the stage forces at its ends and at the output points inside it. Without a motor the bodies'
-forces are affine in q0, which is monotone in a sliding phase, so a stage force's extreme lies
-at a phase end and the maxima taken from these samples are exact.
+Each sliding phase keeps the stage forces at its ends and at the output points inside it (its samples) and
+their peaks: per force the largest |value| of the continuous solution in the phase and its time (``Phase.peaks``;
+how the kernel finds them, at a phase end without a powered motor, monitored and refined on the dense output
+while it runs: kernel.py).
 """
 from __future__ import annotations
 

@@ -3,9 +3,8 @@ the extra travel, whether the seat holds after power off (and which stage self-l
 
 The numbers are computed from the run's record by the compiled code the sweep's batch uses
 (chains/answers.py: ``answer_run``); here they become the summary's dict and the printed lines. The
-thrust is the last stage's force on the last body (the stem). Peaks are taken over the sliding phases'
-samples (their ends and output points); after the trip the motor is off, the bodies' forces are affine
-in q0, which is monotone in a sliding phase, so the peak after the trip is exact. A stage self-locks
+thrust is the last stage's force on the last body (the stem). Its peak after the trip is the largest of the
+tripped phases' peaks, each the maximum of the continuous solution (chains/kernel.py). A stage self-locks
 when its inverse-tractive FTF Psi_i <= 0 (derived from the run's p by the module's prepare):
 tan(gamma) <= the effective friction. The stall margin is the motor's pull-out torque at the run's
 voltage (the table's largest torque times (U/U_n)^2) over the torque the chain needs at the trip:
