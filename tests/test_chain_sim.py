@@ -45,6 +45,19 @@ def test_the_normal_forces_at_the_turn_are_newtons(switching):
         assert peak.value == pytest.approx(max(forward[k], backward[k]), rel=1e-8)
 
 
+def test_a_run_samples_its_end_where_no_output_time_lies(chain_module):
+    """The run's end (t_end = 0.5 s, sliding back after the turn) is a sample of its last phase even where no output
+    time lies (here 0 and 0.1 s only), so the extra travel, the farthest of the samples' travel, sees where the
+    run ends: q0 there as the hand model's."""
+    from tswm_runtime.chains.run import run_chain
+
+    run = run_chain(chain_module(wedges("two-switching", **SWITCHING)), t_end=0.5, v0=1.0, t_out=np.array([0.0, 0.1]),
+                    **TIGHT)
+    end = run.phases[-1].table[-1]
+    assert run.status == "finished" and run.phases[-1].mode != -1
+    assert end[0] == 0.5 and end[1] == pytest.approx(HandChain(**SWITCHING).run(1.0, 0.5)[2][0], rel=1e-9)
+
+
 THREE = dict(gammas=(30.0, 25.0, 20.0), mus=(0.1, 0.1, 0.1), masses=(1.0, 1.0, 1.0, 1.0),
              forces=(5.0, 0.0, 0.0, 20.0), spring=1000.0)
 
