@@ -381,3 +381,28 @@ def test_a_runs_start_is_its_own(chain_module):
     assert np.array_equal(latches(module, np.zeros(2)), expected)
     assert latches(module, np.zeros(2), voltage=0.5)[module.P_VOLTAGE] == 0.5
     assert np.array_equal(latches(module, np.zeros(2)), expected)
+
+
+
+def test_a_repeated_call_runs_as_the_first():
+    """simulate_chain remembers a call's settings and the kernel's arguments per module, method and overrides: a
+    repeated call gives the first one's numbers bit for bit, with its own p and output times (writing a result's
+    changes no later run); other overrides (their types included) and other values are not taken for them."""
+    from tswm_runtime.model.contract import load_module
+    from tswm_runtime.simulation.simulate import SimulationInputError
+
+    mov = load_module("mov")
+    first = simulate_chain(mov, **TIGHT)
+    first.p[:] = np.nan
+    first.t[:] = np.nan
+    again = simulate_chain(mov, **TIGHT)
+    assert np.isfinite(again.p).all() and np.array_equal(again.t, np.linspace(0.0, mov.RUN["t_end"], again.t.size))
+    assert np.array_equal(again.q0, simulate_chain(mov, **TIGHT).q0)
+    assert [e["t"] for e in again.events] == [e["t"] for e in simulate_chain(mov, **TIGHT).events]
+    assert simulate_chain(mov, **{**TIGHT, "rtol": 1e-4}).n_steps < again.n_steps
+    other = simulate_chain(mov, {"mu_1": 0.08}, **TIGHT)
+    assert other.p[mov.P_VALUES + mov.PARAM_NAMES.index("mu_1")] == 0.08 and other.q0[-1] != again.q0[-1]
+    assert simulate_chain(mov, **TIGHT).q0[-1] == again.q0[-1]
+    simulate_chain(mov, points=1)
+    with pytest.raises(SimulationInputError, match="points"):
+        simulate_chain(mov, points=True)

@@ -406,12 +406,25 @@ def run_chain(module, *, t_end: float, v0: float, rtol: float, atol: float, t_ou
     """Integrate the chain from q0 = 0, v0 to t_end through its mode changes and its switch's and seat's
     events; ``voltage`` (U / U_n) replaces the scene's motor voltage, ``values`` (one per PARAM_NAMES, SI,
     checked by the caller) the scene's values."""
-    t_out = np.ascontiguousarray(t_out, dtype=np.float64)
+    prepared = prepare(module, t_end=t_end, v0=v0, rtol=rtol, atol=atol, method=method, max_steps=max_steps,
+                       voltage=voltage, values=values)
+    return run_prepared(module, prepared, np.ascontiguousarray(t_out, dtype=np.float64), max_events)
+
+
+def prepare(module, *, t_end: float, v0: float, rtol: float, atol: float, method: int, max_steps: int,
+            voltage: float | None, values: np.ndarray | None) -> tuple[np.ndarray, tuple]:
+    """What ``run_prepared`` takes of a run's settings: (p at the start, the kernel's arguments before it);
+    never written by a run (a caller may keep them for later runs with the same settings)."""
     start = latches(module, np.zeros(2), voltage, values)   # the latches at q0 = 0 (y0's)
     y0 = start_state(module, float(v0))
     settings = entry.settings(int(method), y0.size, t_end=float(t_end), rtol=float(rtol), atol=float(atol),
                               max_steps=int(max_steps))
-    args = (entry.functions(method, module), chain_functions(module), chain_tables(module), settings, y0)
+    return start, (entry.functions(method, module), chain_functions(module), chain_tables(module), settings, y0)
+
+
+def run_prepared(module, prepared: tuple, t_out: np.ndarray, max_events: int) -> ChainRun:
+    """``run_chain`` with its settings ``prepare``d; t_out float64 and contiguous, the run's own."""
+    start, args = prepared
     phases = first_room(max_events)
     while True:   # a record too small for the run's phases and samples: again with twice the room
         p = start.copy()
@@ -421,7 +434,7 @@ def run_chain(module, *, t_end: float, v0: float, rtol: float, atol: float, t_ou
             break
         phases *= 2
     result = _result(module, code, t_stop, record, chain)
-    result.p = start
+    result.p = start.copy()
     return result
 
 

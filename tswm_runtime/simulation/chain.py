@@ -15,7 +15,7 @@ from types import ModuleType
 
 import numpy as np
 
-from tswm_runtime.chains.run import RESTING, ChainRun, run_chain
+from tswm_runtime.chains.run import RESTING, ChainRun, prepare, run_prepared
 from tswm_runtime.common.memo import overrides_key, remember
 from tswm_runtime.results.rows import output_times
 from tswm_runtime.simulation.chain_values import chain_values
@@ -155,14 +155,34 @@ def simulate_chain(module: ModuleType, params: dict | None = None, method: int =
     scene's values by name (PARAM_NAMES and ``voltage``, the motor's U / U_n; numbers in SI or strings with
     a unit, checked as the scene reader checks them); t_end, v0, rtol, atol, max_steps, points, max_events
     and voltage override the scene's run."""
-    values, voltage = chain_values(module, params)
-    run = settings(module, {**overrides, **({"voltage": voltage} if voltage is not None else {})})
-    t_out = output_times(run["t_end"], run["points"]).copy()   # the remembered times are read-only
-    result = run_chain(module, t_end=run["t_end"], v0=run["v0"], rtol=run["rtol"], atol=run["atol"], t_out=t_out,
-                       method=method, max_steps=run["max_steps"], max_events=run["max_events"], voltage=run["voltage"],
-                       values=values)
+    run, t_out, prepared = _plan(module, params, method, overrides)
+    result = run_prepared(module, prepared, t_out.copy(), run["max_events"])   # the remembered times are read-only
     return ChainResult(module.SCENE, result.status, result.message, result.t_stop, _events(module, result), result.t,
                        result.y[:, 0], result.y[:, 1], result.n_steps, result, module, run["voltage"])
+
+
+def _plan(module: ModuleType, params: dict | None, method: int, overrides: dict) -> tuple[dict, np.ndarray, tuple]:
+    """(the run's settings, its output times, what ``run_prepared`` takes): remembered per module, method and
+    overrides for the scene's values, so that a repeated call goes to the run at once (building them cost
+    about a tenth of a short run, several times that right after other code has run)."""
+    try:
+        key = None if params else (module.__name__, module.SCENE_DIGEST, method, overrides_key(overrides))
+        known = _PLANS.get(key) if key else None
+    except TypeError:   # an unhashable value: checked (and refused) by ``settings``
+        key, known = None, None
+    if known is not None and known[0] is module:
+        return known[1]
+    values, voltage = chain_values(module, params)
+    run = settings(module, {**overrides, **({"voltage": voltage} if voltage is not None else {})})
+    plan = (run, output_times(run["t_end"], run["points"]),
+            prepare(module, t_end=run["t_end"], v0=run["v0"], rtol=run["rtol"], atol=run["atol"], method=method,
+                    max_steps=run["max_steps"], voltage=run["voltage"], values=values))
+    if key:
+        remember(_PLANS, key, (module, plan))
+    return plan
+
+
+_PLANS: dict = {}
 
 
 def _samples(sliding: list, stages: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
