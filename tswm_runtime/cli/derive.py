@@ -55,21 +55,20 @@ def _derive_chain(args: argparse.Namespace) -> int:
     print(f"  modes: {len(reachable(values.flanks))} sliding modes the flanks allow, and resting")
     decision = decide(values, 0.0)
     print(f"  at rest under the scene's forces: {decision.outcome}: {', '.join(decision.modes) or 'no mode'}")
-    if chain.clearance is not None:
-        print(*_clearance_lines(chain), sep="\n")
+    for c in chain.clearances:
+        print(*_clearance_lines(chain, c), sep="\n")
     for path in write_chain_documents(chain, latex=args.latex, markdown=args.markdown, pdf=args.pdf):
         print(f"  wrote {path}")
     return 0
 
 
-def _clearance_lines(chain) -> list[str]:
-    """The stage with a clearance: c, e and the start gap, the open mode's groups, the extra states and guards,
+def _clearance_lines(chain, c) -> list[str]:
+    """A stage with a clearance ``c``: c, e and the start gap, its open mode's groups, the extra states and guards,
     the document's section that derives them."""
     from derivation.chain.clearance import groups
     from derivation.chain.codegen import CLEARANCE_GUARDS
     from derivation.chain.document import OPEN_STAGE
 
-    c = chain.clearance
     k, n = c.stage, len(chain.stages)
     start = "on flank a" if c.gap.value <= 0 else "on flank b" if c.gap.value >= c.clearance.value else "open"
     first = groups(n, (k,)).first
