@@ -316,11 +316,13 @@ class _ChainReader(_Reader):
         voltage = self.number(table, "voltage", path, VOLTAGE, free_ok=False)[0]
         return Motor(*numbers, voltage)
 
-    def clearances(self, stages: list[dict], run: dict, bodies: tuple[Body, ...]) -> tuple[Clearance, ...]:
+    def clearances(self, stages: list[dict], run: dict,
+                   bodies: tuple[Body, ...]) -> tuple[tuple[Clearance, ...], tuple[Body, ...]]:
         """stage[k].clearance (> 0) with stage[k].restitution (e in [0, 1]) and the start gap run.gap_k in
         [0, clearance], in any number of stages; at most one starts open (0 < gap_k < clearance: one open stage at a
         time is modelled), and no body between two stages with a clearance has a spring (its coordinate would follow
-        both stages' backlash)."""
+        both stages' backlash): such a translating body's stiffness must be 0 and it has no spring slot. Returns the
+        clearances and the bodies."""
         out, opened = [], None
         for k, table in enumerate(stages, 1):
             path, gap = f"stage[{k}]", f"gap_{k}"
@@ -341,11 +343,13 @@ class _ChainReader(_Reader):
                 opened = k
             own = _suffixed(given, k)
             out.append(Clearance(k, own["clearance"], own["restitution"], Param(gap, start, "m", False, f"run.{gap}")))
-        for j, body in enumerate(bodies):
-            if body.stiffness is not None and any(c.stage <= j for c in out) and any(c.stage > j for c in out):
-                self.fail(body.stiffness.key, f"body {j} lies between two stages with a clearance: a spring there is "
-                          "not supported (give it to a body before the first or after the last such stage)")
-        return tuple(out)
+        between = [j for j, body in enumerate(bodies) if body.stiffness is not None
+                   and any(c.stage <= j for c in out) and any(c.stage > j for c in out)]
+        for j in between:
+            if bodies[j].stiffness.value != 0.0:
+                self.fail(bodies[j].stiffness.key, f"body {j} lies between two stages with a clearance: a spring there "
+                          "is not supported (give it to a body before the first or after the last such stage)")
+        return tuple(out), tuple(replace(b, stiffness=None) if j in between else b for j, b in enumerate(bodies))
 
     def chain_run(self, doc: dict, stages: int) -> ChainRun:
         table = self.table(doc, "run", required=False) or {}
@@ -371,6 +375,6 @@ class _ChainReader(_Reader):
         motions = [kinds[0].motion_in, *(kind.motion_out for kind in kinds)]
         bodies = tuple(self.body(t, j, m, j == len(stages)) for j, (t, m) in enumerate(zip(tables, motions)))
         run = self.chain_run(doc, len(stages))
-        clearances = self.clearances(stage_tables, self.table(doc, "run", required=False) or {}, bodies)
+        clearances, bodies = self.clearances(stage_tables, self.table(doc, "run", required=False) or {}, bodies)
         return ChainScene(name, description, stages, bodies, self.source, digest, run,
                           self.switch(doc, stages, motions), clearances)
