@@ -154,6 +154,28 @@ def test_two_clearances_that_never_open_run_as_the_chain_without_them(chain_modu
         np.testing.assert_allclose(gapped.samples[4], c2 * gapped.samples[1], rtol=1e-12)
 
 
+def test_a_second_clearance_that_stays_closed_changes_nothing(chain_module):
+    """tests/test_chain_backlash.py's driven chain with friction started open in stage 2 (0.5 mm, e = 0.5), bouncing
+    to rest on flank a, and the same chain with a 1 mm clearance in stage 1 too, closed on flank a (body 0 drives
+    body 1 through it all along): stage 2 is then the second clearance stage (its open mode OPEN + 1, its index 1 the
+    current one from the start), and the run is the same: every output row, every impact (time, speeds) and every
+    event, exactly."""
+    from tests.test_chain_backlash import _scene as one_gap
+
+    one = one_gap("gap-bounces", e=0.5, mu=0.1)
+    two = one.replace('gamma = "30 deg"\nmu = 0.1\n', 'gamma = "30 deg"\nmu = 0.1\nclearance = "1 mm"\nrestitution = 0.5\n')
+    module = chain_module(two)
+    single, double = simulate_chain(chain_module(one), points=21), simulate_chain(module, points=21)
+    assert module.CLEARANCE_STAGES == (1, 2) and double.events[0]["to"] == module.MODES[module.OPEN + 1]
+    assert double.status == single.status == "finished" and len(double.run.impacts) == len(single.run.impacts) > 5
+    np.testing.assert_array_equal(double.run.y, single.run.y)
+    for mine, theirs in zip(double.run.impacts, single.run.impacts):
+        assert mine["stage"] == 2.0 and [mine[k] for k in ("t", "nu before", "nu after", "v0 after", "vk after")] == [
+            theirs[k] for k in ("t", "nu before", "nu after", "v0 after", "vk after")]
+    assert [(e["t"], e["guard"]) for e in double.events] == [(e["t"], e["guard"]) for e in single.events]
+    assert [p.regime for p in double.stages[0].phases] == ["tractive"]
+
+
 CYCLE = {"forces": (4.0, 7.0, -4.0), "stiffness": (50.0, 0.0, 0.0), "v0": 1.0, "t_end": 0.35}
 BACK = {"forces": (5.0, 3.0, -1.0), "stiffness": (400.0, 0.0, 400.0), "v0": 0.5, "t_end": 0.32}
 CYCLES = {"stage-1-then-2": (CYCLE, [("open", 1), ("close", 1, -1), ("open", 2), ("close", 2, -1)]),

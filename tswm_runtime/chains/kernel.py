@@ -17,7 +17,8 @@ from numba import types
 from tswm_runtime.chains.backlash import strike
 from tswm_runtime.hybrid.addressed import ADDRESSES, model_functions, segment_function
 from tswm_runtime.chains.rules import (NO_MODE, NONE, RESTING, RESTING_GROUP, SEVERAL, START, ChainFunctions,
-                                             ChainTables, chain_work, decide, is_open, last_coordinate, settle)
+                                             ChainTables, chain_work, current_index, decide, is_open, last_coordinate,
+                                             settle)
 from tswm_runtime.integration import segment
 from tswm_runtime.jit import cache_guard
 from tswm_runtime.jit.addresses import guards_at
@@ -218,7 +219,8 @@ def _run(functions, chain_addresses, c, settings, y, p, record, rec, max_events,
                 _event(rec, t, k, mode, NO_MODE, NONE, y, p)
                 status = IMPACT_JAMMED
                 break
-            if p[c.p_contact] == 0.0:   # a rebound: its first step short enough for the gap's guard to see it end
+            if p[c.p_contact + current_index(c, p)] == 0.0:   # a rebound: its first step short enough for the gap's
+                # guard to see it end
                 h = flight / 4.0 if flight < np.inf else 0.0
         outcome, new = settle(fns, chain_fns, c, t, y, p, mode, k, w, rec.trip)
         _event(rec, t, k, mode, new, outcome, y, p)
