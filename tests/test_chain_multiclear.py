@@ -272,10 +272,19 @@ def test_a_sweep_records_a_two_open_case_and_goes_on(chain_module):
     assert table["t_stop [s]"].tolist() == [s.t_stop for s in single]
 
 
-def test_the_document_shows_each_clearance_stages_open_phase():
-    """The derivation's document has one open-stage section per stage with a clearance."""
+def test_the_document_shows_each_clearance_stages_open_phase(tmp_path, capsys):
+    """The derivation's document has one open-stage section per stage with a clearance; ``tswm derive`` names each
+    stage's open mode and section."""
     from derivation.chain.document import OPEN_STAGE, build_chain_document
+    from tswm_runtime.cli import main
 
-    chain = parse_chain(_scene("two-doc", CYCLE["forces"], CYCLE["stiffness"]), "doc.toml")
-    titles = [s.title for s in build_chain_document(chain)["sections"]]
+    text = _scene("two-doc", CYCLE["forces"], CYCLE["stiffness"])
+    titles = [s.title for s in build_chain_document(parse_chain(text, "doc.toml"))["sections"]]
     assert [t for t in titles if t.startswith(OPEN_STAGE)] == [f"{OPEN_STAGE}: stage 1", f"{OPEN_STAGE}: stage 2"]
+    path = tmp_path / "two.toml"
+    path.write_text(text)
+    assert main(["derive", str(path)]) == 0
+    out = capsys.readouterr().out
+    assert "  open mode OPEN (stage 1's flanks apart): groups body 0 and bodies 1..2," in out
+    assert "  open mode OPEN + 1 (stage 2's flanks apart): groups bodies 0..1 and body 2," in out
+    assert f'document section: "{OPEN_STAGE}: stage 2" (stage 2 open:' in out

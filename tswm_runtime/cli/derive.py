@@ -80,5 +80,5 @@ def _clearance_lines(chain, c, index: int) -> list[str]:
             (f"  extra states q{k}, v{k} (body {k})" if len(chain.clearances) == 1 else
              "  extra states qcur, vcur (body k of the current clearance stage k)")
             + f"; extra guards {', '.join(CLEARANCE_GUARDS)}",
-            f"  document section: \"{OPEN_STAGE}\" (stage {k} open: the groups' accelerations, the gap's rate, "
+            f"  document section: \"{OPEN_STAGE}{f': stage {k}' if len(chain.clearances) > 1 else ''}\" (stage {k} open: the groups' accelerations, the gap's rate, "
             "the impact's effective masses)"]
