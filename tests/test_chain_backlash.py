@@ -296,7 +296,7 @@ def test_a_chain_sweep_with_a_clearance_runs_each_case_as_simulate(chain_module)
 
 def test_the_scene_keeps_the_clearance(tmp_path):
     chain = parse_chain(_scene("gap-keys"), "gap.toml")
-    c = chain.clearance
+    (c,) = chain.clearances
     assert (c.stage, c.clearance.value, c.restitution.value, c.gap.value) == (2, 1e-3, 0.5, 0.5e-3)
     assert c.gap.key == "run.gap_2" and c.clearance.key == "stage[2].clearance"
 

@@ -35,7 +35,7 @@ def _chain(k: int, worm_mu: float, screw_mu: float):
     clearance = Clearance(k, Param(f"clearance_{k}", 1e-4, "m", False, f"stage[{k}].clearance"),
                           Param(f"restitution_{k}", E, "1", False, f"stage[{k}].restitution"),
                           Param(f"gap_{k}", 4e-5, "m", False, f"run.gap_{k}"))
-    return replace(chain, clearance=clearance), chain
+    return replace(chain, clearances=(clearance,)), chain
 
 
 @pytest.fixture(scope="module")

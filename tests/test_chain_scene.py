@@ -147,19 +147,38 @@ CLEARANCE_BAD = [
 ]
 
 
-def test_a_second_clearance_in_a_chain_is_refused_naming_it():
-    """One clearance per chain: a second is refused naming its key and value; its values are checked first; one
-    clearance is kept."""
+def test_clearances_in_two_stages_are_kept_and_two_starting_open_are_refused_naming_the_key():
+    """A clearance per stage: both are kept in stage order with their own keys; each is checked on its own; two
+    stages starting open (0 < gap_k < clearance) are refused naming the second's run.gap_k and its value (one open
+    stage at a time is modelled), while one open and one on a flank (0 or its clearance) is fine."""
     text = VALVE.replace("mu = 0.05", 'mu = 0.05\nclearance = "0.2 mm"\nrestitution = 0.3')
     two = text.replace("mu = 0.15", 'mu = 0.15\nclearance = "0.1 mm"\nrestitution = 0.5')
-    with pytest.raises(SceneError) as err:
-        parse_chain(two, "v.toml")
-    assert 'stage[2].clearance = "0.1 mm"' in str(err.value), str(err.value)
-    assert "one clearance per chain is supported, and stage[1] has one" in str(err.value)
+    chain = parse_chain(two, "v.toml")
+    assert [(c.stage, c.clearance.value, c.restitution.value, c.gap.value) for c in chain.clearances] == [
+        (1, 2e-4, 0.3, 0.0), (2, 1e-4, 0.5, 0.0)]
+    assert [c.gap.key for c in chain.clearances] == ["run.gap_1", "run.gap_2"]
     with pytest.raises(SceneError) as err:
         parse_chain(two.replace('clearance = "0.1 mm"', 'clearance = "-0.1 mm"'), "v.toml")
     assert "stage[2].clearance = -0.1 mm" in str(err.value) and "must be >= 0 m" in str(err.value)
-    assert parse_chain(text, "v.toml").clearance.stage == 1
+    with pytest.raises(SceneError) as err:
+        parse_chain(two + '[run]\ngap_1 = "0.1 mm"\ngap_2 = "0.05 mm"\n', "v.toml")
+    message = str(err.value)
+    assert message.startswith('v.toml: run.gap_2 = "0.05 mm": stage 1 starts open already (run.gap_1)'), message
+    assert "one open stage at a time is modelled" in message
+    one_open = parse_chain(two + '[run]\ngap_1 = "0.1 mm"\ngap_2 = "0.1 mm"\n', "v.toml")
+    assert [c.gap.value for c in one_open.clearances] == pytest.approx([1e-4, 1e-4])
+    assert [c.stage for c in parse_chain(text, "v.toml").clearances] == [1]
+
+
+def test_a_spring_between_two_clearances_is_refused_naming_it():
+    """A body between two stages with a clearance follows both stages' backlash: a spring on it is refused."""
+    from tests.chains import wedges
+
+    text = wedges("mid-spring", (30.0, 40.0), (0.1, 0.1), (1.0, 2.0, 3.0), (1.0, 0.0, 0.0))
+    text = text.replace('mu = 0.1\n', 'mu = 0.1\nclearance = "1 mm"\nrestitution = 0.5\n')
+    text = text.replace('mass = "2.0 kg"\nforce = "0.0 N"\n', 'mass = "2.0 kg"\nforce = "0.0 N"\nstiffness = "10 N/m"\n')
+    with pytest.raises(SceneError, match=r"body\[1\]\.stiffness.*between two stages with a clearance"):
+        parse_chain(text, "v.toml")
 
 
 @pytest.mark.parametrize("stage, run, parts", CLEARANCE_BAD, ids=[s[:24] + r for s, r, _ in CLEARANCE_BAD])
@@ -182,8 +201,9 @@ def test_cli_refuses_a_bad_stage_clearance_with_exit_2(tmp_path, capsys):
     assert "stage[2].clearance = -0.1 mm (= -0.0001 m): must be >= 0 m" in capsys.readouterr().err
     path.write_text(VALVE.replace("mu = 0.05", 'mu = 0.05\nclearance = "0.1 mm"\nrestitution = 0').replace(
         "mu = 0.15", 'mu = 0.15\nclearance = "0.1 mm"\nrestitution = 0'))
+    path.write_text(path.read_text() + '[run]\ngap_1 = "0.05 mm"\ngap_2 = "0.05 mm"\n')
     assert main(["simulate", str(path)]) == 2
-    assert "stage[2].clearance = \"0.1 mm\": one clearance per chain is supported" in capsys.readouterr().err
+    assert "run.gap_2 = \"0.05 mm\": stage 1 starts open already" in capsys.readouterr().err
     path.write_text(VALVE.replace("mu = 0.15", 'mu = 0.15\nclearance = "0.1 mm"\nrestitution = 0') +
                     '[run]\ngap_2 = "0.2 mm"\n')
     assert main(["simulate", str(path)]) == 2

@@ -46,7 +46,7 @@ class Candidate:
 class Statics:
     """What the resting chain's decision needs: each stage's FTFs of forward sliding (Psi_t, Psi_i),
     its levers, the generalized force on every body and the magnitude of a Coulomb friction on the last
-    body (a valve's packing), which at rest takes any value up to it; ``flank``: a stage with a clearance closed on
+    body (a valve's packing), which at rest takes any value up to it; ``flanks``: each stage with a clearance closed on
     one flank, (its index from 0, +1 flank a or -1 flank b), which pushes its output body on that side only."""
 
     psi: tuple[tuple[float, float], ...]
@@ -54,7 +54,7 @@ class Statics:
     lever_out: tuple[float, ...]
     force: tuple[float, ...]
     slack: float = 0.0
-    flank: tuple[int, int] | None = None
+    flanks: tuple[tuple[int, int], ...] = ()
 
 
 def decide_numbers(candidates: list[Candidate], velocity: float, statics: Statics) -> Decision:
@@ -117,9 +117,10 @@ def rest(statics: Statics) -> tuple[tuple[Intervals, ...], str]:
     stages = len(psi)
 
     def one_side(xs: Intervals, i: int) -> Intervals:   # what stage i exerts on its output body, on its flank's side
-        if statics.flank is None or statics.flank[0] != i:
+        side = dict(statics.flanks).get(i)
+        if side is None:
             return xs
-        return _intersect(xs, ((0.0, math.inf),) if statics.flank[1] > 0 else ((-math.inf, 0.0),))
+        return _intersect(xs, ((0.0, math.inf),) if side > 0 else ((-math.inf, 0.0),))
     forward: list[Intervals] = []
     p_set: Intervals = ((-force[0] / lever_in[0],) * 2,)
     for i in range(stages):

@@ -34,9 +34,11 @@ STATES = ("q0", "v0")
 SWITCHED_GUARDS = ("seat", "switch", "delay")   # the seat's contact, the switch picking up or dropping out, its delay
 # With a clearance: the gap closing on flank a, on flank b, the output group's speed reaching 0.
 CLEARANCE_GUARDS = ("gap_a", "gap_b", "v_out")
-# Its latches: the contact, the groups' directions, whether the output and the input group is held at rest (stuck while
-# the stage is open: its acceleration 0), then rho_sign per stage.
-CLEARANCE_LATCHES = ("contact", "direction_in", "direction_out", "held_out", "held_in")
+# Its latches after the contact per clearance stage: the groups' directions, whether the output and the input group is
+# held at rest (stuck while the stage is open: its acceleration 0), then rho_sign per stage, then the gap offset G_k per
+# clearance stage, the current clearance stage (its index in CLEARANCE_STAGES: open, or last opened) and its c_k.
+CLEARANCE_LATCHES = ("direction_in", "direction_out", "held_out", "held_in")
+Q_CUR, V_CUR, C_CUR = sp.symbols("q_cur v_cur c_cur", real=True)   # y[2], y[3] and c_k of the current stage k
 GENERATOR_SOURCES = ("chain/codegen.py", "chain/clearance.py", "chain/dynamics.py", "chain/stages.py", "chain/scene.py",
                      "chain/valve.py", "templates/chain_module.py.j2")
 
@@ -201,17 +203,26 @@ def _layout(chain: ChainScene) -> tuple[list[dict], list[dict], dict[sp.Symbol, 
     return values, derived, slots, derive
 
 
+def current(chain: ChainScene) -> tuple[sp.Symbol, sp.Symbol, sp.Symbol]:
+    """(q, v, c) of the current clearance stage k: y[2], y[3] and c_k = v_k / v_0 of the rigid chain (a latch with
+    several clearance stages; with one, q_k, v_k and its derived c_k)."""
+    if len(chain.clearances) > 1:
+        return Q_CUR, V_CUR, C_CUR
+    k = chain.clearances[0].stage
+    return sp.Symbol(f"q_{k}", real=True), sp.Symbol(f"v_{k}", real=True), sp.Symbol(f"c_{k}", real=True)
+
+
 def _coordinates(chain: ChainScene) -> list[sp.Expr]:
     """Each body's coordinate (q = 0 at the start): q_j = c_j q_0 with c_j = v_j / v_0 (derived by ``prepare``);
-    with a clearance in stage k, the bodies from k on form their own rigid group (``clearance.groups``) and
-    q_j = (c_j / c_k) q_k."""
+    with clearances, a body after one (the scene allows no spring between two) moves rigidly with the last body,
+    whose coordinate is (c_N / c_k) y[2] with k the current clearance stage (``current``; y[2] is rescaled when
+    another stage opens), so q_j = (c_j / c_k) y[2]."""
     c = [sp.Symbol(f"c_{j}", real=True) for j in range(len(chain.bodies))]
-    if chain.clearance is None:
+    if not chain.clearances:
         return [c_j * q0 for c_j in c]
-    k = chain.clearance.stage
-    of_body = cl.groups(len(chain.stages), (k,)).of_body
-    return [c[j] * q0 if of_body[j] == 0 else c[j] / c[k] * sp.Symbol(f"q_{k}", real=True)
-            for j in range(len(chain.bodies))]
+    q, _, c_k = current(chain)
+    first = chain.clearances[0].stage
+    return [c[j] * q0 if j < first else c[j] / c_k * q for j in range(len(chain.bodies))]
 
 
 def _forces(chain: ChainScene, code: _Code, direction: sp.Expr) -> list[sp.Expr]:
@@ -327,7 +338,7 @@ def _by_state(code: _Code, chain: ChainScene, accel: sp.Expr, direction: sp.Expr
     clearance in stage k d a / d q_k: the springs' and the motor's share (the forces are the only state dependence;
     the motor's torque changes with v_0 by its table's slope, ``motor_slope``)."""
     accel = accel.subs(dict(zip(code.sym.force, _forces(chain, code, direction))))
-    by = (q0, MOTOR) + ((sp.Symbol(f"q_{chain.clearance.stage}", real=True),) if chain.clearance else ())
+    by = (q0, MOTOR) + ((current(chain)[0],) if chain.clearances else ())
     return tuple(sp.diff(accel, x) for x in by)
 
 
@@ -357,9 +368,14 @@ def generate_chain_module(chain: ChainScene) -> str:
     defaults of p's slots."""
     n = len(chain.stages)
     values, derived, slots, derive = _layout(chain)
-    k = chain.clearance.stage if chain.clearance else 0
-    code = _Code(n, slots, derive, {sp.Symbol(f"q_{k}", real=True): "y[2]", sp.Symbol("v_0", real=True): "y[1]",
-                                    sp.Symbol(f"v_{k}", real=True): "y[3]"} if k else None)
+    k = len(chain.clearances)
+    states = None
+    if k:
+        q, v, c_k = current(chain)
+        states = {q: "y[2]", sp.Symbol("v_0", real=True): "y[1]", v: "y[3]",
+                  **({c_k: "p[P_SPEED_CUR]"} if k > 1 else {}),
+                  **{sp.Symbol(f"gap_{c.stage}", real=True): f"p[P_GAP + {i}]" for i, c in enumerate(chain.clearances)}}
+    code = _Code(n, slots, derive, states)
     reachable = dyn.reachable(tuple(s.flanks for s in chain.stages))
     modes = [dyn.sliding(direction, regimes) for direction, regimes in reachable]
     functions = [code.function("body_forces", "(F_0, ..., F_N): each body's force or torque (the motor's while "
@@ -372,10 +388,11 @@ def generate_chain_module(chain: ChainScene) -> str:
     guards = ("D", "jam", *(f"N_{i + 1}" for i in range(n)), "v0", *gaps, *SWITCHED_GUARDS)
     directions = [tuple([-1] * (n + 2) + [-mode.direction] + [-1] * (len(gaps) + len(SWITCHED_GUARDS)))
                   for mode in modes]
-    open_calls, open_block = {}, ""
-    if k:
-        opened, open_calls, open_block = _open_functions(chain, code)
-        functions += opened
+    opened = []
+    for i, c in enumerate(chain.clearances):
+        own, calls_i, block = _open_functions(chain, code, c)
+        functions += own
+        opened.append(_open_template(chain, slots, c, i, calls_i, block))
         directions.append(tuple([-1] * len(guards)))
     switch, valve = chain.switch, chain.bodies[-1].valve
     seat = valve.seat if valve is not None else None
@@ -407,13 +424,22 @@ def generate_chain_module(chain: ChainScene) -> str:
         "SWITCH_ON": -1 if switch is None else switch.stage, "HAS_SEAT": seat is not None,
     }
     if k:
+        stages = tuple(c.stage for c in chain.clearances)
+        q, v, _ = current(chain)
+        first_latch = open_first + k
         constants.update({
-            "STATES": ("q0", "v0", f"q{k}", f"v{k}"), "CLEARANCE_STAGE": k, "OPEN": len(modes),
-            "MODES": (*constants["MODES"], f"open: stage {k}"), "MODE_DIRECTION": (*constants["MODE_DIRECTION"], 0),
-            "MODE_REGIMES": (*constants["MODE_REGIMES"], ()), "MODE_FLANKS": (*constants["MODE_FLANKS"], ()),
-            "P_NAMES": (*constants["P_NAMES"], *CLEARANCE_LATCHES, *(f"rho_sign {i + 1}" for i in range(n))),
-            "P_CONTACT": open_first, "P_DIRECTION_IN": open_first + 1, "P_DIRECTION_OUT": open_first + 2,
-            "P_HELD_OUT": open_first + 3, "P_HELD_IN": open_first + 4, "P_RHO_SIGN": open_first + 5, "IMPACT_FRAME": IMPACT_FRAME})
+            "STATES": ("q0", "v0", str(q).replace("_", ""), str(v).replace("_", "")), "CLEARANCE_STAGES": stages,
+            "OPEN": len(modes), "MODES": (*constants["MODES"], *(f"open: stage {j}" for j in stages)),
+            "MODE_DIRECTION": (*constants["MODE_DIRECTION"], *(0,) * k),
+            "MODE_REGIMES": (*constants["MODE_REGIMES"], *((),) * k),
+            "MODE_FLANKS": (*constants["MODE_FLANKS"], *((),) * k),
+            "P_NAMES": (*constants["P_NAMES"], *(f"contact {j}" for j in stages), *CLEARANCE_LATCHES,
+                        *(f"rho_sign {i + 1}" for i in range(n)), *(f"gap offset {j}" for j in stages),
+                        "current clearance stage", "its c_k"),
+            "P_CONTACT": open_first, "P_DIRECTION_IN": first_latch, "P_DIRECTION_OUT": first_latch + 1,
+            "P_HELD_OUT": first_latch + 2, "P_HELD_IN": first_latch + 3, "P_RHO_SIGN": first_latch + 4,
+            "P_GAP": first_latch + 4 + n, "P_CURRENT": first_latch + 4 + n + k,
+            "P_SPEED_CUR": first_latch + 5 + n + k, "IMPACT_FRAME": IMPACT_FRAME})
     for i, v in enumerate(values):
         v["index"] = first + i
     for d in derived:
@@ -424,7 +450,7 @@ def generate_chain_module(chain: ChainScene) -> str:
     env.filters["comment"] = _comment
     jac_reads, jacobians = _jacobians(code, chain, modes)
     body = env.get_template("chain_module.py.j2").render(
-        clearance=_open_template(chain, slots, open_calls, open_block) if k else None,
+        clearances=opened,
         chain=chain, n=n, modes=modes, calls=calls, constants={k: inert(v, k) for k, v in constants.items()},
         values=values, defaults=inert(tuple(v["si"] for v in values), "PARAM_DEFAULTS"),
         derived=derived, prepare_lines=[*(f"{v['name']} = p[{v['slot']}]" for v in values if v["read"]),
@@ -492,14 +518,19 @@ def _open_variants(code: _Code, signs: list[sp.Symbol]) -> dict[str, tuple[str, 
     return variants
 
 
-def _open_functions(chain: ChainScene, code: _Code) -> tuple[list[dict], dict[str, str], str]:
-    """The open phase of the stage with the clearance (``clearance.open_phase``, ``open_impact``): the groups'
+def _open_functions(chain: ChainScene, code: _Code, c) -> tuple[list[dict], dict[str, str], str]:
+    """The open phase of clearance ``c``'s stage k (``clearance.open_phase``, ``open_impact``): the groups'
     accelerations, (jam, the closed stages' normal forces, the gap, what the switch measures), the stage forces,
     the Jacobian and the impact's frame on each flank, each a sum of coefficients times the run-time symbols
     (``_Code.blocks``), a block per combination of the signs they depend on (``_open_signs``); the valve's
-    friction in the output group's direction. Returns the functions, each one's call from the template (its
-    block chosen by ``open_block(p)`` from the sign latches) and open_block's sum."""
-    n, k = len(chain.stages), chain.clearance.stage
+    friction in the output group's direction; body k's coordinate and speed are y[2], y[3] (the current stage's,
+    ``current``: k is current while open) and its gap's offset the latch G_k (symbol gap_k). Returns the functions
+    (named <name>_k), each one's call from the template (its block chosen by ``open_block_k(p)`` from the sign
+    latches) and open_block_k's sum."""
+    n, k = len(chain.stages), c.stage
+    q, v, c_cur = current(chain)
+    own = {sp.Symbol(f"q_{k}", real=True): q, sp.Symbol(f"v_{k}", real=True): v}
+    at_k = {c_cur: sp.Symbol(f"c_{k}", real=True)}   # c_k for the current stage's c in the Jacobian
     phase = cl.open_phase(n, k)
     closed = sorted(phase.normal)
     sym = code.sym
@@ -517,49 +548,50 @@ def _open_functions(chain: ChainScene, code: _Code) -> tuple[list[dict], dict[st
         measured = sp.Symbol(chain.bodies[0].force.name, real=True) + (MOTOR if chain.bodies[0].motor else 0)
     else:
         measured = per_stage[3 * (switch.stage - 1) + 1]
-    restitution = sp.Symbol(chain.clearance.restitution.name, real=True)
+    restitution = sp.Symbol(c.restitution.name, real=True)
     exprs = {
         "open_accel": ("(a_0, a_k): the input and output groups' accelerations", list(phase.accel)),
         "open_contact": ("(jam, the closed stages' normal forces, the gap, what the torque switch measures)",
-                         [phase.jam, *(phase.normal[i] for i in closed), phase.gap, measured]),
+                         [phase.jam, *(phase.normal[i] for i in closed), phase.gap.subs(own), measured]),
         "open_stage_forces": ("per stage (on its input body, on its output body, normal force; 0 for the open "
                               "stage)", per_stage),
         "open_jacobian": ("(d a_0, d a_k) by q_0, by the motor's torque and by q_k",
-                          [e for a in phase.accel for e in _by_state(code, chain, a, DIRECTION)])}
+                          [e.subs(at_k) for a in phase.accel for e in _by_state(code, chain, a, DIRECTION)])}
     for flank in ("a", "b"):
         im = cl.open_impact(n, k, flank)
         exprs[f"open_impact_{flank}"] = (f"the collision's frame on flank {flank} (IMPACT_FRAME)", [
-            im.nu, im.slip, im.W[0, 0], im.W[0, 1], im.W[1, 1], im.mu, restitution, *im.jump_in, *im.jump_out])
+            e.subs(own) for e in (im.nu, im.slip, im.W[0, 0], im.W[0, 1], im.W[1, 1], im.mu, restitution,
+                                  *im.jump_in, *im.jump_out)])
     signs = _open_signs(n, k, [e for _, group in exprs.values() for e in group])
     variants = _open_variants(code, signs)
     first = next(iter(variants))
     functions, calls = [], {}
     for name, (doc, e) in exprs.items():
-        f = code.blocks(name, f"{doc} while stage {k} is open (the body forces in the output group's `direction`; "
-                        f"the coefficients of the signs {', '.join(map(str, signs))} from slot k: "
-                        f"D_{name}_<p or m per sign>_0)", e, variants)
+        f = code.blocks(f"{name}_{k}", f"{doc} while stage {k} is open (the body forces in the output group's "
+                        f"`direction`; the coefficients of the signs {', '.join(map(str, signs))} from slot k: "
+                        f"D_{name}_{k}_<p or m per sign>_0)", e, variants)
         functions.append(f)
-        calls[name] = (f"{name}(t, y, p, p[P_DIRECTION_OUT], D_{name}_{first}_0 + {f['stride']} * open_block(p))"
-                       if f["stride"] else f"{name}(t, y, p, p[P_DIRECTION_OUT], 0)")
+        calls[name] = (f"{name}_{k}(t, y, p, p[P_DIRECTION_OUT], D_{name}_{k}_{first}_0 + {f['stride']} * "
+                       f"open_block_{k}(p))" if f["stride"] else f"{name}_{k}(t, y, p, p[P_DIRECTION_OUT], 0)")
     latch = {cl.DIRECTION_IN: "P_DIRECTION_IN", cl.DIRECTION_OUT: "P_DIRECTION_OUT",
              **{cl.rho_sign(i): f"P_RHO_SIGN + {i - 1}" for i in range(1, n + 1)}}
     block = " + ".join(f"(1 if p[{latch[s]}] < 0.0 else 0) * {2 ** b}" for b, s in enumerate(signs))
     return functions, calls, block or "0"
 
 
-def _open_template(chain: ChainScene, slots: dict[sp.Symbol, str], calls: dict[str, str], block: str) -> dict:
-    """What the template's open phase needs: the stage, the open functions' calls, ``open_block``'s sum of the
-    sign latches' bits, the targets of open_contact and the slots it reads."""
-    n, c = len(chain.stages), chain.clearance
-    k = c.stage
+def _open_template(chain: ChainScene, slots: dict[sp.Symbol, str], c, index: int, calls: dict[str, str],
+                   block: str) -> dict:
+    """What the template's open phase of clearance ``c`` (the ``index``-th) needs: the stage, its mode, the open
+    functions' calls, ``open_block``'s sum of the sign latches' bits, the targets of open_contact and the slots it
+    reads."""
+    n, k = len(chain.stages), c.stage
     closed = [i for i in range(1, n + 1) if i != k]
     held = {"held_in": ("P_HELD_IN", 0, k - 1), "held_out": ("P_HELD_OUT", k, n)}   # its latch, its closed stages i < j <= n
-    return {"stage": k, "call": calls, "block": block,
+    return {"stage": k, "index": index, "mode": f"OPEN + {index}" if index else "OPEN", "call": calls, "block": block,
             "held": [{"latch": latch, "guards": f"g[{2 + i}:{2 + j}]", "forces": f"out[{3 * i}:{3 * j}]",
                       "switch": f"{i} < SWITCH_ON <= {j}"} for latch, i, j in held.values() if j > i],
             "contact_targets": ", ".join(["g[1]", *(f"g[{1 + i}]" for i in closed), "gap"]),
-            "c_k": slots[sp.Symbol(f"c_{k}", real=True)], "c_last": slots[sp.Symbol(f"c_{n}", real=True)],
-            "clearance": slots[sp.Symbol(c.clearance.name, real=True)]}
+            "c_last": slots[sp.Symbol(f"c_{n}", real=True)], "clearance": slots[sp.Symbol(c.clearance.name, real=True)]}
 
 
 def _psi(sym: dyn.Symbols, k: int, flank: str) -> sp.Expr:

@@ -107,28 +107,26 @@ def _rest(n_st: int) -> Section:
 OPEN_STAGE = "An open stage (clearance)"
 
 
-def open_stage_number(chain: ChainScene) -> int:
-    """The stage the document shows open: the one with the scene's clearance, else the last."""
-    return chain.clearance.stage if chain.clearance is not None else len(chain.stages)
-
-
-def _open_stage(chain: ChainScene) -> Section:
-    """Stage k open (the scene's clearance, else the last stage), from clearance.py: groups, gap kinematics, impact
-    masses."""
-    n_st, k = len(chain.stages), open_stage_number(chain)
+def _open_stage(chain: ChainScene, clearance=None) -> Section:
+    """Stage k open (the scene's ``clearance``; without one the last stage), from clearance.py: groups, gap
+    kinematics, impact masses; one section per stage with a clearance, each open alone."""
+    n_st = len(chain.stages)
+    k = clearance.stage if clearance is not None else n_st
     opened = cl.open_chain(n_st, (k,))
     hit = cl.impact(n_st, (k,), k, "a")
     first = ", ".join(str(j) for j in opened.groups.first)
-    s = Section(OPEN_STAGE)
-    if chain.clearance is None:
+    s = Section(OPEN_STAGE if len(chain.clearances) < 2 else f"{OPEN_STAGE}: stage {k}")
+    if clearance is None:
         s.text(f"Were stage {k} open (a clearance between its flanks), it would transmit nothing and the chain would "
                f"split into the groups that start at bodies {first}, each moving with its first body's coordinate.")
     else:
-        c = chain.clearance
+        c = clearance
         s.text(f"Stage {k} has a clearance of {c.clearance.value:.6g} m along its flanks' normal (restitution "
                f"{c.restitution.value:.6g}, gap {c.gap.value:.6g} m from flank a at the start). While its flanks are "
                f"apart it transmits nothing and the chain splits into the groups that start at bodies {first}, each "
-               "moving with its first body's coordinate.")
+               "moving with its first body's coordinate" + (" (the other stages with a clearance closed: one open "
+                                                            "stage at a time is modelled)."
+                                                            if len(chain.clearances) > 1 else "."))
     s.text("Newton for every body, each closed stage's forces tied by its FTF, gives each group's acceleration:")
     s.math(*(f"a_{{{j}}} = {_l(a)}" for j, a in zip(opened.groups.first, opened.accel)))
     s.text(f"Stage {k}'s normal gap $g_{{{k}}}$ (0 on flank a, the clearance on flank b) moves with the one-stage "
@@ -291,7 +289,7 @@ def build_chain_document(chain: ChainScene) -> dict:
               for p in (*(q for s in chain.stages for q in s.params.values()),
                         *(q for b in chain.bodies for q in (b.inertia, b.force)))]
     sections = [_stages(chain), _kinetostatics(), *_modes(len(chain.stages), reachable), _rest(len(chain.stages)),
-                _open_stage(chain), _band(values), _decision(values), _audit(values, reachable)]
+                *(_open_stage(chain, c) for c in chain.clearances or (None,)), _band(values), _decision(values), _audit(values, reachable)]
     return {"title": f"Derivation of the chain of stages for scene `{chain.name}`",
             "description": chain.description, "source": chain.source, "digest": chain.digest,
             "params": params, "sections": sections}

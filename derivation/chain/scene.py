@@ -133,7 +133,7 @@ class ChainScene:
     digest: str
     run: ChainRun = ChainRun(1.0, 0.0, 1e-6, 1e-9, 100000)
     switch: Switch | None = None
-    clearance: Clearance | None = None
+    clearances: tuple[Clearance, ...] = ()   # per stage with a clearance, in stage order
 
     def values(self) -> ChainValues:
         """The equivalent wedges' numbers (slope, friction angle, levers) and the bodies', in SI."""
@@ -156,8 +156,7 @@ class ChainScene:
         if self.switch is not None:
             rules = switch_rules(self.switch.quantity)
             out += [(getattr(self.switch, key), rule) for key, rule in rules.items()]
-        if self.clearance is not None:
-            c = self.clearance
+        for c in self.clearances:
             out += [(c.clearance, CLEARANCE), (c.restitution, IMPACT["restitution"]), (c.gap, GAP)]
         return out
 
@@ -317,10 +316,14 @@ class _ChainReader(_Reader):
         voltage = self.number(table, "voltage", path, VOLTAGE, free_ok=False)[0]
         return Motor(*numbers, voltage)
 
-    def clearances(self, stages: list[dict], run: dict) -> Clearance | None:
+    def clearances(self, stages: list[dict], run: dict,
+                   bodies: tuple[Body, ...]) -> tuple[tuple[Clearance, ...], tuple[Body, ...]]:
         """stage[k].clearance (> 0) with stage[k].restitution (e in [0, 1]) and the start gap run.gap_k in
-        [0, clearance], at most one stage with a clearance per chain."""
-        first = None
+        [0, clearance], in any number of stages; at most one starts open (0 < gap_k < clearance: one open stage at a
+        time is modelled), and no body between two stages with a clearance has a spring (its coordinate would follow
+        both stages' backlash): such a translating body's stiffness must be 0 and it has no spring slot. Returns the
+        clearances and the bodies."""
+        out, opened = [], None
         for k, table in enumerate(stages, 1):
             path, gap = f"stage[{k}]", f"gap_{k}"
             if "clearance" not in table:
@@ -330,16 +333,23 @@ class _ChainReader(_Reader):
                 continue
             given = self.plain(table, path, STAGE_CLEARANCE)
             start = self.number(run, gap, "run", GAP, free_ok=False, siblings=given)[0]
-            if first is not None:
-                self.fail(f"{path}.clearance", f"one clearance per chain is supported, and stage[{first}] has one: "
-                          f"give stage {k} none", _toml(table["clearance"]))
             if given["clearance"].value == 0.0:
                 self.fail(f"{path}.clearance", "must be > 0 in a chain (0: give the stage no clearance)",
                           _toml(table["clearance"]))
+            if 0.0 < start < given["clearance"].value:
+                if opened is not None:
+                    self.fail(f"run.{gap}", f"stage {opened} starts open already (run.gap_{opened}): one open stage "
+                              f"at a time is modelled, start stage {k} on a flank (0 or its clearance)", _toml(run[gap]))
+                opened = k
             own = _suffixed(given, k)
-            first = k
-            clearance = Clearance(k, own["clearance"], own["restitution"], Param(gap, start, "m", False, f"run.{gap}"))
-        return clearance if first is not None else None
+            out.append(Clearance(k, own["clearance"], own["restitution"], Param(gap, start, "m", False, f"run.{gap}")))
+        between = [j for j, body in enumerate(bodies) if body.stiffness is not None
+                   and any(c.stage <= j for c in out) and any(c.stage > j for c in out)]
+        for j in between:
+            if bodies[j].stiffness.value != 0.0:
+                self.fail(bodies[j].stiffness.key, f"body {j} lies between two stages with a clearance: a spring there "
+                          "is not supported (give it to a body before the first or after the last such stage)")
+        return tuple(out), tuple(replace(b, stiffness=None) if j in between else b for j, b in enumerate(bodies))
 
     def chain_run(self, doc: dict, stages: int) -> ChainRun:
         table = self.table(doc, "run", required=False) or {}
@@ -365,6 +375,6 @@ class _ChainReader(_Reader):
         motions = [kinds[0].motion_in, *(kind.motion_out for kind in kinds)]
         bodies = tuple(self.body(t, j, m, j == len(stages)) for j, (t, m) in enumerate(zip(tables, motions)))
         run = self.chain_run(doc, len(stages))
-        clearance = self.clearances(stage_tables, self.table(doc, "run", required=False) or {})
+        clearances, bodies = self.clearances(stage_tables, self.table(doc, "run", required=False) or {}, bodies)
         return ChainScene(name, description, stages, bodies, self.source, digest, run,
-                          self.switch(doc, stages, motions), clearance)
+                          self.switch(doc, stages, motions), clearances)

@@ -1,5 +1,5 @@
-"""The impact of a chain's stage with a clearance, in compiled code: its flanks meet where the gap reaches 0 (flank a)
-or the clearance (flank b).
+"""The impact of a chain's stage with a clearance (the open one, the current clearance stage), in compiled code: its
+flanks meet where the gap reaches 0 (flank a) or the clearance (flank b).
 
 The generated module's ``impact`` writes the collision's frame (IMPACT_FRAME: the normal speed nu = f g' and the slip,
 the inverse mass W of the two groups reduced to the stage, tan(rho_k), e, each group's speed change per unit impulse),
@@ -14,13 +14,13 @@ size), and the mode logic decides all stages at once (``rules.decide``); else th
 """
 import numpy as np
 
-from tswm_runtime.chains.rules import UNIQUE, open_phase, separating
+from tswm_runtime.chains.rules import UNIQUE, current_index, open_phase, open_stage, separating
 from tswm_runtime.hybrid.impact import OK, collide
 from tswm_runtime.jit.arrays import copy_into
 from tswm_runtime.jit.cache_guard import njit
 
 IMPACT_COLUMNS = ("t", "flank", "nu before", "nu after", "energy lost", "closed", "v0 before", "vk before", "v0 after",
-                  "vk after")
+                  "vk after", "stage")
 
 
 @njit(error_model="numpy")
@@ -28,11 +28,12 @@ def pushed(c, flank, p):
     """A group stuck at rest (latch held_in or held_out) takes the impulse on ``flank`` moving the way it pushes it
     (the output group forward on flank a, the input group backward), its closed stages driven from the open stage's
     side: the output group's tractive, the input group's inverse-tractive (their regimes in the impact's frame)."""
+    k = open_stage(c, p)
     for g in range(2):
         if p[c.p_direction + 3 - g] > 0.0:
             p[c.p_direction + g] = float(flank if g == 1 else -flank)
             for i in range(c.stages):
-                if (i + 1 < c.open_stage) if g == 0 else (i + 1 > c.open_stage):
+                if (i + 1 < k) if g == 0 else (i + 1 > k):
                     p[c.p_rho_sign + i] = 1.0 if g == 1 else -1.0
 
 
@@ -42,7 +43,7 @@ def strike(fns, chain_fns, c, flank, t, y, p, tol, w, row):
     stage closed, 0: it rebounds open); row = IMPACT_COLUMNS. Returns (False when the impulse cannot stop the
     approach, the flight time to the next impact on this flank if the open phase's accelerations stay: inf for
     none), so that the step after a rebound can be kept short enough for the gap's guard to see it return."""
-    f = w.frame
+    f, mode, contact = w.frame, c.open_mode + current_index(c, p), c.p_contact + current_index(c, p)
     pushed(c, flank, p)
     copy_into(w.before, p)   # the latches of the impact (the open phase's regimes), for a plastic one again
     chain_fns.impact(flank, t, y, p, f)
@@ -54,15 +55,15 @@ def strike(fns, chain_fns, c, flank, t, y, p, tol, w, row):
         return False, flight
     y[1] += f[7] * p_n + f[8] * p_t
     y[3] += f[9] * p_n + f[10] * p_t
-    fns.guards(c.open_mode, t, y, p, w.g)
+    fns.guards(mode, t, y, p, w.g)
     n = c.stages
     gap_tol = tol.atol[2] + tol.rtol * (abs(w.g[n + 3]) + abs(w.g[n + 4]))
     closes = nu <= tol.atol[3] + tol.rtol * abs(nu_before)
     if not closes:
-        p[c.p_contact] = 0.0
+        p[contact] = 0.0
         outcome_open, _ = open_phase(fns, chain_fns, c, t, y, p, w)
         if outcome_open == UNIQUE:
-            fns.rhs(c.open_mode, t, y, p, w.f)
+            fns.rhs(mode, t, y, p, w.f)
             toward = -separating(chain_fns, c, flank, t, y, p, w)
             closes = toward > 0.0 and nu * nu <= 2.0 * toward * gap_tol
             flight = 2.0 * nu / toward if toward > 0.0 else np.inf
@@ -75,11 +76,11 @@ def strike(fns, chain_fns, c, flank, t, y, p, tol, w, row):
             y[1] += f[7] * p_n + f[8] * p_t
             y[3] += f[9] * p_n + f[10] * p_t
             row[3], row[4] = nu, lost
-        p[c.p_contact] = flank
+        p[contact] = flank
         y[3] = p[c.p_speed_k] * y[1]
         row[5] = 1.0
     else:
-        p[c.p_contact] = 0.0
-    row[8], row[9] = y[1], y[3]
+        p[contact] = 0.0
+    row[8], row[9], row[10] = y[1], y[3], open_stage(c, p)
     return True, flight
 

@@ -29,7 +29,8 @@ from numba import types
 from tswm_runtime.chains.backlash import strike
 from tswm_runtime.hybrid.addressed import ADDRESSES, model_functions, segment_function
 from tswm_runtime.chains.rules import (NO_MODE, NONE, RESTING, RESTING_GROUP, SEVERAL, START, ChainFunctions,
-                                             ChainTables, chain_work, decide, last_coordinate, settle)
+                                             ChainTables, chain_work, current_index, decide, is_open, last_coordinate,
+                                             settle)
 from tswm_runtime.integration import segment
 from tswm_runtime.jit import cache_guard
 from tswm_runtime.jit.addresses import guards_at
@@ -50,6 +51,7 @@ INCONSISTENT_START = -25  # D or the jam factor <= 0 where a mode begins
 RECORD_FULL = -26     # more phases, events or samples than the record holds: run again with more room
 GROUP_AT_REST = -27   # a group at rest while the stage with the clearance is open can neither stay nor leave rest
 IMPACT_JAMMED = -28   # the impulse cannot stop the flanks' approach (dnu/dP_n <= 0)
+TWO_OPEN = -29        # a second stage with a clearance would open while one is open (not modelled)
 MAX_SAME_TIME = 8     # decisions at one instant before the run stops
 
 #: Where the run writes (sizes from ``chains/run.py``): phases (mode, first sample, end of samples) and
@@ -63,7 +65,7 @@ INT_MATRIX = types.int64[:, ::1]
 CHAIN_RECORD = types.NamedTuple((INT_MATRIX, MATRIX, MATRIX, INT_MATRIX, MATRIX, VECTOR, INTS, MATRIX, MATRIX),
                                 ChainRecord)
 CHAIN_TABLES = types.NamedTuple((INTS, INT_MATRIX, *(types.int64,) * 10, types.float64, types.float64,
-                                 types.float64, INTS, *(types.int64,) * 8), ChainTables)
+                                 types.float64, INT_MATRIX, types.int64, INTS, *(types.int64,) * 8), ChainTables)
 #: run_chain_at(functions, chain functions (stage_forces, body_forces_into, impact), tables, settings, y, p, record,
 #: chain record, max_events) -> (status, t_stop)
 CHAIN_SIG = types.Tuple((types.int64, types.float64))(ADDRESSES, types.UniTuple(types.int64, 3), CHAIN_TABLES,
@@ -240,9 +242,9 @@ def _run(functions, chain_addresses, c, settings, y, p, record, rec, max_events,
             break
         if k == stages + 2:   # v0 reached 0: at rest exactly (the whole chain unless a stage is open)
             y[1] = 0.0
-            if n_states == 4 and mode != c.open_mode:
+            if n_states == 4 and not is_open(c, mode):
                 y[3] = 0.0
-        if c.open_mode >= 0 and mode == c.open_mode and k == stages + 5:   # the output group stopped
+        if is_open(c, mode) and k == stages + 5:   # the output group stopped
             y[3] = 0.0
         if not _sample(chain_fns, c, rec, mode, t, y, p, w.forces):
             status = RECORD_FULL
@@ -252,7 +254,14 @@ def _run(functions, chain_addresses, c, settings, y, p, record, rec, max_events,
             _event(rec, t, k, mode, NO_MODE, NONE, y, p)
             status = SINGULAR
             break
-        if c.open_mode >= 0 and mode == c.open_mode and (k == stages + 3 or k == stages + 4):   # the flanks meet
+        if is_open(c, mode) and 2 <= k < 2 + stages:   # a closed stage's normal force reached 0 in an open phase
+            for j in range(c.clear_stage.size):
+                if c.clear_stage[j] == k - 1:     # a stage with a clearance would open too
+                    status = TWO_OPEN
+            if status == TWO_OPEN:
+                _event(rec, t, k, mode, NO_MODE, NONE, y, p)
+                break
+        if is_open(c, mode) and (k == stages + 3 or k == stages + 4):   # the flanks meet
             i_row = rec.counts[3]
             rec.counts[3] = i_row + 1
             struck, flight = strike(fns, chain_fns, c, 1 if k == stages + 3 else -1, t, y, p, settings.tol, w,
@@ -261,7 +270,8 @@ def _run(functions, chain_addresses, c, settings, y, p, record, rec, max_events,
                 _event(rec, t, k, mode, NO_MODE, NONE, y, p)
                 status = IMPACT_JAMMED
                 break
-            if p[c.p_contact] == 0.0:   # a rebound: its first step short enough for the gap's guard to see it end
+            if p[c.p_contact + current_index(c, p)] == 0.0:   # a rebound: its first step short enough for the gap's
+                # guard to see it end
                 h = flight / 4.0 if flight < np.inf else 0.0
         outcome, new = settle(fns, chain_fns, c, t, y, p, mode, k, w, rec.trip)
         _event(rec, t, k, mode, new, outcome, y, p)
@@ -278,8 +288,9 @@ def run_chain_at(functions, chain_addresses, c, settings, y0, p, record, rec, ma
     prepare) to settings.t_end: phases, events and their
     decisions, the trip, into rec, each sliding phase's maxima of the module's observables (record.mon's rows:
     3 per stage) into rec.peaks; output rows into record.out.y (q0, v0; a row at an event time keeps the
-    later phase's value, rows after a stop NaN). With a clearance in stage k y0 is (q0, v0, qk, vk) and vk is
-    set here to c_k v0 of p (the chain starts moving as one body: the gap's rate 0). Returns (status, t_stop).
+    later phase's value, rows after a stop NaN). With clearances y0 is (q0, v0, qk, vk) of the current clearance
+    stage k and vk is set here to c_k v0 of p (the chain starts moving as one body: the gaps' rates 0). Returns
+    (status, t_stop).
     Its work arrays are made here and kept alive for ``_run``, which borrows them (``borrow``) with its
     arguments."""
     n_guards = c.guard_direction.shape[1]

@@ -8,9 +8,10 @@ cone (``rest_holds``: the admissible sets propagated stage by stage, as ``chain_
 One consistent mode is the answer (UNIQUE); several that agree in a_0 and exclude rest are a kink
 (CRITICAL: the one that is not the current mode is taken); none (NONE) or several (SEVERAL, a
 Painleve-type case) are outcomes too, never exceptions. tests/test_chain_kernel.py checks that both
-implementations decide alike. While the stage with a clearance is open (``open_phase``), each group at rest
-is decided the same way on its own: stuck where ``group_holds`` (the same propagation over its bodies and
-closed stages) admits its statics, or leaving rest.
+implementations decide alike. While a stage with a clearance is open (``open_phase``; one at a time), each group
+at rest is decided the same way on its own: stuck where ``group_holds`` (the same propagation over its bodies and
+closed stages) admits its statics, or leaving rest. A stage with a clearance that is closed pushes on its flank in
+contact only, in the rigid chain's modes (``mode_contact``), at rest and in another stage's open phase.
 
 The functions a decision calls: ``rhs`` (a_0 is dy[1]) and ``guards`` (D, jam, N_k, v0, seat,
 switch, delay; mode RESTING: the last four) from the mode machine's Functions, and the chain
@@ -39,17 +40,20 @@ FRAME = 11            # an impact's frame: the module's IMPACT_FRAME
 #: latch; its states).
 ChainTables = namedtuple("ChainTables", "direction guard_direction stages p_psi p_lever_in p_lever_out p_slack "
                                         "switch_on p_delay p_switch p_pick p_seated armed picked tripped "
-                                        "mode_contact open_mode open_stage p_contact p_direction p_rho_sign p_speed_k "
-                                        "p_speed motor")
-#: With a clearance (``backlash.py``): per mode the flank of the stage with the clearance it loads (+1 a, -1 b, 0
-#: for OPEN), the mode OPEN (-1: no clearance), the stage, the slots of the contact latch (+1, -1, 0 open), the
-#: groups' directions (two) and the stages' regime signs, and of v_k / v_0 of the rigid chain; the first slot of the
-#: speed factors c_j = v_j / v_0 of the rigid chain (c_0 to c_N). Whether body 0 has a motor (1; its torque depends on
-#: v0, so that a stage force's maximum may lie inside a phase while it is powered).
+                                        "mode_contact open_mode clear_stage p_contact p_direction p_rho_sign p_gap "
+                                        "p_current p_speed_k p_speed motor")
+#: With clearances (``backlash.py``): per mode and clearance stage the flank it loads (+1 a, -1 b, 0 for the open
+#: modes), the first open mode OPEN (open_mode + i: clearance i's stage open; -1: no clearance), the stages with a
+#: clearance (clear_stage), the first slots of the contact latches (+1, -1, 0 open; one per clearance stage), of the
+#: groups' directions (two, then held_out, held_in), of the stages' regime signs and of the gaps' offsets G_i, the
+#: slots of the current clearance stage's index (open, or last opened) and of its c_k = v_k / v_0; the first slot of
+#: the speed factors c_j = v_j / v_0 of the rigid chain (c_0 to c_N). Whether body 0 has a motor (1; its torque depends
+#: on v0, so that a stage force's maximum may lie inside a phase while it is powered).
 
 #: What a decision writes: guard values, a rate, the bodies' forces, interval sets (two and a cone),
-#: the candidates' modes and a_0, p before the latches moved, the stage forces at a cut.
-ChainWork = namedtuple("ChainWork", "g f force set_a set_b cone modes accel before forces frame y")
+#: the candidates' modes and a_0, p before the latches moved, the stage forces at a cut, an impact's frame, a state;
+#: p and y before a stage opens and the chosen p and y (``opening``).
+ChainWork = namedtuple("ChainWork", "g f force set_a set_b cone modes accel before forces frame y saved y_saved chosen")
 
 #: The chain module's functions a decision calls besides rhs and guards.
 ChainFunctions = namedtuple("ChainFunctions", "stage_forces body_forces impact")
@@ -59,7 +63,26 @@ ChainFunctions = namedtuple("ChainFunctions", "stage_forces body_forces impact")
 def chain_work(n_guards, n_stages, n_modes, n_params, n_states):
     return ChainWork(np.empty(n_guards), np.empty(n_states), np.empty(n_stages + 1), np.empty((SET_ROWS, 2)),
                      np.empty((SET_ROWS, 2)), np.empty((2, 2)), np.empty(n_modes, np.int64), np.empty(n_modes),
-                     np.empty(n_params), np.empty(3 * n_stages), np.empty(FRAME), np.empty(n_states))
+                     np.empty(n_params), np.empty(3 * n_stages), np.empty(FRAME), np.empty(n_states), np.empty(n_params),
+                     np.empty(n_states), np.empty(n_params + n_states))
+
+
+@njit(error_model="numpy")
+def current_index(c, p):
+    """The index (in clear_stage) of the current clearance stage: the open one, or the last opened."""
+    return int(p[c.p_current])
+
+
+@njit(error_model="numpy")
+def open_stage(c, p):
+    """The current clearance stage (1-based): the one open in an open mode."""
+    return c.clear_stage[int(p[c.p_current])]
+
+
+@njit(error_model="numpy")
+def is_open(c, mode):
+    """Whether ``mode`` is an open mode (a stage with a clearance open)."""
+    return c.open_mode >= 0 and mode >= c.open_mode
 
 
 @njit(error_model="numpy")
@@ -171,8 +194,9 @@ def group_holds(c, p, force, w, first, last):
         n_cone = _forward_cone(p[c.p_psi + 2 * i], p[c.p_psi + 2 * i + 1], w.cone)
         n = _scaled(a, n, w.cone, n_cone, b)
         n = _affine(b, n, 0.0, p[c.p_lever_out + i], a)
-        if i == c.open_stage - 1:   # a stage with a clearance pushes on its one flank in contact only
-            n = _one_side(a, n, p[c.p_contact])
+        for j in range(c.clear_stage.size):   # a stage with a clearance pushes on its one flank in contact only
+            if c.clear_stage[j] == i + 1 and p[c.p_contact + j] != 0.0:
+                n = _one_side(a, n, p[c.p_contact + j])
         if i == last - 1:
             for j in range(n):
                 if max(a[j, 0], lo) <= min(a[j, 1], hi):
@@ -188,10 +212,10 @@ def group_holds(c, p, force, w, first, last):
 def decide(fns, chain_fns, c, t, y, p, current, w):
     """(outcome, mode) at (t, y) under latches p: the candidates in the direction of v0 (both at rest) and
     rest; ``current`` is the mode the event ended (a CRITICAL outcome takes another). Mode NO_MODE for
-    NONE and SEVERAL. With a clearance: the open stage's phase (``open_phase``) while the contact latch is 0,
-    else the modes loading the flank in contact, rest with that stage pushing on it, and when neither holds the
-    stage opening (``opening``)."""
-    if c.open_mode >= 0 and p[c.p_contact] == 0.0:
+    NONE and SEVERAL. With clearances: the open stage's phase (``open_phase``) while its contact latch is 0 (it is
+    the current one), else the modes loading the flanks in contact, rest with those stages pushing on them, and when
+    neither holds a stage opening (``opening``)."""
+    if c.open_mode >= 0 and p[c.p_contact + current_index(c, p)] == 0.0:
         return open_phase(fns, chain_fns, c, t, y, p, w)
     v = y[1]
     stages = c.stages
@@ -200,7 +224,7 @@ def decide(fns, chain_fns, c, t, y, p, current, w):
         d = c.direction[m]
         if not (v == 0.0 or (v > 0.0) == (d > 0)):
             continue
-        if c.open_mode >= 0 and (m == c.open_mode or c.mode_contact[m] != p[c.p_contact]):
+        if c.open_mode >= 0 and (m >= c.open_mode or not _loads(c, m, p)):
             continue
         fns.guards(m, t, y, p, w.g)
         fns.rhs(m, t, y, p, w.f)
@@ -230,19 +254,44 @@ def decide(fns, chain_fns, c, t, y, p, current, w):
 
 
 @njit(error_model="numpy")
-def _free(c, p, group):
-    """Whether a group's direction changes none of its forces while the stage with the clearance is open: it holds
-    no closed stage and (the output group) the last body feels no valve friction."""
-    if group == 0:
-        return c.open_stage == 1
-    return c.open_stage == c.stages and p[c.p_slack] == 0.0
+def _loads(c, m, p):
+    """Whether closed mode ``m`` loads every stage with a clearance on its flank in contact."""
+    for j in range(c.clear_stage.size):
+        if c.mode_contact[m, j] != p[c.p_contact + j]:
+            return False
+    return True
 
 
 @njit(error_model="numpy")
-def _in_group(c, stage, group):
-    """Whether closed stage ``stage`` (1-based) joins bodies of ``group`` (0 input, 1 output) while the stage with the
-    clearance is open."""
-    return stage < c.open_stage if group == 0 else stage > c.open_stage
+def _free(c, p, group):
+    """Whether a group's direction changes none of its forces while the current clearance stage is open: it holds
+    no closed stage and (the output group) the last body feels no valve friction."""
+    if group == 0:
+        return open_stage(c, p) == 1
+    return open_stage(c, p) == c.stages and p[c.p_slack] == 0.0
+
+
+@njit(error_model="numpy")
+def _in_group(c, p, stage, group):
+    """Whether closed stage ``stage`` (1-based) joins bodies of ``group`` (0 input, 1 output) while the current
+    clearance stage is open."""
+    return stage < open_stage(c, p) if group == 0 else stage > open_stage(c, p)
+
+
+@njit(error_model="numpy")
+def _keeps_flanks(c, p):
+    """Whether each closed stage with a clearance slides on its flank in contact under the open phase's latches: its
+    flank is its regime's sign times its group's direction (no check in a stuck or free group: no regime there)."""
+    for j in range(c.clear_stage.size):
+        stage = c.clear_stage[j]
+        if j == current_index(c, p):
+            continue
+        group = 0 if stage < open_stage(c, p) else 1
+        direction = p[c.p_direction + group]
+        if p[c.p_direction + 3 - group] == 0.0 and direction != 0.0 and \
+                p[c.p_rho_sign + stage - 1] * direction != p[c.p_contact + j]:
+            return False
+    return True
 
 
 @njit(error_model="numpy")
@@ -261,11 +310,14 @@ def _open_candidate(fns, c, t, y, p, w, combo, held):
             p[c.p_direction + g] = (1.0 if v > 0.0 else -1.0) if v != 0.0 else (-1.0 if combo >> g & 1 else 1.0)
     for i in range(c.stages):
         p[c.p_rho_sign + i] = -1.0 if combo >> (2 + i) & 1 else 1.0
-    fns.guards(c.open_mode, t, y, p, w.g)
+    if not _keeps_flanks(c, p):
+        return False
+    mode = c.open_mode + current_index(c, p)
+    fns.guards(mode, t, y, p, w.g)
     ok = w.g[1] > 0.0
     for i in range(c.stages):
         ok = ok and not w.g[2 + i] < 0.0
-    fns.rhs(c.open_mode, t, y, p, w.f)
+    fns.rhs(mode, t, y, p, w.f)
     for g in range(2):
         v, a = (y[1], w.f[1]) if g == 0 else (y[3], w.f[3])
         if v == 0.0 and not _free(c, p, g) and not held >> g & 1:
@@ -282,8 +334,8 @@ def _stuck(chain_fns, c, t, y, p, w, group):
     if (y[1] if group == 0 else y[3]) != 0.0 or _free(c, p, group):
         return False
     chain_fns.body_forces(0, t, y, p, w.force)
-    return group_holds(c, p, w.force, w, 0, c.open_stage - 1) if group == 0 else \
-        group_holds(c, p, w.force, w, c.open_stage, c.stages)
+    return group_holds(c, p, w.force, w, 0, open_stage(c, p) - 1) if group == 0 else \
+        group_holds(c, p, w.force, w, open_stage(c, p), c.stages)
 
 
 @njit(error_model="numpy")
@@ -294,7 +346,7 @@ def _open_candidates(fns, c, t, y, p, w, held):
     found, first, a_in, a_out, agree = 0, -1, 0.0, 0.0, True
     still = False
     for combo in range(1 << (2 + c.stages)):
-        if combo >> (2 + c.open_stage - 1) & 1:
+        if combo >> (2 + open_stage(c, p) - 1) & 1:
             continue
         skip = False
         for g in range(2):
@@ -302,7 +354,7 @@ def _open_candidates(fns, c, t, y, p, w, held):
             skip = skip or (combo >> g & 1 == 1 and (v != 0.0 or _free(c, p, g) or held >> g & 1 == 1))
         for i in range(c.stages):
             for g in range(2):
-                skip = skip or (held >> g & 1 == 1 and combo >> (2 + i) & 1 == 1 and _in_group(c, i + 1, g))
+                skip = skip or (held >> g & 1 == 1 and combo >> (2 + i) & 1 == 1 and _in_group(c, p, i + 1, g))
         if skip:
             continue
         still = still or (y[1] == 0.0 and not _free(c, p, 0)) or (y[3] == 0.0 and not _free(c, p, 1))
@@ -345,7 +397,7 @@ def open_phase(fns, chain_fns, c, t, y, p, w):
     if total > 1 and not agree:
         return SEVERAL, NO_MODE
     _open_candidate(fns, c, t, y, p, w, first, first_held)
-    return UNIQUE, c.open_mode
+    return UNIQUE, c.open_mode + current_index(c, p)
 
 
 @njit(error_model="numpy")
@@ -359,18 +411,57 @@ def separating(chain_fns, c, flank, t, y, p, w):
 
 
 @njit(error_model="numpy")
+def part(fns, c, i, t, y, p, w):
+    """Clearance i's stage opens: its contact latch 0; where it is not the current stage j, it becomes current:
+    y[2], y[3] scaled by c_k / c_j (bodies j and k move rigidly together until now, so the last body's coordinate
+    c_N / c_j y[2] is kept), its c_k the latch, and its gap's offset G_i set so that the gap is its contact value (0
+    on flank a, the clearance on flank b) now: it takes up the other stages' slips since it was current."""
+    flank = p[c.p_contact + i]
+    p[c.p_contact + i] = 0.0
+    if current_index(c, p) == i:
+        return
+    speed = p[c.p_speed + c.clear_stage[i]]
+    y[2] *= speed / p[c.p_speed_k]
+    y[3] *= speed / p[c.p_speed_k]
+    p[c.p_current], p[c.p_speed_k], p[c.p_gap + i] = float(i), speed, 0.0
+    fns.guards(c.open_mode + i, t, y, p, w.g)   # the gap with G_i = 0: its rate's integral; and the clearance
+    n = c.stages
+    p[c.p_gap + i] = (0.0 if flank > 0.0 else w.g[n + 3] + w.g[n + 4]) - w.g[n + 3]
+
+
+@njit(error_model="numpy")
 def opening(fns, chain_fns, c, t, y, p, w):
-    """No mode loading the flank in contact holds and the chain cannot rest: the stage opens when its open phase
-    is consistent and its gap's acceleration parts the flanks; else (NONE, NO_MODE) with the contact kept."""
-    flank = p[c.p_contact]
-    p[c.p_contact] = 0.0
-    outcome, mode = open_phase(fns, chain_fns, c, t, y, p, w)
-    if outcome == UNIQUE:
-        fns.rhs(c.open_mode, t, y, p, w.f)
-        if separating(chain_fns, c, int(flank), t, y, p, w) > 0.0:
-            return UNIQUE, mode
-    p[c.p_contact] = flank
-    return NONE, NO_MODE
+    """No mode loading the flanks in contact holds and the chain cannot rest: a stage with a clearance opens
+    (``part``) when its open phase is consistent and its gap's acceleration parts the flanks; (UNIQUE, its open mode)
+    when one such stage does, (SEVERAL, NO_MODE) when more than one could (two open stages are not modelled), else
+    (NONE, NO_MODE) with p and y as they were."""
+    found, n_y = -1, y.size
+    copy_into(w.saved, p)
+    copy_into(w.y_saved, y)
+    for i in range(c.clear_stage.size):
+        flank = w.saved[c.p_contact + i]
+        if flank == 0.0:
+            continue
+        part(fns, c, i, t, y, p, w)
+        outcome, mode = open_phase(fns, chain_fns, c, t, y, p, w)
+        if outcome == UNIQUE:
+            fns.rhs(mode, t, y, p, w.f)
+            if separating(chain_fns, c, int(flank), t, y, p, w) > 0.0:
+                if found >= 0:
+                    found = -2
+                    break
+                found = i
+                copy_into(w.chosen[:p.size], p)
+                copy_into(w.chosen[p.size:p.size + n_y], y)
+        copy_into(p, w.saved)
+        copy_into(y, w.y_saved)
+    if found < 0:
+        copy_into(p, w.saved)
+        copy_into(y, w.y_saved)
+        return (SEVERAL if found == -2 else NONE), NO_MODE
+    copy_into(p, w.chosen[:p.size])
+    copy_into(y, w.chosen[p.size:p.size + n_y])
+    return UNIQUE, c.open_mode + found
 
 
 @njit(error_model="numpy")
@@ -394,12 +485,12 @@ def switched(fns, c, mode, guard, t, y, p, w):
 
 @njit(error_model="numpy")
 def last_coordinate(c, y, p):
-    """The last body's coordinate q_N: c_N q0 for a rigid chain; with a clearance in stage k body k's own qk
-    mapped through the stages after it, (c_N / c_k) qk (qk itself when k = N), so that the backlash taken up
-    before counts no travel."""
+    """The last body's coordinate q_N: c_N q0 for a rigid chain; with clearances, y[2] (body k's coordinate, k the
+    current clearance stage, rescaled whenever another becomes current) mapped through the stages after k,
+    (c_N / c_k) y[2], so that the backlash taken up before counts no travel."""
     if y.size == 2:
         return p[c.p_speed + c.stages] * y[0]
-    return p[c.p_speed + c.stages] / p[c.p_speed + c.open_stage] * y[2]
+    return p[c.p_speed + c.stages] / p[c.p_speed_k] * y[2]
 
 
 @njit(error_model="numpy")
@@ -433,10 +524,12 @@ def settle(fns, chain_fns, c, t, y, p, mode, guard, w, trip):
     if (guard == n_guards - 2 or guard == n_guards - 1) and switched(fns, c, mode, guard, t, y, p, w):
         if np.isnan(trip[0]):
             cut(chain_fns, c, mode, t, y, w, trip)
-    if c.open_mode >= 0 and 0 <= mode != c.open_mode and guard == 1 + c.open_stage:
-        p[c.p_contact] = 0.0   # the normal force of the stage with the clearance reached 0: its flanks part
+    if 0 <= mode and not is_open(c, mode):
+        for i in range(c.clear_stage.size):
+            if guard == 1 + c.clear_stage[i]:
+                part(fns, c, i, t, y, p, w)   # the normal force of a stage with a clearance reached 0: its flanks part
     outcome, new = decide(fns, chain_fns, c, t, y, p, mode, w)
-    if new != NO_MODE and (guard == START or new == RESTING or (c.open_mode >= 0 and mode == c.open_mode)):
+    if new != NO_MODE and (guard == START or new == RESTING or is_open(c, mode)):
         copy_into(w.before, p)
         if switched(fns, c, new, CHECK, t, y, p, w):
             if np.isnan(trip[0]):

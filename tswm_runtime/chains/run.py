@@ -103,7 +103,7 @@ class ChainEvent:
     def decision(self) -> Decision:
         if self.given is not None:
             return self.given
-        if clearance_stage(self.seen[0]):
+        if clearance_stages(self.seen[0]):
             return _clearance_decision(self)
         return decide(self.seen[0], self.t, *self.seen[1:])
 
@@ -136,7 +136,7 @@ class ChainRun:
 
     @cached_property
     def impacts(self) -> list[dict]:
-        """The flanks' impacts of the stage with a clearance (backlash.IMPACT_COLUMNS; flank "a" or "b", closed:
+        """The flanks' impacts of the stages with a clearance (backlash.IMPACT_COLUMNS; flank "a" or "b", closed:
         whether the stage stayed closed after it)."""
         rows = self.record.impacts[:int(self.record.counts[3])].tolist()
         return [{**dict(zip(IMPACT_COLUMNS, row)), "flank": "a" if row[1] > 0 else "b", "closed": row[5] > 0}
@@ -171,15 +171,19 @@ def latches(module, y: np.ndarray, voltage: float | None = None, values: np.ndar
         remember(prepared, voltage, known, 64)
     p = known.copy()
     p[module.P_SEATED] = float(module.HAS_SEAT and p[module.P_SPEED + module.STAGES] * y[0] >= p[module.P_SEAT])
-    if clearance_stage(module):
-        p[module.P_CONTACT] = start_contact(module, p)
+    stages = clearance_stages(module)
+    if stages:
+        contacts = [start_contact(module, p, k) for k in stages]
+        p[module.P_CONTACT:module.P_CONTACT + len(stages)] = contacts
+        p[module.P_GAP:module.P_GAP + len(stages)] = [p[getattr(module, f"V_gap_{k}")] for k in stages]
+        current = contacts.index(0.0) if 0.0 in contacts else 0
+        p[module.P_CURRENT], p[module.P_SPEED_CUR] = current, p[module.P_SPEED + stages[current]]
     return p
 
 
-def start_contact(module, p: np.ndarray) -> float:
-    """The stage with the clearance at the start: closed on flank a (gap 0, +1), on flank b (gap = clearance, -1),
+def start_contact(module, p: np.ndarray, k: int) -> float:
+    """Stage k (with a clearance) at the start: closed on flank a (gap 0, +1), on flank b (gap = clearance, -1),
     else open (0)."""
-    k = clearance_stage(module)
     gap, clearance = p[getattr(module, f"V_gap_{k}")], p[getattr(module, f"V_clearance_{k}")]
     return 1.0 if gap <= 0.0 else -1.0 if gap >= clearance else 0.0
 
@@ -209,17 +213,19 @@ def _candidates(module, t: float, y: np.ndarray, p: np.ndarray, directions) -> l
 def decide(module, t: float, y: np.ndarray, p: np.ndarray, flank: float = 0.0) -> Decision:
     """The chain's mode at (t, y) under latches p: every candidate in the direction of v0 (both at rest),
     and rest (the valve's friction holding anything up to its magnitude). With a clearance closed on ``flank``
-    (+1 a, -1 b): the candidates loading that flank, and rest with the stage pushing on it only."""
+    (+1 a, -1 b) (the current clearance stage's): the candidates loading that flank, and rest with the stage
+    pushing on it only; the other stages with a clearance on their flanks in contact (p's latches)."""
     v = y[1]
     directions = (1, -1) if v == 0 else ((1,) if v > 0 else (-1,))
     statics = replace(numbers(module, p), force=tuple(float(f) for f in module.body_forces(t, y, p, 0.0)))
     candidates = _candidates(module, t, y, p, directions)
-    k = clearance_stage(module)
-    if k and flank:
+    if flank:
+        sides = {k: float(p[module.P_CONTACT + i]) for i, k in enumerate(clearance_stages(module))}
+        sides[clearance_stages(module)[int(p[module.P_CURRENT])]] = flank
         loaded = {module.MODES[m] for m, flanks in enumerate(module.MODE_FLANKS)
-                  if flanks and flanks[k - 1] == FLANKS[flank]}
+                  if flanks and all(flanks[k - 1] == FLANKS[side] for k, side in sides.items())}
         candidates = [c for c in candidates if c.name in loaded]
-        statics = replace(statics, flank=(k - 1, int(flank)))
+        statics = replace(statics, flanks=tuple((k - 1, int(side)) for k, side in sides.items()))
     return decide_numbers(candidates, v, statics)
 
 
@@ -227,18 +233,23 @@ FLANKS = {1.0: "a", -1.0: "b"}
 
 
 def _clearance_decision(event: ChainEvent) -> Decision:
-    """The reason of an event of a chain with a clearance in stage k: the rigid decision with the flank constraint
-    while the stage is closed (``decide`` with the flank in contact); where it opens, which flank and why (its normal
-    force reached 0, or no mode loading that flank holds and the chain cannot rest); at an impact, the flank, the
-    normal speed before and after and whether the stage closed; in the open phase, each group's direction and the
-    closed stages' regimes (the latches the compiled decision set)."""
+    """The reason of an event of a chain with clearances, about the current clearance stage k (the one open, or
+    last opened): the rigid decision with the flank constraints while the stages are closed (``decide`` with the
+    flank in contact); where it opens, which flank and why (its normal force reached 0, or no mode loading that
+    flank holds and the chain cannot rest); at an impact, the flank, the normal speed before and after and whether
+    the stage closed; in the open phase, each group's direction and the closed stages' regimes (the latches the
+    compiled decision set); a second stage that would open while k is open."""
     module, chain, row = event.at
     _, y, p = event.seen
-    k = clearance_stage(module)
-    before = float(chain.event_f[row - 1, 1 + len(module.STATES) + module.P_CONTACT]) if row else start_contact(
-        module, p)
+    index = int(p[module.P_CURRENT])
+    k = clearance_stages(module)[index]
+    contact = module.P_CONTACT + index
+    before = float(chain.event_f[row - 1, 1 + len(module.STATES) + contact]) if row else start_contact(module, p, k)
     words = []
-    if event.from_mode == module.OPEN and event.guard in ("gap_a", "gap_b"):
+    opened = event.from_mode is not None and event.from_mode >= module.OPEN
+    if opened and event.to_mode is None and event.guard.startswith("N_"):
+        return Decision(event.outcome, (), None, two_open(event.guard, k))
+    if opened and event.guard in ("gap_a", "gap_b"):
         if event.to_mode is None:
             return Decision(event.outcome, (), None, f"stage {k}'s flanks meet on flank {event.guard[-1]} and the "
                             "impulse cannot stop their approach")
@@ -249,11 +260,11 @@ def _clearance_decision(event: ChainEvent) -> Decision:
         before = 1.0 if hit["flank"] == "a" else -1.0
         if not hit["closed"]:
             return Decision(event.outcome, (), None, f"{words[0]}; {_open_words(module, p)}")
-    elif event.from_mode == module.OPEN or (before == 0.0 and event.guard == "start"):
+    elif opened or (before == 0.0 and event.guard == "start"):
         words.append(f"stage {k} starts open (its flanks apart)" if event.guard == "start" else
                      f"{event.guard} in the open phase")
         before = 0.0
-    if before == 0.0 or event.to_mode == module.OPEN:
+    if before == 0.0 or (event.to_mode is not None and event.to_mode >= module.OPEN):
         if event.to_mode is None:
             why = {"group at rest": "a group of bodies would stay at rest while the flanks are apart (its stick is not "
                                     "decided yet)", "several": "several open phases hold"}
@@ -267,7 +278,8 @@ def _clearance_decision(event: ChainEvent) -> Decision:
                 words.append(f"no mode loading flank {flank} holds and the chain cannot rest with stage {k} pushing "
                              f"on it ({closed.reason})")
             words.append(f"its flanks part from flank {flank}")
-        return Decision(event.outcome, (module.MODES[module.OPEN],), None, "; ".join([*words, _open_words(module, p)]))
+        return Decision(event.outcome, (module.MODES[module.OPEN + index],), None,
+                        "; ".join([*words, _open_words(module, p)]))
     closed = decide(module, event.t, y, p, before)
     words.append(f"stage {k} closed on flank {FLANKS[before]}: {closed.reason}")
     return Decision(closed.outcome, closed.modes, closed.accel, "; ".join(words), closed.internal)
@@ -276,7 +288,7 @@ def _clearance_decision(event: ChainEvent) -> Decision:
 def _impact(module, chain: kernel.ChainRecord, row: int) -> dict:
     """The impact of the gap event in ``row``: one impact row per gap event of the open phase, in order."""
     gaps = (module.GUARDS.index("gap_a"), module.GUARDS.index("gap_b"))
-    i = sum(1 for guard, before in chain.events[:row, :2].tolist() if before == module.OPEN and guard in gaps)
+    i = sum(1 for guard, before in chain.events[:row, :2].tolist() if before >= module.OPEN and guard in gaps)
     values = chain.impacts[i].tolist()
     return {**dict(zip(IMPACT_COLUMNS, values)), "flank": "a" if values[1] > 0 else "b", "closed": values[5] > 0}
 
@@ -284,7 +296,7 @@ def _impact(module, chain: kernel.ChainRecord, row: int) -> dict:
 def _open_words(module, p: np.ndarray) -> str:
     """The open phase's latches in words: each group's direction (free: its forces do not depend on it; held: at rest,
     its own statics holding it), each closed stage's regime."""
-    k, n = clearance_stage(module), module.STAGES
+    k, n = clearance_stages(module)[int(p[module.P_CURRENT])], module.STAGES
     names = {1.0: "forward", -1.0: "backward", 0.0: "free (its forces do not depend on its direction)"}
 
     def group(held: int, direction: int) -> str:
@@ -324,17 +336,20 @@ def _parts(module) -> _ModuleParts:
         ints = dict(stages=module.STAGES, p_psi=module.P_PSI, p_lever_in=module.P_LEVER_IN,
                     p_lever_out=module.P_LEVER_OUT, p_slack=module.P_SLACK, switch_on=module.SWITCH_ON,
                     p_delay=module.P_DELAY, p_switch=module.P_SWITCH, p_pick=module.P_PICK, p_seated=module.P_SEATED)
-        k = clearance_stage(module)
+        stages = clearance_stages(module)
         flank = {"a": 1, "b": -1}
         tables = compiled.ChainTables(
             direction=np.array(module.MODE_DIRECTION, np.int64),
             guard_direction=np.array(module.GUARD_DIRECTIONS, np.int64).reshape(n_modes, len(module.GUARDS)),
             **{k: int(v) for k, v in ints.items()}, armed=float(module.ARMED), picked=float(module.PICKED),
             tripped=float(module.TRIPPED),
-            mode_contact=np.array([flank[f[k - 1]] if k and f else 0 for f in module.MODE_FLANKS], np.int64),
-            open_mode=module.OPEN if k else -1, open_stage=k, p_contact=module.P_CONTACT if k else 0,
-            p_direction=module.P_DIRECTION_IN if k else 0, p_rho_sign=module.P_RHO_SIGN if k else 0,
-            p_speed_k=module.P_SPEED + k if k else 0, p_speed=module.P_SPEED, motor=int(hasattr(module, "MOTOR_POINTS")))
+            mode_contact=np.array([[flank[f[k - 1]] if f else 0 for k in stages] for f in module.MODE_FLANKS],
+                                  np.int64).reshape(n_modes, len(stages)),
+            open_mode=module.OPEN if stages else -1, clear_stage=np.array(stages, np.int64),
+            **{name: getattr(module, slot) if stages else 0 for name, slot in (
+                ("p_contact", "P_CONTACT"), ("p_direction", "P_DIRECTION_IN"), ("p_rho_sign", "P_RHO_SIGN"),
+                ("p_gap", "P_GAP"), ("p_current", "P_CURRENT"), ("p_speed_k", "P_SPEED_CUR"))},
+            p_speed=module.P_SPEED, motor=int(hasattr(module, "MOTOR_POINTS")))
         no_steps = (np.empty((0, 4)), np.empty((0, 2), np.int64), np.empty((0, 2)), np.empty((0, 2)),
                     np.empty((0, 3, 4)), np.empty(0, np.int64), np.empty((0, n_p)))
         known = _PARTS[module.__name__] = _ModuleParts(
@@ -348,14 +363,19 @@ def _parts(module) -> _ModuleParts:
 _PARTS: dict = {}
 
 
-def clearance_stage(module) -> int:
-    """The stage with a clearance (1-based), 0 for a rigid chain."""
-    return getattr(module, "CLEARANCE_STAGE", 0)
+def clearance_stages(module) -> tuple[int, ...]:
+    """The stages with a clearance (1-based), () for a rigid chain."""
+    return getattr(module, "CLEARANCE_STAGES", ())
+
+
+def two_open(guard: str, k: int) -> str:
+    """The words of a run stopped because stage j (the guard N_j) would open while stage k is open."""
+    return f"stage {guard[2:]} opens while stage {k} is open: two open stages are not modelled"
 
 
 def start_state(module, v0: float) -> np.ndarray:
-    """The states at t = 0: q0 = 0 and v0; with a clearance in stage k also qk = 0 and vk (which the kernel sets
-    to c_k v0 of each run's p: the chain moves as one body)."""
+    """The states at t = 0: q0 = 0 and v0; with clearances also qk = 0 and vk of the current clearance stage k (vk
+    the kernel sets to c_k v0 of each run's p: the chain moves as one body)."""
     y0 = np.zeros(len(module.STATES))
     y0[1] = v0
     return y0
@@ -449,6 +469,8 @@ def run_status(code: int) -> str:
         return "inconsistent"
     if code == kernel.GROUP_AT_REST:
         return "group-at-rest"
+    if code == kernel.TWO_OPEN:
+        return "two-open"
     return STATUS.get(code, f"status {code}")
 
 
@@ -458,9 +480,10 @@ def _result(module, code: int, t_stop: float, record: Record, chain: kernel.Chai
     if code == kernel.FINISHED:
         return run
     last = run.events[-1]
-    if code in (kernel.UNDECIDED, kernel.INDETERMINATE) and clearance_stage(module):
+    stages = ", ".join(map(str, clearance_stages(module)))
+    if code in (kernel.UNDECIDED, kernel.INDETERMINATE) and stages:
         run.message = (f"{'several modes hold' if code == kernel.INDETERMINATE else 'no mode holds'} at "
-                       f"t = {t_stop:.9g} s (the chain with stage {clearance_stage(module)}'s clearance)")
+                       f"t = {t_stop:.9g} s (the chain with stage {stages}'s clearance)")
     elif code in (kernel.UNDECIDED, kernel.INDETERMINATE):
         run.message = last.decision.reason
     elif code == kernel.SINGULAR:
@@ -472,12 +495,14 @@ def _result(module, code: int, t_stop: float, record: Record, chain: kernel.Chai
         run.message = (f"D or the jam factor is <= 0 where mode {module.MODES[run.phases[-1].mode]} begins at "
                        f"t = {t_stop:.9g} s: no contact force keeps the stages together")
     elif code == kernel.GROUP_AT_REST:
-        run.message = (f"a group of bodies is at rest at t = {t_stop:.9g} s while stage {clearance_stage(module)}'s "
+        run.message = (f"a group of bodies is at rest at t = {t_stop:.9g} s while stage {_current(module, last)}'s "
                        "flanks are apart and can neither stay at rest (its stages' stick cones and friction do not "
                        "hold its forces) nor leave rest in any direction and regimes")
     elif code == kernel.IMPACT_JAMMED:
-        run.message = (f"stage {clearance_stage(module)}'s flanks meet at t = {t_stop:.9g} s and the impulse cannot "
+        run.message = (f"stage {_current(module, last)}'s flanks meet at t = {t_stop:.9g} s and the impulse cannot "
                        "stop their approach (the effective masses and friction jam the impact)")
+    elif code == kernel.TWO_OPEN:
+        run.message = f"{two_open(last.guard, _current(module, last))} (at t = {t_stop:.9g} s)"
     elif code == kernel.TOO_MANY_EVENTS:
         run.message = f"{len(run.events)} events"
     elif code == kernel.CHATTERING:
@@ -485,6 +510,11 @@ def _result(module, code: int, t_stop: float, record: Record, chain: kernel.Chai
     else:
         run.message = f"the integrator stopped at t = {t_stop:.9g} s"
     return run
+
+
+def _current(module, event: ChainEvent) -> int:
+    """The current clearance stage at an event (the latches its decision saw)."""
+    return clearance_stages(module)[int(event.seen[2][module.P_CURRENT])]
 
 
 def _trip(module, trip: np.ndarray) -> dict | None:

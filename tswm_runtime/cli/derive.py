@@ -55,29 +55,30 @@ def _derive_chain(args: argparse.Namespace) -> int:
     print(f"  modes: {len(reachable(values.flanks))} sliding modes the flanks allow, and resting")
     decision = decide(values, 0.0)
     print(f"  at rest under the scene's forces: {decision.outcome}: {', '.join(decision.modes) or 'no mode'}")
-    if chain.clearance is not None:
-        print(*_clearance_lines(chain), sep="\n")
+    for i, c in enumerate(chain.clearances):
+        print(*_clearance_lines(chain, c, i), sep="\n")
     for path in write_chain_documents(chain, latex=args.latex, markdown=args.markdown, pdf=args.pdf):
         print(f"  wrote {path}")
     return 0
 
 
-def _clearance_lines(chain) -> list[str]:
-    """The stage with a clearance: c, e and the start gap, the open mode's groups, the extra states and guards,
-    the document's section that derives them."""
+def _clearance_lines(chain, c, index: int) -> list[str]:
+    """The ``index``-th stage with a clearance ``c``: c, e and the start gap, its open mode's groups, the extra
+    states and guards, the document's section that derives them."""
     from derivation.chain.clearance import groups
     from derivation.chain.codegen import CLEARANCE_GUARDS
     from derivation.chain.document import OPEN_STAGE
 
-    c = chain.clearance
     k, n = c.stage, len(chain.stages)
     start = "on flank a" if c.gap.value <= 0 else "on flank b" if c.gap.value >= c.clearance.value else "open"
     first = groups(n, (k,)).first
     bodies = [f"bodies {a}..{b - 1}" if b - 1 > a else f"body {a}" for a, b in zip(first, (*first[1:], n + 1))]
     return [f"  clearance: stage {k} ({chain.stages[k - 1].kind}), c = {c.clearance.value:.6g} m along the flanks' "
             f"normal, restitution e = {c.restitution.value:.6g}, start gap {c.gap.value:.6g} m ({start})",
-            f"  open mode OPEN (stage {k}'s flanks apart): groups {' and '.join(bodies)}, each moving as one body "
-            f"with its first body's coordinate",
-            f"  extra states q{k}, v{k} (body {k}); extra guards {', '.join(CLEARANCE_GUARDS)}",
-            f"  document section: \"{OPEN_STAGE}\" (stage {k} open: the groups' accelerations, the gap's rate, "
+            f"  open mode OPEN{f' + {index}' if index else ''} (stage {k}'s flanks apart): groups "
+            f"{' and '.join(bodies)}, each moving as one body with its first body's coordinate",
+            (f"  extra states q{k}, v{k} (body {k})" if len(chain.clearances) == 1 else
+             "  extra states qcur, vcur (body k of the current clearance stage k)")
+            + f"; extra guards {', '.join(CLEARANCE_GUARDS)}",
+            f"  document section: \"{OPEN_STAGE}{f': stage {k}' if len(chain.clearances) > 1 else ''}\" (stage {k} open: the groups' accelerations, the gap's rate, "
             "the impact's effective masses)"]

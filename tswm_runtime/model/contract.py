@@ -69,7 +69,7 @@ FUNCTIONS = {
 CHAIN_CONSTANTS = {
     "SCENE": "scene name", "SCENE_DIGEST": "sha256 of the scene file", "DESCRIPTION": "the scene's description",
     "STAGES": "number of stages N", "STATES": "('q0', 'v0'): body 0's coordinate and speed; with a clearance in stage k also ('qk', 'vk'), "
-              "body k's (the module's CLEARANCE_STAGE, OPEN, P_CONTACT, ... describe it: docs/drive-trains.md)",
+              "with several ('qcur', 'vcur'): the current clearance stage's body (the module's CLEARANCE_STAGES, OPEN, P_CONTACT, P_CURRENT, ... describe it: docs/drive-trains.md)",
     "MODES": "sliding mode names: direction and each stage's regime and flank",
     "MODE_DIRECTION": "sign of v0 per mode", "MODE_REGIMES": "per mode, each stage's regime",
     "MODE_FLANKS": "per mode, each stage's loaded flank", "STAGE_KINDS": "per stage its kind",

@@ -15,7 +15,7 @@ from types import ModuleType
 
 import numpy as np
 
-from tswm_runtime.chains.run import RESTING, ChainRun, prepare, run_prepared
+from tswm_runtime.chains.run import RESTING, ChainRun, clearance_stages, prepare, run_prepared
 from tswm_runtime.common.memo import overrides_key, remember
 from tswm_runtime.results.rows import output_times
 from tswm_runtime.simulation.chain_values import chain_values
@@ -104,7 +104,7 @@ class ChainResult:
                 "stages": [asdict(s) for s in self.stages], "events": [dict(e) for e in self.events],
                 "n_steps": self.n_steps,
                 "answers": self.answers,
-                **({"impacts": self.run.impacts} if getattr(self.module, "CLEARANCE_STAGE", 0) else {})}
+                **({"impacts": self.run.impacts} if clearance_stages(self.module) else {})}
 
 
 def settings(module: ModuleType, overrides: dict) -> dict:
@@ -219,16 +219,16 @@ def plot(result: ChainResult, module: ModuleType, path) -> object:
     t, _, v0, forces, travel = result.samples
     stages = [(f"stage {k + 1} ({module.STAGE_KINDS[k]})", UNITS[module.BODY_MOTIONS[k]],
                UNITS[module.BODY_MOTIONS[k + 1]]) for k in range(module.STAGES)]
-    k, gap = getattr(module, "CLEARANCE_STAGE", 0), None
-    if k:   # the stage's gap from the output rows
-        gap = (k - 1, result.run.t, gaps(module, result))
+    clear, gap = clearance_stages(module), None
+    if len(clear) == 1:   # the stage's gap from the output rows
+        gap = (clear[0] - 1, result.run.t, gaps(module, result))
     return plot_stages(path, f"{module.SCENE}: {result.status}", t, travel, v0, forces, stages,
                        result.trip["t"] if result.trip else None, gap)
 
 
 def gaps(module: ModuleType, result: ChainResult) -> np.ndarray:
-    """The normal gap of the stage with a clearance at the output rows (NaN after a stop): the module's open-phase
-    guard gap_a, which depends on the coordinates and the scene's values only."""
+    """The normal gap of the stage with a clearance (of a chain with one) at the output rows (NaN after a stop): the
+    module's open-phase guard gap_a, which depends on the coordinates and the scene's values only."""
     g, index, p = np.empty(len(module.GUARDS)), module.GUARDS.index("gap_a"), result.p.copy()
     out = np.full(result.run.t.size, np.nan)
     for i, (t, y) in enumerate(zip(result.run.t.tolist(), result.run.y)):
@@ -245,11 +245,12 @@ def _regime(module: ModuleType, phase, k: int) -> tuple[str, str]:
     mode = phase.mode
     if mode == RESTING:
         return "resting", ""
-    if mode == getattr(module, "OPEN", None):
-        if k + 1 == module.CLEARANCE_STAGE:
-            return "open", ""
+    if clearance_stages(module) and mode >= module.OPEN:
         p = phase.latches
-        before = k + 1 < module.CLEARANCE_STAGE
+        opened = clearance_stages(module)[int(p[module.P_CURRENT])]
+        if k + 1 == opened:
+            return "open", ""
+        before = k + 1 < opened
         if p[module.P_HELD_IN if before else module.P_HELD_OUT] > 0.0:
             return "resting", ""    # its group stuck at rest
         sign = p[module.P_RHO_SIGN + k]
@@ -314,14 +315,15 @@ def _events(module: ModuleType, run: ChainRun) -> tuple[EventRow, ...]:
 
 
 def impact_lines(run: ChainRun, module: ModuleType) -> list[str]:
-    """The impacts of the stage with a clearance: time, flank, normal speed of approach and of rebound at the
-    flank, kinetic energy lost, and whether the stage closed; nothing for a rigid chain."""
-    k = getattr(module, "CLEARANCE_STAGE", 0)
-    if not k:
+    """The impacts of the stages with a clearance: time, (with several: the stage,) flank, normal speed of approach
+    and of rebound at the flank, kinetic energy lost, and whether the stage closed; nothing for a rigid chain."""
+    stages = clearance_stages(module)
+    if not stages:
         return []
-    lines = [f"  stage {k} impacts ({len(run.impacts)}):"]
+    lines = [f"  stage {', '.join(map(str, stages))} impacts ({len(run.impacts)}):"]
     for row in run.impacts:
-        lines.append(f"    t = {row['t']:.9g} s on flank {row['flank']}: normal speed {row['nu before']:.6g} -> "
+        at = f"stage {row['stage']:.0f} " if len(stages) > 1 else ""
+        lines.append(f"    t = {row['t']:.9g} s {at}on flank {row['flank']}: normal speed {row['nu before']:.6g} -> "
                      f"{row['nu after']:.6g} (SI), energy lost {row['energy lost']:.6g} J, "
                      + ("closed" if row["closed"] else "rebounds"))
     return lines
@@ -348,7 +350,6 @@ def summary(result: ChainResult, module: ModuleType) -> list[str]:
     for e in result.events:
         lines.append(f"    t = {e['t']:.9g} s, {e['guard']}: {e['from'] or '(start)'} -> {e['to'] or '(stop)'} "
                      f"[{e['outcome']}]")
-        if e["outcome"] != "unique" or (e["to"] == "resting" and module.STAGES > 1) or getattr(module,
-                                                                                              "CLEARANCE_STAGE", 0):
+        if e["outcome"] != "unique" or (e["to"] == "resting" and module.STAGES > 1) or clearance_stages(module):
             lines.append(f"      {e['reason']}")
     return lines

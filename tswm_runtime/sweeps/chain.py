@@ -26,7 +26,7 @@ from tswm_runtime.jit import coldstart
 coldstart.announce(("integrate", "chain", "chain-batch"))  # before the next import compiles them, if not cached
 
 from tswm_runtime.chains.batch import run_cases  # noqa: E402
-from tswm_runtime.chains.run import clearance_stage, latches  # noqa: E402
+from tswm_runtime.chains.run import clearance_stages, latches  # noqa: E402
 from tswm_runtime.model.values import ValueInputError, quantities, si_value  # noqa: E402
 from tswm_runtime.simulation.chain import settings  # noqa: E402
 from tswm_runtime.simulation.chain_values import chain_values, unknown_value  # noqa: E402
@@ -75,7 +75,7 @@ def columns_of(module: ModuleType, swept: list[str]) -> list[str]:
     return [*(f"{name} [{si[name]}]" if si.get(name) else name for name in swept), "status", "t_trip [s]",
             f"thrust at trip [{thrust}]", f"drive at trip [{torque}]", f"travel at trip [{travel}]",
             f"peak after trip [{thrust}]", "t_peak [s]", f"extra travel [{travel}]", "holds", "stall margin",
-            "t_stop [s]", "events", "steps", *(("impacts", "impact loss [J]") if clearance_stage(module) else ())]
+            "t_stop [s]", "events", "steps", *(("impacts", "impact loss [J]") if clearance_stages(module) else ())]
 
 
 def sizing(module: ModuleType, grid: dict[str, list[float]], overrides: dict, *, output: str | Path | None = None,
@@ -154,6 +154,6 @@ def _table(module: ModuleType, run: dict, method: int, swept: list[str], values:
              columns.numbers(spread(a.stall_margin)),
              columns.numbers(spread(a.t_stop)), columns.numbers(spread(a.events, 0)),
              columns.numbers(spread(a.steps, 0))]
-    if clearance_stage(module):
+    if clearance_stages(module):
         cells += [columns.numbers(spread(a.impacts, 0)), columns.numbers(spread(a.energy_lost))]
     return columns.table(dict(zip(names, cells)))
