@@ -355,10 +355,10 @@ def test_the_last_body_held_by_its_valve_friction_waits_for_the_flanks(chain_mod
 def test_extra_travel_is_the_free_stems_farthest_point_on_the_seat(chain_module, f2):
     """Stage 2 open from the start (gap 0.5 mm), the chain coasting at v0 = 0.1 m/s, body 0 pushed by 0.2 N: the stem
     (body 2, M2, force F2, no valve friction: a free group) flies on its own, v2 = c2 v0 + F2 t / M2, into a seat at
-    2 mm of k = 100 N/mm and turns on it before the flanks meet (the run ends before); the switch on body 0's 0.2 N (setting 0.1 N) trips
-    after its 5 ms delay. The farthest point (energy: F2 x + M2 v_s^2 / 2 = k x^2 / 2 beyond the seat, v_s the stem's
-    speed at the seat) less the travel at the trip is the extra travel, and the stem's turn is an event at that
-    point."""
+    2 mm of k = 100 N/mm and turns on it before the flanks meet (the run ends before); the switch on body 0's 0.2 N
+    (setting 0.1 N) trips after its 5 ms delay. The farthest point (energy: F2 x + M2 v_s^2 / 2 = k x^2 / 2 beyond
+    the seat, v_s the stem's speed at the seat) less the travel at the trip is the extra travel, and the stem's turn
+    is an event at that point."""
     seat, k, delay = 2e-3, 1e5, 5e-3
     switch = '[switch]\non = "motor"\nsetting = "0.1 N"\ndelay = "5 ms"\n[run]'
     text = _scene("gap-seat-free", f0=0.2, f2=f2, v0=0.1, t_end=0.052,
