@@ -359,7 +359,7 @@ def test_extra_travel_is_the_free_stems_farthest_point_on_the_seat(chain_module,
     (setting 0.1 N) trips after its 5 ms delay. The farthest point (energy: F2 x + M2 v_s^2 / 2 = k x^2 / 2 beyond
     the seat, v_s the stem's speed at the seat) less the travel at the trip is the extra travel, and the stem's turn
     is an event at that point."""
-    seat, k, delay = 2e-3, 1e5, 5e-3
+    seat, k, delay, rtol = 2e-3, 1e5, 5e-3, 1e-10   # rtol: the scene's run.rtol
     switch = '[switch]\non = "motor"\nsetting = "0.1 N"\ndelay = "5 ms"\n[run]'
     text = _scene("gap-seat-free", f0=0.2, f2=f2, v0=0.1, t_end=0.052,
                   valve=f'seat = "{seat!r} m"\nseat_stiffness = "{k!r} N/m"\n').replace("[run]", switch)
@@ -373,8 +373,8 @@ def test_extra_travel_is_the_free_stems_farthest_point_on_the_seat(chain_module,
     trip = result.answers["trip"]
     assert trip["t"] == pytest.approx(delay, rel=1e-12)
     assert trip["travel"] == pytest.approx(v2 * delay + f2 / (2 * M[2]) * delay**2, rel=1e-9)
-    assert result.answers["extra_travel"] == pytest.approx(seat + x - trip["travel"], rel=1e-8)
+    assert result.answers["extra_travel"] == pytest.approx(seat + x - trip["travel"], rel=10 * rtol)
     turns = [e["t"] for e in result.events if e["guard"] == "v_out"]
     assert len(turns) == 1
     if f2 == 0.0:   # at the seat after seat / v2, a quarter of the spring's period later
-        assert turns[0] == pytest.approx(seat / v2 + math.pi / 2 * math.sqrt(M[2] / k), rel=1e-8)
+        assert turns[0] == pytest.approx(seat / v2 + math.pi / 2 * math.sqrt(M[2] / k), rel=10 * rtol)
