@@ -349,3 +349,32 @@ def test_the_last_body_held_by_its_valve_friction_waits_for_the_flanks(chain_mod
     v0_after, v2_after, *_ = _hand_impact(0.1, 0.3, first["v0 before"], 0.0)
     assert first["v0 after"] == pytest.approx(v0_after, rel=1e-10) and first["vk after"] == pytest.approx(v2_after,
                                                                                                      rel=1e-10)
+
+
+@pytest.mark.parametrize("f2", [0.0, 0.5])
+def test_extra_travel_is_the_free_stems_farthest_point_on_the_seat(chain_module, f2):
+    """Stage 2 open from the start (gap 0.5 mm), the chain coasting at v0 = 0.1 m/s, body 0 pushed by 0.2 N: the stem
+    (body 2, M2, force F2, no valve friction: a free group) flies on its own, v2 = c2 v0 + F2 t / M2, into a seat at
+    2 mm of k = 100 N/mm and turns on it before the flanks meet (the run ends before); the switch on body 0's 0.2 N
+    (setting 0.1 N) trips after its 5 ms delay. The farthest point (energy: F2 x + M2 v_s^2 / 2 = k x^2 / 2 beyond
+    the seat, v_s the stem's speed at the seat) less the travel at the trip is the extra travel, and the stem's turn
+    is an event at that point."""
+    seat, k, delay, rtol = 2e-3, 1e5, 5e-3, 1e-10   # rtol: the scene's run.rtol
+    switch = '[switch]\non = "motor"\nsetting = "0.1 N"\ndelay = "5 ms"\n[run]'
+    text = _scene("gap-seat-free", f0=0.2, f2=f2, v0=0.1, t_end=0.052,
+                  valve=f'seat = "{seat!r} m"\nseat_stiffness = "{k!r} N/m"\n').replace("[run]", switch)
+    module = chain_module(text)
+    result = simulate_chain(module, points=5)
+    assert result.status == "finished", result.message
+    assert not result.run.impacts   # the flanks meet after t_end (54.6 ms with F2 = 0)
+    v2 = math.tan(G1) * math.tan(G2) * 0.1
+    v_s = math.sqrt(v2**2 + 2 * f2 / M[2] * seat)
+    x = f2 / k + math.sqrt((f2 / k)**2 + M[2] * v_s**2 / k)
+    trip = result.answers["trip"]
+    assert trip["t"] == pytest.approx(delay, rel=1e-12)
+    assert trip["travel"] == pytest.approx(v2 * delay + f2 / (2 * M[2]) * delay**2, rel=1e-9)
+    assert result.answers["extra_travel"] == pytest.approx(seat + x - trip["travel"], rel=10 * rtol)
+    turns = [e["t"] for e in result.events if e["guard"] == "v_out"]
+    assert len(turns) == 1
+    if f2 == 0.0:   # at the seat after seat / v2, a quarter of the spring's period later
+        assert turns[0] == pytest.approx(seat / v2 + math.pi / 2 * math.sqrt(M[2] / k), rel=10 * rtol)

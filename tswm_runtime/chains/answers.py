@@ -14,15 +14,14 @@ One row of floats and one of integers per run:
          seated at the end, resting at the end (finished at rest), impacts of the stage with a clearance)
 
 The thrust is the last stage's force on the last body; travel is the last body's coordinate (the kernel's
-``rules.last_coordinate``: c_N q0 for a rigid chain, from body k's own coordinate with a clearance in stage
-k). The peak after the trip is the largest |thrust| among the tripped phases' peaks (the kernel's maxima of the
-continuous solution), the extra travel the farthest of their samples' travel: the last body turns only where its
-speed is 0, an event (a phase end, sampled), except in the open phase of a clearance in the last stage without
-valve friction (the last body alone, a free group: its speed is no event), where a turn inside the phase is
-missed. The torque needed holds the thrust with every stage sliding forward tractive at constant speed, from the
-stages' derived FTFs: prod_i Psi_t,i r_in,i / r_out,i times the thrust (the intermediate bodies' own forces
-not counted). The pull-out torque is the motor table's largest torque times (U/U_n)^2; the stall margin is it
-over the needed torque.
+``rules.last_coordinate``: c_N q0 for a rigid chain, from body k's own coordinate with a clearance in stage k). The
+peak after the trip is the largest |thrust| among the tripped phases' peaks (the kernel's maxima of the continuous
+solution), the extra travel the farthest of their samples' travel: the last body turns only where its speed is 0, an
+event (a phase end, sampled), also alone in the open phase of a clearance in the last stage without valve friction
+(a free group: its direction latch is its speed's sign, ``rules._open_candidate``). The torque needed holds the
+thrust with every stage sliding forward tractive at constant speed, from the stages' derived FTFs: prod_i Psi_t,i
+r_in,i / r_out,i times the thrust (the intermediate bodies' own forces not counted). The pull-out torque is the
+motor table's largest torque times (U/U_n)^2; the stall margin is it over the needed torque.
 """
 from collections import namedtuple
 

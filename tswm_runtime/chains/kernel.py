@@ -2,21 +2,20 @@
 address), its events, the decision at each (``rules.settle``: the latches, then the next mode) and
 its resting phases, written into a ChainRecord from which ``chains/run.py`` builds the result.
 
-Per phase (a stretch in one mode, or at rest) the record keeps its mode, times, latches, the range of its
-samples and its peaks; a sliding phase's samples are (t, q0, v0, stage forces, the last body's coordinate) at
-its start, at every output time inside it and where it ends (its event, t_end or a stop). Its peaks are per
-stage force the largest |value| of the continuous solution in the phase, signed, and its time (NaN:
-undetermined in the whole phase, a stuck group's force; a resting phase has none). A stage force is affine in
-the bodies' forces, which depend on the coordinates (springs, the seat while its latch holds), on v0 through a
-motor's torque and on nothing else (no time). Without a powered motor it is affine in q0, monotone in a sliding
-phase (v0 = 0 is an event), so its largest |value| is at a phase end, a sample; in a clearance's open phase a
-closed stage's force depends on its own group's bodies only (derivation/chain/clearance.py ``open_phase``: the
-open stage carries nothing), so on q0 or on qk, each monotone there (a group's speed reaching 0 is an event,
-except for a free group, which holds no closed stage, and a stuck one, whose forces are NaN). While a motor is
-powered the segment kernel monitors the module's observables (``observe``: the stage forces) in every step and
-refines their maxima on its dense output (``segment._monitor``, ``_refine``); the peaks are the larger of those
-and the samples (a phase that ends where D reaches 0 keeps its samples': the forces grow without bound there
-and the run stops).
+Per phase (a stretch in one mode, or at rest) the record keeps its mode, times, latches, the range of its samples
+and its peaks; a sliding phase's samples are (t, q0, v0, stage forces, the last body's coordinate) at its start, at
+every output time inside it and where it ends (its event, t_end or a stop). Its peaks are per stage force the
+largest |value| of the continuous solution in the phase, signed, and its time (NaN: undetermined in the whole phase,
+a stuck group's force; a resting phase has none). A stage force is affine in the bodies' forces, which depend on the
+coordinates (springs, the seat while its latch holds), on v0 through a motor's torque and on nothing else (no time).
+Without a powered motor it is affine in q0, monotone in a sliding phase (v0 = 0 is an event), so its largest |value|
+is at a phase end, a sample; in a clearance's open phase a closed stage's force depends on its own group's bodies
+only (derivation/chain/clearance.py ``open_phase``: the open stage carries nothing), so on q0 or on qk, each
+monotone there (a group's speed reaching 0 is an event, except for a stuck one, whose forces are NaN). While a motor
+is powered the segment kernel monitors the module's observables (``observe``: the stage forces) in every step and
+refines their maxima on its dense output (``segment._monitor``, ``_refine``); the peaks are the larger of those and
+the samples (a phase that ends where D reaches 0 keeps its samples': the forces grow without bound there and the run
+stops).
 Per event: the guard (START at the start), the modes before and after (NO_MODE: the run stops), the
 decision's outcome, the state and the latches the decision saw. The trip: what the chain carried just before
 the switch cut the motor.

@@ -299,12 +299,16 @@ def _open_candidate(fns, c, t, y, p, w, combo, held):
     """Set the open phase's latches to ``combo`` (bit 0 and 1: a group at rest moves backward; bit 2 + i: stage
     i + 1 inverse-tractive) and ``held`` (bit 0 and 1: the input, the output group stuck at rest: latches held_in,
     held_out, its acceleration 0); whether it is consistent: no closed stage jams or pulls (N_i >= 0; a stuck group's
-    are undetermined, its guards 1), and a group leaving rest accelerates in its direction. A free or stuck group's
-    direction is 0 (its speed's guard stays 0, never an event)."""
+    are undetermined, its guards 1), and a group leaving rest accelerates in its direction. A stuck group's
+    direction is 0 (its speed's guard stays 0, never an event); a free group's is its speed's sign, at rest its
+    acceleration's (0: none): none of its forces depends on it, but its speed's guard falls through 0 where it turns,
+    an event, so that the last body's farthest point is a phase end (the extra travel after the trip)."""
     p[c.p_direction + 3], p[c.p_direction + 2] = float(held & 1), float(held >> 1 & 1)
     for g in range(2):
         v = y[1] if g == 0 else y[3]
-        if _free(c, p, g) or held >> g & 1:
+        if _free(c, p, g):
+            p[c.p_direction + g] = np.sign(v)
+        elif held >> g & 1:
             p[c.p_direction + g] = 0.0
         else:
             p[c.p_direction + g] = (1.0 if v > 0.0 else -1.0) if v != 0.0 else (-1.0 if combo >> g & 1 else 1.0)
@@ -320,7 +324,9 @@ def _open_candidate(fns, c, t, y, p, w, combo, held):
     fns.rhs(mode, t, y, p, w.f)
     for g in range(2):
         v, a = (y[1], w.f[1]) if g == 0 else (y[3], w.f[3])
-        if v == 0.0 and not _free(c, p, g) and not held >> g & 1:
+        if v == 0.0 and _free(c, p, g):
+            p[c.p_direction + g] = np.sign(a)
+        elif v == 0.0 and not held >> g & 1:
             ok = ok and p[c.p_direction + g] * a > 0.0
     return ok
 

@@ -297,17 +297,20 @@ def _open_words(module, p: np.ndarray) -> str:
     """The open phase's latches in words: each group's direction (free: its forces do not depend on it; held: at rest,
     its own statics holding it), each closed stage's regime."""
     k, n = clearance_stages(module)[int(p[module.P_CURRENT])], module.STAGES
-    names = {1.0: "forward", -1.0: "backward", 0.0: "free (its forces do not depend on its direction)"}
+    names = {1.0: "forward", -1.0: "backward"}
 
-    def group(held: int, direction: int) -> str:
+    def group(held: int, direction: int, free: bool) -> str:   # free: ``rules._free``
+        if free:
+            return "free (its forces do not depend on its direction)"
         return "held at rest (its statics hold it)" if p[held] > 0.0 else names[float(p[direction])]
 
     regimes = [f"stage {i + 1} {'tractive' if p[module.P_RHO_SIGN + i] > 0 else 'inverse-tractive'}"
                for i in range(n) if i != k - 1]
     group_in = "body 0" if k == 1 else f"bodies 0..{k - 1}"
     group_out = f"body {n}" if k == n else f"bodies {k}..{n}"
-    return (f"open phase: {group_in} {group(module.P_HELD_IN, module.P_DIRECTION_IN)}, {group_out} "
-            f"{group(module.P_HELD_OUT, module.P_DIRECTION_OUT)}; closed stages: {', '.join(regimes) or 'none'}")
+    return (f"open phase: {group_in} {group(module.P_HELD_IN, module.P_DIRECTION_IN, k == 1)}, {group_out} "
+            f"{group(module.P_HELD_OUT, module.P_DIRECTION_OUT, k == n and p[module.P_SLACK] == 0.0)}; closed "
+            f"stages: {', '.join(regimes) or 'none'}")
 
 
 class _ModuleParts(NamedTuple):
