@@ -4,6 +4,7 @@ import io
 import os
 import subprocess
 import sys
+import warnings
 
 import pytest
 
@@ -73,6 +74,19 @@ def test_stages_move_with_the_clock_inside_a_stage():
     assert stages.position == pytest.approx(16.0)
     text = out.getvalue()
     assert text.index("compile") < text.index("wait") < text.index("run") and "100%" in text
+
+
+def test_stages_summing_past_the_rounded_total_end_at_100_percent_without_a_warning():
+    """Estimates of 0.04 s each sum to 0.12 s; the bar's total is rounded to 0.1 s, and ending the stages must not
+    move it past that (tqdm warns "clamping frac" and shows a negative remaining time)."""
+    out = io.StringIO()
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        stages = Stages({"a": 0.04, "b": 0.04, "c": 0.04}, desc="job", file=out, clock=Clock(), wait_clock=Clock())
+        for name in "abc":
+            stages.begin(name)
+        stages.close()
+    assert stages.position == pytest.approx(0.1) and "<-" not in out.getvalue()
 
 
 def test_estimates_follow_what_is_cold():

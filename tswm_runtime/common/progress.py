@@ -39,7 +39,10 @@ class Stages:
             self._thread.start()
 
     def _advance_to(self, value: float) -> None:
+        """Move the bar forward to ``value``, never past its total (rounded to 0.1 s: the stages' sum may
+        exceed it by rounding, which tqdm would warn of and show as a negative remaining time)."""
         with self._lock:
+            value = min(value, self._bar.total)
             if value > self._bar.n:
                 self._bar.update(value - self._bar.n)
 
