@@ -416,6 +416,9 @@ def test_the_free_input_groups_turn_is_an_event_at_its_closed_form(chain_module,
     assert y[0] == pytest.approx(far, rel=10 * rtol) and y[1] == pytest.approx(0.0, abs=1e-12)
     assert turn.to_mode == turn.from_mode == module.OPEN
     assert [e.guard for e in result.run.events] == ["start", "v0"]
+    words = ("open phase: body 0 free (its forces do not depend on its direction), bodies 1..2 forward; closed stages: "
+             "stage 2 tractive")
+    assert all(e["reason"].endswith(words) for e in result.events)
     t = result.run.t
     a1 = math.tan(G2) * f2 / (M[1] + M[2] * math.tan(G2)**2)
     q1 = math.tan(G1) * v0 * t + a1 / 2 * t**2
