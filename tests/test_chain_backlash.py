@@ -24,12 +24,16 @@ M = (1.0, 2.0, 3.0)
 
 
 def _scene(name, *, mu=0.0, e=0.5, clearance="1 mm", gap="0.5 mm", f0=10.0, f2=-2.0, stiffness=0.0, v0=0.0,
-           t_end=0.3, valve=""):
-    return (f'name = "{name}"\n[[stage]]\nkind = "wedge"\ngamma = "30 deg"\nmu = {mu!r}\n'
-            f'[[stage]]\nkind = "wedge"\ngamma = "40 deg"\nmu = {mu!r}\nclearance = "{clearance}"\nrestitution = {e!r}\n'
-            f'[[body]]\nmass = "1 kg"\nforce = "{f0!r} N"\n[[body]]\nmass = "2 kg"\nforce = "0 N"\n'
+           t_end=0.3, valve="", clear=2, stiffness0=None):
+    """The chain, its clearance in stage ``clear``; body 0 with a spring where ``stiffness0`` is given."""
+    stages = "".join(f'[[stage]]\nkind = "wedge"\ngamma = "{g} deg"\nmu = {mu!r}\n' +
+                     (f'clearance = "{clearance}"\nrestitution = {e!r}\n' if i == clear else "")
+                     for i, g in ((1, 30), (2, 40)))
+    spring0 = "" if stiffness0 is None else f'stiffness = "{stiffness0!r} N/m"\n'
+    return (f'name = "{name}"\n{stages}'
+            f'[[body]]\nmass = "1 kg"\nforce = "{f0!r} N"\n{spring0}[[body]]\nmass = "2 kg"\nforce = "0 N"\n'
             f'[[body]]\nmass = "3 kg"\nforce = "{f2!r} N"\nstiffness = "{stiffness!r} N/m"\n{valve}'
-            f'[run]\nt_end = {t_end!r}\nv0 = {v0!r}\ngap_2 = "{gap}"\nrtol = 1e-10\natol = 1e-12\n')
+            f'[run]\nt_end = {t_end!r}\nv0 = {v0!r}\ngap_{clear} = "{gap}"\nrtol = 1e-10\natol = 1e-12\n')
 
 
 def _open_accels(mu, f0, f2):
@@ -378,3 +382,50 @@ def test_extra_travel_is_the_free_stems_farthest_point_on_the_seat(chain_module,
     assert len(turns) == 1
     if f2 == 0.0:   # at the seat after seat / v2, a quarter of the spring's period later
         assert turns[0] == pytest.approx(seat / v2 + math.pi / 2 * math.sqrt(M[2] / k), rel=10 * rtol)
+
+
+@pytest.mark.parametrize("f0, k0", [(-2.0, 0.0), (-1.0, 1000.0)])
+def test_the_free_input_groups_turn_is_an_event_at_its_closed_form(chain_module, f0, k0):
+    """Stage 1 open from the start (gap 1 mm of 10 mm), the chain coasting at v0 = 0.1 m/s: body 0 alone is the
+    input group, free (no closed stage, no valve), pushed by f0 less a spring k0 q0: from speed v0 it turns at
+    t = M0 v0 / -f0 at q0 = M0 v0^2 / (-2 f0) (k0 = 0), or with w = sqrt(k0 / M0) at tan(w t) = v0 k0 / (-f0 w),
+    q0 = f0 / k0 + sqrt((f0 / k0)^2 + (v0 / w)^2); the turn is a v0 event there. The output group (bodies 1 and 2
+    through stage 2, frictionless, body 2 held back by 0.5 N) starts at c1 v0 and decelerates at
+    a1 = tan(g2) F2 / (M1 + M2 tan(g2)^2); the gap g0 + q1 cos(g1) - q0 sin(g1) of the output rows is these hand
+    kinematics' (it never reaches a flank)."""
+    v0, f2, g0, rtol = 0.1, -0.5, 1e-3, 1e-10   # rtol: the scene's run.rtol
+    module = chain_module(_scene("gap-free-input", f0=f0, f2=f2, v0=v0, t_end=0.08, clearance="10 mm", gap="1 mm",
+                                 clear=1, stiffness0=k0))
+    result = simulate_chain(module, points=9)
+    assert result.status == "finished", result.message
+    assert not result.run.impacts
+    if k0 == 0.0:
+        t_turn, far = M[0] * v0 / -f0, M[0] * v0**2 / (-2 * f0)
+
+        def q0(t):
+            return v0 * t + f0 / (2 * M[0]) * t**2
+    else:
+        w = math.sqrt(k0 / M[0])
+        t_turn, far = math.atan2(v0 * k0, -f0 * w) / w, f0 / k0 + math.sqrt((f0 / k0)**2 + (v0 / w)**2)
+
+        def q0(t):
+            return f0 / k0 * (1 - np.cos(w * t)) + v0 / w * np.sin(w * t)
+    (turn,) = [e for e in result.run.events if e.guard == "v0"]
+    assert turn.t == pytest.approx(t_turn, rel=10 * rtol)
+    _, y, _ = turn.seen
+    assert y[0] == pytest.approx(far, rel=10 * rtol) and y[1] == pytest.approx(0.0, abs=1e-12)
+    assert turn.to_mode == turn.from_mode == module.OPEN
+    assert [e.guard for e in result.run.events] == ["start", "v0"]
+    words = ("open phase: body 0 free (its forces do not depend on its direction), bodies 1..2 forward; closed stages: "
+             "stage 2 tractive")
+    assert all(e["reason"].endswith(words) for e in result.events)
+    t = result.run.t
+    a1 = math.tan(G2) * f2 / (M[1] + M[2] * math.tan(G2)**2)
+    q1 = math.tan(G1) * v0 * t + a1 / 2 * t**2
+    np.testing.assert_allclose(result.run.y[:, 0], q0(t), rtol=1e-8, atol=1e-8 * far)
+    np.testing.assert_allclose(result.run.y[:, 2], q1, rtol=1e-8, atol=1e-8 * far)
+    from tswm_runtime.simulation.chain import gaps
+
+    hand = g0 + q1 * math.cos(G1) - q0(t) * math.sin(G1)
+    assert gaps(module, result) == pytest.approx(hand, rel=1e-8, abs=1e-8 * far)
+    assert (hand > 0).all() and (hand < 10e-3).all() and t[-1] > t_turn

@@ -262,13 +262,21 @@ def _loads(c, m, p):
     return True
 
 
+def free_group(group, stage, stages, slack):
+    """Whether ``group`` (0 input, 1 output) is free while clearance stage ``stage`` (1-based) of ``stages`` is open:
+    its direction changes none of its forces, as it holds no closed stage and (the output group) the last body feels
+    no valve friction (``slack``, its magnitude at rest). Plain Python for the decision's words (run.py), compiled
+    for ``_free``."""
+    return stage == 1 if group == 0 else stage == stages and slack == 0.0
+
+
+_free_group = njit(error_model="numpy")(free_group)
+
+
 @njit(error_model="numpy")
 def _free(c, p, group):
-    """Whether a group's direction changes none of its forces while the current clearance stage is open: it holds
-    no closed stage and (the output group) the last body feels no valve friction."""
-    if group == 0:
-        return open_stage(c, p) == 1
-    return open_stage(c, p) == c.stages and p[c.p_slack] == 0.0
+    """``free_group`` of the current clearance stage under the latches p."""
+    return _free_group(group, open_stage(c, p), c.stages, p[c.p_slack])
 
 
 @njit(error_model="numpy")

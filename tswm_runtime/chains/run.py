@@ -299,8 +299,8 @@ def _open_words(module, p: np.ndarray) -> str:
     k, n = clearance_stages(module)[int(p[module.P_CURRENT])], module.STAGES
     names = {1.0: "forward", -1.0: "backward"}
 
-    def group(held: int, direction: int, free: bool) -> str:   # free: ``rules._free``
-        if free:
+    def group(index: int, held: int, direction: int) -> str:
+        if compiled.free_group(index, k, n, p[module.P_SLACK]):
             return "free (its forces do not depend on its direction)"
         return "held at rest (its statics hold it)" if p[held] > 0.0 else names[float(p[direction])]
 
@@ -308,9 +308,8 @@ def _open_words(module, p: np.ndarray) -> str:
                for i in range(n) if i != k - 1]
     group_in = "body 0" if k == 1 else f"bodies 0..{k - 1}"
     group_out = f"body {n}" if k == n else f"bodies {k}..{n}"
-    return (f"open phase: {group_in} {group(module.P_HELD_IN, module.P_DIRECTION_IN, k == 1)}, {group_out} "
-            f"{group(module.P_HELD_OUT, module.P_DIRECTION_OUT, k == n and p[module.P_SLACK] == 0.0)}; closed "
-            f"stages: {', '.join(regimes) or 'none'}")
+    return (f"open phase: {group_in} {group(0, module.P_HELD_IN, module.P_DIRECTION_IN)}, {group_out} "
+            f"{group(1, module.P_HELD_OUT, module.P_DIRECTION_OUT)}; closed stages: {', '.join(regimes) or 'none'}")
 
 
 class _ModuleParts(NamedTuple):
