@@ -32,6 +32,7 @@ while it runs: kernel.py).
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field, replace
 from functools import cached_property
 from typing import NamedTuple
@@ -529,7 +530,7 @@ def _current(module, event: ChainEvent) -> int:
 def _trip(module, trip: np.ndarray) -> dict | None:
     """What the chain carried just before the motor's cut (None: no cut): mode, state, stage forces (None at
     rest: undetermined), body 0's drive torque, the last body's coordinate."""
-    if np.isnan(trip[0]):
+    if math.isnan(trip[0]):
         return None
     mode = int(trip[-1])
     return {"t": float(trip[0]), "y": trip[1:3].copy(), "mode": mode,
