@@ -317,8 +317,9 @@ def test_a_force_peak_is_the_first_phase_maximum_of_largest_magnitude_over_the_s
 
 
 def test_a_result_read_for_its_outcome_builds_no_summaries(chain_module, monkeypatch):
-    """The stages' summaries, the drive train's answers and the samples' table are built on first access:
-    a caller reading the outcome (a sweep's case, the bench) never pays for them."""
+    """The stages' summaries, the drive train's answers, the samples' table and the run's events (with their
+    decisions) are built on first access: a caller reading the outcome and the events' times and modes (a sweep's
+    case, the bench) never pays for them."""
     from tswm_runtime.simulation import chain as simulation
 
     def unread(*_):
@@ -327,6 +328,8 @@ def test_a_result_read_for_its_outcome_builds_no_summaries(chain_module, monkeyp
         monkeypatch.setattr(simulation, name, unread)
     result = simulate_chain(chain_module(wedges("two-switching", **SWITCHING)), **TIGHT)
     assert result.status == "finished" and result.events[0]["guard"] == "start"
+    assert [e["to"] for e in result.events][-1] and "events" not in vars(result.run)
+    assert result.events[-1]["reason"] and "events" in vars(result.run)
     with pytest.raises(AssertionError, match="not read"):
         result.stages
 
@@ -367,6 +370,8 @@ def test_a_run_reads_its_phases_from_its_record_on_first_access(chain_module):
     assert [phase.mode for phase in run.phases][0] == run.events[0].to_mode
     assert all(np.shares_memory(event.seen[1], run.record.event_f) for event in run.events)
     assert [e["outcome"] for e in result.events] == [e.decision.outcome for e in run.events]
+    assert [(e["t"], e["guard"], e["outcome"]) for e in result.events] == [(e.t, e.guard, e.outcome)
+                                                                         for e in run.events]
 
 
 def test_a_runs_start_is_its_own(chain_module):

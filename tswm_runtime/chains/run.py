@@ -32,6 +32,7 @@ while it runs: kernel.py).
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field, replace
 from functools import cached_property
 from typing import NamedTuple
@@ -112,8 +113,8 @@ class ChainRun:
     """A chain run: status, message, t_stop, the output times t and states y there (NaN after a stop), the
     steps taken (accepted and rejected), the trip (t, y, mode, stage forces (None at rest), drive just before
     the switch cut the motor; None: no cut), p at the start (latches, values, derived slots), the kernel's status
-    code and the chain record the run wrote; its phases and events are read from that record (views into it)
-    on first access."""
+    code and the chain record the run wrote; its phases and events (and the events' plain rows) are read from that
+    record (views into it) on first access."""
 
     def __init__(self, module, code: int, t_stop: float, record: Record, chain: kernel.ChainRecord):
         self._module = module
@@ -143,14 +144,20 @@ class ChainRun:
                 for row in rows]
 
     @cached_property
-    def events(self) -> list[ChainEvent]:
+    def event_rows(self) -> list[tuple]:
+        """Per event (t, guard, from_mode, to_mode (None: stop), outcome), plain numbers and words: what
+        ``events`` are built from, cheaper to read when their decisions are not needed."""
         module, chain = self._module, self.record
-        event_f, n_events = chain.event_f, int(chain.counts[2])
-        times = event_f[:n_events, 0].tolist()
-        return [ChainEvent(times[e], "start" if guard == compiled.START else module.GUARDS[guard], before,
-                           None if after == compiled.NO_MODE else after, compiled.OUTCOMES[outcome],
-                           (module, chain, e))
+        n_events = int(chain.counts[2])
+        times = chain.event_f[:n_events, 0].tolist()
+        return [(times[e], "start" if guard == compiled.START else module.GUARDS[guard], before,
+                 None if after == compiled.NO_MODE else after, compiled.OUTCOMES[outcome])
                 for e, (guard, before, after, outcome) in enumerate(chain.events[:n_events].tolist())]
+
+    @cached_property
+    def events(self) -> list[ChainEvent]:
+        at = self._module, self.record
+        return [ChainEvent(*row, (*at, e)) for e, row in enumerate(self.event_rows)]
 
 
 def latches(module, y: np.ndarray, voltage: float | None = None, values: np.ndarray | None = None) -> np.ndarray:
@@ -522,7 +529,7 @@ def _current(module, event: ChainEvent) -> int:
 def _trip(module, trip: np.ndarray) -> dict | None:
     """What the chain carried just before the motor's cut (None: no cut): mode, state, stage forces (None at
     rest: undetermined), body 0's drive torque, the last body's coordinate."""
-    if np.isnan(trip[0]):
+    if math.isnan(trip[0]):
         return None
     mode = int(trip[-1])
     return {"t": float(trip[0]), "y": trip[1:3].copy(), "mode": mode,

@@ -271,33 +271,33 @@ def _stage(module: ModuleType, run: ChainRun, k: int, peaks: dict) -> StageSumma
 
 
 class EventRow(Mapping):
-    """An event as plain data: t, guard, from, to (None: stop), outcome, reason; each read from the run's
-    event when asked for, so a run read for its numbers never evaluates the reason (the Python decision's
-    words)."""
+    """An event as plain data: t, guard, from, to (None: stop), outcome, reason; read from the run's event rows,
+    the reason from its event when asked for, so a run read for its numbers never builds its events nor
+    evaluates the reason (the Python decision's words)."""
 
     KEYS = ("t", "guard", "from", "to", "outcome", "reason")
-    __slots__ = ("_module", "_event")
+    __slots__ = ("_module", "_run", "_index", "_row")
 
-    def __init__(self, module: ModuleType, event):
-        self._module, self._event = module, event
+    def __init__(self, module: ModuleType, run: ChainRun, index: int, row: tuple):
+        self._module, self._run, self._index, self._row = module, run, index, row
 
     def _mode(self, mode):
         return None if mode is None else ("resting" if mode == RESTING else self._module.MODES[mode])
 
     def __getitem__(self, key):
-        event = self._event
+        t, guard, before, after, outcome = self._row
         if key == "t":
-            return event.t
+            return t
         if key == "guard":
-            return event.guard
+            return guard
         if key == "from":
-            return self._mode(event.from_mode) if event.guard != "start" else None
+            return self._mode(before) if guard != "start" else None
         if key == "to":
-            return self._mode(event.to_mode)
+            return self._mode(after)
         if key == "outcome":
-            return event.outcome
+            return outcome
         if key == "reason":
-            return event.decision.reason
+            return self._run.events[self._index].decision.reason
         raise KeyError(key)
 
     def __iter__(self):
@@ -311,7 +311,7 @@ class EventRow(Mapping):
 
 
 def _events(module: ModuleType, run: ChainRun) -> tuple[EventRow, ...]:
-    return tuple(EventRow(module, e) for e in run.events)
+    return tuple([EventRow(module, run, e, row) for e, row in enumerate(run.event_rows)])
 
 
 def impact_lines(run: ChainRun, module: ModuleType) -> list[str]:
