@@ -14,7 +14,7 @@ size), and the mode logic decides all stages at once (``rules.decide``); else th
 """
 import numpy as np
 
-from tswm_runtime.chains.rules import UNIQUE, current_index, open_phase, open_stage, separating
+from tswm_runtime.chains.rules import UNIQUE, current_index, in_group, open_phase, open_stage, separating
 from tswm_runtime.hybrid.impact import OK, collide
 from tswm_runtime.jit.arrays import copy_into
 from tswm_runtime.jit.cache_guard import njit
@@ -33,7 +33,7 @@ def pushed(c, flank, p):
         if p[c.p_direction + 3 - g] > 0.0:
             p[c.p_direction + g] = float(flank if g == 1 else -flank)
             for i in range(c.stages):
-                if (i + 1 < k) if g == 0 else (i + 1 > k):
+                if in_group(k, i + 1, g):
                     p[c.p_rho_sign + i] = 1.0 if g == 1 else -1.0
 
 

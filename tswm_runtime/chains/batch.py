@@ -14,7 +14,6 @@ import numpy as np
 from numba import prange, types
 
 from tswm_runtime.chains import kernel
-from tswm_runtime.chains.backlash import IMPACT_COLUMNS
 from tswm_runtime.chains.answers import (ANSWERING, I_EVENTS, I_IMPACTS, I_STATUS, I_STEPS, I_VERDICT, N_F, N_I,
                                           VERDICTS, answer, answering)
 from tswm_runtime.chains.run import chain_functions, chain_tables, first_room, run_status, samples_room, start_state
@@ -53,12 +52,7 @@ def _records(t_out, n_states, n_p, stages, room):
                   np.empty((t_out.size, n_p)))
     record = Record(out, EventLog(np.empty(1), np.empty((1, 4), np.int64), np.empty((1, 2)), np.empty((1, 4))),
                     np.empty((3 * stages, 3)), np.zeros(segment.N_COUNTERS, np.int64), no_steps(2, n_p))
-    chain = kernel.ChainRecord(np.empty((room.phases, 3), np.int64), np.empty((room.phases, 2 + n_p)),
-                               np.empty((room.samples, 4 + 3 * stages)), np.empty((room.phases, 4), np.int64),
-                               np.empty((room.phases, 1 + n_states + n_p)), np.empty(6 + 3 * stages),
-                               np.zeros(4, np.int64),
-                               np.empty((room.phases, len(IMPACT_COLUMNS))), np.empty((room.phases, 6 * stages)))
-    return record, chain
+    return record, kernel.chain_record_compiled(room.phases, room.samples, n_states, n_p, stages)
 
 
 @njit(error_model="numpy")

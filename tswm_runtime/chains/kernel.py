@@ -25,11 +25,11 @@ from collections import namedtuple
 import numpy as np
 from numba import types
 
-from tswm_runtime.chains.backlash import strike
+from tswm_runtime.chains.backlash import IMPACT_COLUMNS, strike
 from tswm_runtime.hybrid.addressed import ADDRESSES, model_functions, segment_function
 from tswm_runtime.chains.rules import (NO_MODE, NONE, RESTING, RESTING_GROUP, SEVERAL, START, ChainFunctions,
-                                             ChainTables, chain_work, current_index, decide, is_open, last_coordinate,
-                                             settle)
+                                             ChainTables, chain_work, clearance_index, current_index, decide, is_open,
+                                             last_coordinate, settle)
 from tswm_runtime.integration import segment
 from tswm_runtime.jit import cache_guard
 from tswm_runtime.jit.addresses import guards_at
@@ -63,6 +63,19 @@ ChainRecord = namedtuple("ChainRecord", "phases phase_f samples events event_f t
 INT_MATRIX = types.int64[:, ::1]
 CHAIN_RECORD = types.NamedTuple((INT_MATRIX, MATRIX, MATRIX, INT_MATRIX, MATRIX, VECTOR, INTS, MATRIX, MATRIX),
                                 ChainRecord)
+
+
+def chain_record(phases, samples, n_states, n_p, stages):
+    """An empty ChainRecord with room for ``phases`` phases and ``samples`` samples of a chain of ``stages`` stages
+    with n_states states and n_p slots of p: plain Python for one run (chains/run.py), compiled as
+    ``chain_record_compiled`` for the batch's cases (chains/batch.py)."""
+    forces = 3 * stages
+    return ChainRecord(np.empty((phases, 3), np.int64), np.empty((phases, 2 + n_p)), np.empty((samples, 4 + forces)),
+                       np.empty((phases, 4), np.int64), np.empty((phases, 1 + n_states + n_p)), np.empty(6 + forces),
+                       np.zeros(4, np.int64), np.empty((phases, len(IMPACT_COLUMNS))), np.empty((phases, 2 * forces)))
+
+
+chain_record_compiled = njit(error_model="numpy", refcounted=True)(chain_record)   # it allocates
 CHAIN_TABLES = types.NamedTuple((INTS, INT_MATRIX, *(types.int64,) * 10, types.float64, types.float64,
                                  types.float64, INT_MATRIX, types.int64, INTS, *(types.int64,) * 8), ChainTables)
 #: run_chain_at(functions, chain functions (stage_forces, body_forces_into, impact), tables, settings, y, p, record,
@@ -253,13 +266,10 @@ def _run(functions, chain_addresses, c, settings, y, p, record, rec, max_events,
             _event(rec, t, k, mode, NO_MODE, NONE, y, p)
             status = SINGULAR
             break
-        if is_open(c, mode) and 2 <= k < 2 + stages:   # a closed stage's normal force reached 0 in an open phase
-            for j in range(c.clear_stage.size):
-                if c.clear_stage[j] == k - 1:     # a stage with a clearance would open too
-                    status = TWO_OPEN
-            if status == TWO_OPEN:
-                _event(rec, t, k, mode, NO_MODE, NONE, y, p)
-                break
+        if is_open(c, mode) and 2 <= k < 2 + stages and clearance_index(c, k - 1) >= 0:
+            status = TWO_OPEN   # a closed stage with a clearance would open too in an open phase
+            _event(rec, t, k, mode, NO_MODE, NONE, y, p)
+            break
         if is_open(c, mode) and (k == stages + 3 or k == stages + 4):   # the flanks meet
             i_row = rec.counts[3]
             rec.counts[3] = i_row + 1

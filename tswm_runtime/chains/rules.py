@@ -74,6 +74,15 @@ def current_index(c, p):
 
 
 @njit(error_model="numpy")
+def clearance_index(c, stage):
+    """The index (in clear_stage) of stage ``stage`` (1-based), -1 for a stage without a clearance."""
+    for j in range(c.clear_stage.size):
+        if c.clear_stage[j] == stage:
+            return j
+    return -1
+
+
+@njit(error_model="numpy")
 def open_stage(c, p):
     """The current clearance stage (1-based): the one open in an open mode."""
     return c.clear_stage[int(p[c.p_current])]
@@ -194,9 +203,9 @@ def group_holds(c, p, force, w, first, last):
         n_cone = _forward_cone(p[c.p_psi + 2 * i], p[c.p_psi + 2 * i + 1], w.cone)
         n = _scaled(a, n, w.cone, n_cone, b)
         n = _affine(b, n, 0.0, p[c.p_lever_out + i], a)
-        for j in range(c.clear_stage.size):   # a stage with a clearance pushes on its one flank in contact only
-            if c.clear_stage[j] == i + 1 and p[c.p_contact + j] != 0.0:
-                n = _one_side(a, n, p[c.p_contact + j])
+        j = clearance_index(c, i + 1)   # a stage with a clearance pushes on its one flank in contact only
+        if j >= 0 and p[c.p_contact + j] != 0.0:
+            n = _one_side(a, n, p[c.p_contact + j])
         if i == last - 1:
             for j in range(n):
                 if max(a[j, 0], lo) <= min(a[j, 1], hi):
@@ -280,21 +289,22 @@ def _free(c, p, group):
 
 
 @njit(error_model="numpy")
-def _in_group(c, p, stage, group):
-    """Whether closed stage ``stage`` (1-based) joins bodies of ``group`` (0 input, 1 output) while the current
-    clearance stage is open."""
-    return stage < open_stage(c, p) if group == 0 else stage > open_stage(c, p)
+def in_group(k, stage, group):
+    """Whether closed stage ``stage`` (1-based) joins bodies of ``group`` (0 input, 1 output) while stage k is
+    open."""
+    return stage < k if group == 0 else stage > k
 
 
 @njit(error_model="numpy")
 def _keeps_flanks(c, p):
     """Whether each closed stage with a clearance slides on its flank in contact under the open phase's latches: its
     flank is its regime's sign times its group's direction (no check in a stuck or free group: no regime there)."""
+    k = open_stage(c, p)
     for j in range(c.clear_stage.size):
         stage = c.clear_stage[j]
         if j == current_index(c, p):
             continue
-        group = 0 if stage < open_stage(c, p) else 1
+        group = 0 if in_group(k, stage, 0) else 1
         direction = p[c.p_direction + group]
         if p[c.p_direction + 3 - group] == 0.0 and direction != 0.0 and \
                 p[c.p_rho_sign + stage - 1] * direction != p[c.p_contact + j]:
@@ -368,7 +378,7 @@ def _open_candidates(fns, c, t, y, p, w, held):
             skip = skip or (combo >> g & 1 == 1 and (v != 0.0 or _free(c, p, g) or held >> g & 1 == 1))
         for i in range(c.stages):
             for g in range(2):
-                skip = skip or (held >> g & 1 == 1 and combo >> (2 + i) & 1 == 1 and _in_group(c, p, i + 1, g))
+                skip = skip or (held >> g & 1 == 1 and combo >> (2 + i) & 1 == 1 and in_group(open_stage(c, p), i + 1, g))
         if skip:
             continue
         still = still or (y[1] == 0.0 and not _free(c, p, 0)) or (y[3] == 0.0 and not _free(c, p, 1))
@@ -463,15 +473,15 @@ def opening(fns, chain_fns, c, t, y, p, w):
             if separating(chain_fns, c, int(flank), t, y, p, w) > 0.0:
                 if found >= 0:
                     found = -2
+                    copy_into(p, w.saved)
+                    copy_into(y, w.y_saved)
                     break
                 found = i
                 copy_into(w.chosen[:p.size], p)
                 copy_into(w.chosen[p.size:p.size + n_y], y)
         copy_into(p, w.saved)
         copy_into(y, w.y_saved)
-    if found < 0:
-        copy_into(p, w.saved)
-        copy_into(y, w.y_saved)
+    if found < 0:   # p and y as they were: restored after each stage tried
         return (SEVERAL if found == -2 else NONE), NO_MODE
     copy_into(p, w.chosen[:p.size])
     copy_into(y, w.chosen[p.size:p.size + n_y])
@@ -539,9 +549,9 @@ def settle(fns, chain_fns, c, t, y, p, mode, guard, w, trip):
         if np.isnan(trip[0]):
             cut(chain_fns, c, mode, t, y, w, trip)
     if 0 <= mode and not is_open(c, mode):
-        for i in range(c.clear_stage.size):
-            if guard == 1 + c.clear_stage[i]:
-                part(fns, c, i, t, y, p, w)   # the normal force of a stage with a clearance reached 0: its flanks part
+        i = clearance_index(c, guard - 1)
+        if i >= 0:
+            part(fns, c, i, t, y, p, w)   # the normal force of a stage with a clearance reached 0: its flanks part
     outcome, new = decide(fns, chain_fns, c, t, y, p, mode, w)
     if new != NO_MODE and (guard == START or new == RESTING or is_open(c, mode)):
         copy_into(w.before, p)

@@ -139,9 +139,7 @@ class ChainRun:
     def impacts(self) -> list[dict]:
         """The flanks' impacts of the stages with a clearance (backlash.IMPACT_COLUMNS; flank "a" or "b", closed:
         whether the stage stayed closed after it)."""
-        rows = self.record.impacts[:int(self.record.counts[3])].tolist()
-        return [{**dict(zip(IMPACT_COLUMNS, row)), "flank": "a" if row[1] > 0 else "b", "closed": row[5] > 0}
-                for row in rows]
+        return [_impact_row(row) for row in self.record.impacts[:int(self.record.counts[3])].tolist()]
 
     @cached_property
     def event_rows(self) -> list[tuple]:
@@ -296,8 +294,12 @@ def _impact(module, chain: kernel.ChainRecord, row: int) -> dict:
     """The impact of the gap event in ``row``: one impact row per gap event of the open phase, in order."""
     gaps = (module.GUARDS.index("gap_a"), module.GUARDS.index("gap_b"))
     i = sum(1 for guard, before in chain.events[:row, :2].tolist() if before >= module.OPEN and guard in gaps)
-    values = chain.impacts[i].tolist()
-    return {**dict(zip(IMPACT_COLUMNS, values)), "flank": "a" if values[1] > 0 else "b", "closed": values[5] > 0}
+    return _impact_row(chain.impacts[i].tolist())
+
+
+def _impact_row(row: list) -> dict:
+    """An impact row (IMPACT_COLUMNS) in words: flank "a" or "b", closed: whether the stage stayed closed after it."""
+    return {**dict(zip(IMPACT_COLUMNS, row)), "flank": "a" if row[1] > 0 else "b", "closed": row[5] > 0}
 
 
 def _open_words(module, p: np.ndarray) -> str:
@@ -414,19 +416,13 @@ def samples_room(phases: int, points: int) -> int:
 def _record(module, t_out: np.ndarray, phases: int, samples: int) -> tuple[Record, kernel.ChainRecord]:
     """A run's records: its own output rows, counters and chain record, the module's shared parts besides."""
     parts = _parts(module)
-    n_p, forces = len(module.P_NAMES), 3 * module.STAGES
-    width = 4 + forces
+    forces = 3 * module.STAGES
     rows = np.empty((t_out.size, len(module.STATES)))
     rows.fill(np.nan)   # np.full costs three times as much
     out = Outputs(t_out, rows, parts.out_mode, parts.out_p)
     record = Record(out, parts.event_log, np.empty((forces, 3)), np.zeros(segment.N_COUNTERS, np.int64),
                     StepLog(*parts.no_steps, np.zeros(2, np.int64)))
-    chain = kernel.ChainRecord(np.empty((phases, 3), np.int64), np.empty((phases, 2 + n_p)),
-                               np.empty((samples, width)), np.empty((phases, 4), np.int64),
-                               np.empty((phases, 1 + len(module.STATES) + n_p)), np.empty(6 + 3 * module.STAGES),
-                               np.zeros(4, np.int64),
-                               np.empty((phases, len(IMPACT_COLUMNS))), np.empty((phases, 2 * forces)))
-    return record, chain
+    return record, kernel.chain_record(phases, samples, len(module.STATES), len(module.P_NAMES), module.STAGES)
 
 
 def run_chain(module, *, t_end: float, v0: float, rtol: float, atol: float, t_out: np.ndarray,
